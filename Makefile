@@ -1,0 +1,34 @@
+# mpdem: every target sets itself up first (tools/setup.sh is idempotent).
+# MPDEM_MPI=mpich selects MPICH instead of Open MPI.
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+MPIEXEC := $(VENV)/bin/mpiexec
+RANKS  ?= 1
+
+.PHONY: setup run test test-serial test-mpi bench clean
+
+setup:
+	@bash tools/setup.sh
+
+# The built-in example (about 1500 spheres) poured, settled, z and phi printed.
+run: setup
+	$(MPIEXEC) -n $(RANKS) $(PY) -m mpdem run --out runs/example --force
+
+test: setup test-serial test-mpi
+
+test-serial:
+	$(PY) -m pytest -q tests
+
+test-mpi:
+	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \
+	  for n in 2 3 4; do \
+	    echo "== mpi_tests under mpiexec -n $$n"; \
+	    timeout 900 $(MPIEXEC) -n $$n $(PY) -m pytest -q -p no:cacheprovider mpi_tests || exit 1; \
+	  done; \
+	else echo "== no mpi_tests yet"; fi
+
+bench: setup
+	$(PY) -m mpdem bench
+
+clean:
+	rm -rf runs .pytest_cache

@@ -1,0 +1,23 @@
+"""mpdem: MPI-parallel discrete-element simulator for sphere packings.
+
+Reduced units throughout: particle diameter d = 1, mass m = 1, gravity g = 1.
+The model is specified in shared/physics.md; the invariants in shared/design.md.
+"""
+import hashlib
+import os
+from pathlib import Path
+
+__version__ = "0.1.0"
+
+
+def _numba_cache_dir():
+    # numba does not recompile a cached kernel when a kernel it calls (in
+    # another file) changes, so the cache is keyed by all kernel sources.
+    h = hashlib.sha256()
+    for p in sorted((Path(__file__).parent / "kernels").glob("*.py")):
+        h.update(p.read_bytes())
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "mpdem" / "numba"
+    return str(base / h.hexdigest()[:16])
+
+
+os.environ.setdefault("NUMBA_CACHE_DIR", _numba_cache_dir())

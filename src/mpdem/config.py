@@ -1,0 +1,365 @@
+"""Run configuration: TOML in reduced units -> one frozen, validated Config.
+
+Every parameter has a documented default here (the README's config reference
+is generated from ``SCHEMA``). A few defaults are derived from other values
+(physics.md): k_t = 2 k_n / 7, gamma_n from epsilon (eq. 4-5),
+dt = 1e-4 sqrt(2e5 / k_n), E_stop = 1e-8 (k_n / 2e5)^(-3/4). Validation
+(physics.md section 8) happens here, before any work starts: an error names
+the key, the value and what is accepted.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+REQUIRED = object()   # marks a key with no default
+DERIVED = object()    # marks a default computed from other keys
+
+
+class ConfigError(ValueError):
+    """A configuration value that cannot be run."""
+
+
+@dataclass(frozen=True)
+class Key:
+    section: str
+    name: str
+    default: object
+    doc: str
+    kind: type = float
+    choices: tuple = ()
+
+
+def _k(section, name, default, doc, kind=float, choices=()):
+    return Key(section, name, default, doc, kind, choices)
+
+
+SCHEMA = (
+    _k("run", "max_steps", REQUIRED, "hard cap on time steps (required); a run that hits it is 'not converged'", int),
+    _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int),
+    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file or a text table `id x y z [vx vy vz] [fixed]`", str),
+    _k("box", "L_x", 20.0, "periodic box length in x [d]"),
+    _k("box", "L_y", 20.0, "periodic box length in y [d]"),
+    _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
+    _k("pour", "N", 20000, "number of mobile spheres", int),
+    _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (physics.md 5.3)"),
+    _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest"),
+    _k("contact", "model", "hooke", "normal/tangential force law", str, ("hooke", "hertz")),
+    _k("contact", "k_n", 2e5, "normal spring constant [m g / d]"),
+    _k("contact", "k_t", DERIVED, "tangential spring constant [m g / d]; default 2 k_n / 7"),
+    _k("contact", "epsilon", 0.88, "coefficient of restitution of a free pair; sets gamma_n (eq. 4-5)"),
+    _k("contact", "gamma_n", DERIVED, "normal damping [sqrt(g/d)]; default from epsilon and k_n"),
+    _k("contact", "gamma_t", 0.0, "tangential damping [sqrt(g/d)]; 0 as in the method, gamma_n/2 the documented alternative"),
+    _k("contact", "mu", 0.5, "Coulomb friction coefficient (0 = frictionless)"),
+    _k("contact", "limit_damping", False, "clip an attractive normal force to 0 (off in the reference model)", bool),
+    _k("contact", "history", "project", "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|", str, ("project", "rotate")),
+    _k("bed", "file", "", "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
+    _k("bed", "thickness", 1.2, "thickness of the slab cut from the settled packing [d] (physics.md 5.2)"),
+    _k("bed", "gap", 2.0, "height of the cut slab's bottom above the temporary floor [d]"),
+    _k("bed", "settle_density", 5.0, "spheres settled per unit floor area to make the bed [1/d^2]"),
+    _k("bed", "settle_k_n", 2e4, "spring constant of the bed-making settle [m g / d]"),
+    _k("bed", "settle_epsilon", 0.1, "restitution of the bed-making settle"),
+    _k("bed", "settle_time", 40.0, "simulated time of the bed-making settle [tau]"),
+    _k("bed", "density_min", 1.0, "warn if the bed's areal density is below this [1/d^2]"),
+    _k("bed", "density_max", 1.3, "warn if the bed's areal density is above this [1/d^2]"),
+    _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)"),
+    _k("integration", "skin", 0.2, "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2"),
+    _k("integration", "contact_slots", 16, "initial contact slots per particle (grown automatically)", int),
+    _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)"),
+    _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous")),
+    _k("stop", "window", 1.0, "averaging window of the stop rule [tau]"),
+    _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)"),
+    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]"),
+    _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]"),
+    _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]"),
+    _k("output", "progress_every", 10000, "steps between progress lines", int),
+    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = clamp(0.2 (h - z_bed), 3, 10)"),
+    _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
+    _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
+    _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]"),
+)
+
+SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
+KEYS = MappingProxyType({f"{k.section}.{k.name}": k for k in SCHEMA})
+
+
+def gamma_n_from_epsilon(epsilon, k_n, m_eff=0.5):
+    """Normal damping giving restitution ``epsilon`` for a free pair (eq. 4-5).
+
+    gamma_n = 2 L sqrt(2 k_n / m) / sqrt(pi^2 + L^2), L = -ln(epsilon), m = 1.
+    ``m_eff`` is the reduced mass of the pair (1/2 for two free spheres).
+    """
+    lg = -math.log(epsilon)
+    return 2.0 * lg * math.sqrt(k_n / m_eff) / math.sqrt(math.pi ** 2 + lg ** 2)
+
+
+def restitution(gamma_n, k_n, m_eff=0.5):
+    """Restitution of a head-on collision with reduced mass ``m_eff`` (eq. 4)."""
+    return math.exp(-math.pi * gamma_n / (2.0 * math.sqrt(k_n / m_eff - gamma_n ** 2 / 4.0)))
+
+
+def collision_time(gamma_n, k_n, m_eff=0.5):
+    """Duration of a head-on Hookean collision [tau] (eq. 5)."""
+    return math.pi / math.sqrt(k_n / m_eff - gamma_n ** 2 / 4.0)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Resolved configuration: ``values['section.key']`` for every key.
+
+    Attribute access by section: ``cfg.contact.k_n``.
+    """
+    values: MappingProxyType
+    warnings: tuple = ()
+    derived: frozenset = field(default_factory=frozenset)
+
+    def __getattr__(self, section):
+        if section not in SECTIONS:
+            raise AttributeError(section)
+        vals = {k.split(".", 1)[1]: v for k, v in self.values.items()
+                if k.startswith(section + ".")}
+        return _Section(section, vals)
+
+    def replace(self, **updates):
+        """A new Config with ``{'section.key': value}`` overrides, re-resolved."""
+        raw = {k: v for k, v in self.values.items() if k not in self.derived}
+        raw.update(updates)
+        return resolve(raw)
+
+    def to_toml(self):
+        """Every key with its value; derived defaults are marked."""
+        lines = ["# mpdem resolved configuration (every default filled in)"]
+        for sec in SECTIONS:
+            lines.append(f"\n[{sec}]")
+            for k in SCHEMA:
+                if k.section != sec:
+                    continue
+                name = f"{sec}.{k.name}"
+                text = f"{k.name} = {_toml_value(self.values[name])}"
+                if name in self.derived:
+                    text += "  # derived default"
+                lines.append(text)
+        return "\n".join(lines) + "\n"
+
+
+class _Section:
+    def __init__(self, name, vals):
+        self._name = name
+        self.__dict__.update(vals)
+
+    def __repr__(self):
+        return f"<{self._name} {self.__dict__}>"
+
+
+def _toml_value(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "nan")
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def flatten(doc, origin="config"):
+    """{'section': {'key': v}} -> {'section.key': v}, rejecting unknown names."""
+    flat = {}
+    for sec, body in doc.items():
+        if sec not in SECTIONS or not isinstance(body, dict):
+            raise ConfigError(f"{origin}: unknown section [{sec}]; known sections: {', '.join(SECTIONS)}")
+        for name, v in body.items():
+            key = f"{sec}.{name}"
+            if key not in KEYS:
+                known = ", ".join(k.name for k in SCHEMA if k.section == sec)
+                raise ConfigError(f"{origin}: unknown key {key}; keys of [{sec}]: {known}")
+            flat[key] = v
+    return flat
+
+
+def parse_set(item):
+    """'section.key=value' -> ('section.key', value); value parsed as TOML if it can be."""
+    if "=" not in item:
+        raise ConfigError(f"--set {item!r}: expected section.key=value")
+    key, text = (s.strip() for s in item.split("=", 1))
+    if key not in KEYS:
+        raise ConfigError(f"--set {key}: unknown key; known keys: {', '.join(KEYS)}")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return key, value
+
+
+def load(path=None, sets=(), base=None):
+    """Read a TOML file (or start from ``base``), apply ``--set`` items, resolve."""
+    raw = dict(base or {})
+    if path is not None:
+        try:
+            with open(path, "rb") as fh:
+                doc = tomllib.load(fh)
+        except OSError as e:
+            raise ConfigError(f"config file {path}: {e.strerror}") from None
+        except tomllib.TOMLDecodeError as e:
+            raise ConfigError(f"config file {path}: not valid TOML: {e}") from None
+        raw.update(flatten(doc, origin=str(path)))
+    for item in sets:
+        k, v = parse_set(item)
+        raw[k] = v
+    return resolve(raw)
+
+
+def _coerce(key, value):
+    spec = KEYS[key]
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key} = {value!r}: expected true or false")
+        return value
+    if spec.kind is int:
+        if isinstance(value, bool) or not (isinstance(value, int) or
+                                           (isinstance(value, float) and value.is_integer())):
+            raise ConfigError(f"{key} = {value!r}: expected an integer")
+        return int(value)
+    if spec.kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key} = {value!r}: expected a number")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"{key} = {value!r}: must be finite")
+        return value
+    if not isinstance(value, str):
+        raise ConfigError(f"{key} = {value!r}: expected a string")
+    if spec.choices and value not in spec.choices:
+        raise ConfigError(f"{key} = {value!r}: accepted values are {', '.join(map(repr, spec.choices))}")
+    return value
+
+
+def resolve(raw):
+    """Fill defaults, derive, validate. Returns a Config or raises ConfigError."""
+    vals, derived, warns = {}, set(), []
+    for key, spec in KEYS.items():
+        if key in raw:
+            vals[key] = _coerce(key, raw[key])
+        elif spec.default is REQUIRED:
+            raise ConfigError(f"{key} is required (no default); set it in the config or with --set {key}=...")
+        elif spec.default is DERIVED:
+            vals[key] = None
+        else:
+            vals[key] = spec.default
+
+    def need(key, ok, accepted):
+        if not ok:
+            raise ConfigError(f"{key} = {vals[key]!r}: accepted {accepted}")
+
+    k_n = vals["contact.k_n"]
+    need("contact.k_n", k_n > 0, "k_n > 0")
+    if not 1e3 <= k_n <= 1e10:
+        warns.append(f"contact.k_n = {k_n:g} is outside [1e3, 1e10] (paper: 2e5 to 2e9)")
+    if vals["contact.k_t"] is None:
+        vals["contact.k_t"] = 2.0 * k_n / 7.0
+        derived.add("contact.k_t")
+    need("contact.k_t", vals["contact.k_t"] >= 0, "k_t >= 0")
+    if not math.isclose(vals["contact.k_t"], 2 * k_n / 7, rel_tol=1e-12):
+        warns.append(f"contact.k_t = {vals['contact.k_t']:g} differs from 2 k_n / 7 = {2 * k_n / 7:g} (the paper's ratio)")
+    eps = vals["contact.epsilon"]
+    need("contact.epsilon", 0 < eps <= 1, "0 < epsilon <= 1")
+    gcrit = 2.0 * math.sqrt(2.0 * k_n)
+    if vals["contact.gamma_n"] is None:
+        vals["contact.gamma_n"] = gamma_n_from_epsilon(eps, k_n)
+        derived.add("contact.gamma_n")
+    else:
+        g = vals["contact.gamma_n"]
+        need("contact.gamma_n", 0 <= g < gcrit, f"0 <= gamma_n < 2 sqrt(2 k_n / m) = {gcrit:.6g} (critical damping)")
+        if "contact.epsilon" in raw and not math.isclose(restitution(g, k_n), eps, rel_tol=1e-9, abs_tol=1e-12):
+            raise ConfigError(f"contact.gamma_n = {g!r} and contact.epsilon = {eps!r} disagree "
+                              f"(gamma_n gives epsilon = {restitution(g, k_n):.6g}); give only one of them")
+        vals["contact.epsilon"] = restitution(g, k_n)
+        derived.add("contact.epsilon")
+    gamma_n = vals["contact.gamma_n"]
+    need("contact.gamma_t", vals["contact.gamma_t"] >= 0, "gamma_t >= 0")
+    mu = vals["contact.mu"]
+    need("contact.mu", 0 <= mu <= 1e4, "0 <= mu <= 1e4")
+    if mu > 10:
+        warns.append(f"contact.mu = {mu:g} is above the paper's range (0 to 10)")
+    if vals["contact.model"] == "hertz":
+        warns.append("contact.model = 'hertz': epsilon is nominal (velocity dependent); gamma_n is the Hookean value for it")
+
+    phi = vals["pour.phi_i"]
+    need("pour.phi_i", 0 < phi < 0.35, "0 < phi_i < 0.35 (random sequential addition fails near 0.38)")
+    if phi > 0.30:
+        warns.append(f"pour.phi_i = {phi:g} is above the paper's range (0.02 to 0.3)")
+    need("pour.N", vals["pour.N"] >= 1, "N >= 1")
+    need("pour.K0", vals["pour.K0"] >= 0, "K0 >= 0")
+    need("run.max_steps", vals["run.max_steps"] > 0, "max_steps > 0")
+    need("run.seed", vals["run.seed"] >= 0, "seed >= 0")
+    need("box.gravity", vals["box.gravity"] >= 0, "gravity >= 0 (it points along -z)")
+
+    skin = vals["integration.skin"]
+    need("integration.skin", 0 < skin <= 1, "0 < skin <= 1 d")
+    for key in ("box.L_x", "box.L_y"):
+        need(key, vals[key] >= 3.0 and vals[key] >= 2 * (1.0 + skin),
+             f"L >= 3 d and L >= 2 (d + skin) = {2 * (1 + skin):g} d (minimum image)")
+    need("integration.contact_slots", vals["integration.contact_slots"] >= 1, "contact_slots >= 1")
+
+    if vals["integration.dt"] is None:
+        vals["integration.dt"] = 1e-4 * math.sqrt(2e5 / k_n)
+        derived.add("integration.dt")
+    dt = vals["integration.dt"]
+    need("integration.dt", dt > 0, "dt > 0")
+    t_col = collision_time(gamma_n, k_n)
+    ratio = t_col / dt
+    if ratio < 10:
+        raise ConfigError(f"integration.dt = {dt:g}: t_col / dt = {ratio:.3g}; accepted t_col / dt >= 10 "
+                          f"(t_col = {t_col:.4g}); default dt is 1e-4 sqrt(2e5 / k_n)")
+    if ratio < 30:
+        warns.append(f"integration.dt = {dt:g} resolves a collision with only {ratio:.1f} steps (30 or more advised)")
+    if gamma_n * dt > 0.5:
+        raise ConfigError(f"integration.dt = {dt:g}: gamma_n dt = {gamma_n * dt:.3g}; accepted gamma_n dt <= 0.5")
+
+    if vals["stop.E_stop"] is None:
+        vals["stop.E_stop"] = 1e-8 * (k_n / 2e5) ** -0.75
+        derived.add("stop.E_stop")
+    need("stop.E_stop", vals["stop.E_stop"] > 0, "E_stop > 0")
+    need("stop.sample_interval", vals["stop.sample_interval"] > 0, "sample_interval > 0")
+    need("stop.window", vals["stop.window"] >= vals["stop.sample_interval"], "window >= sample_interval")
+    need("checks.overlap_warn", vals["checks.overlap_warn"] > 0, "overlap_warn > 0")
+    need("checks.overlap_error", vals["checks.overlap_error"] > vals["checks.overlap_warn"], "overlap_error > overlap_warn")
+    need("checks.escape_margin", vals["checks.escape_margin"] > 0, "escape_margin > 0")
+    need("output.progress_every", vals["output.progress_every"] >= 1, "progress_every >= 1")
+    need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")
+    need("bed.gap", vals["bed.gap"] >= 0, "gap >= 0")
+    need("bed.settle_density", 0 < vals["bed.settle_density"] <= 50, "0 < settle_density <= 50")
+    need("bed.settle_k_n", vals["bed.settle_k_n"] > 0, "settle_k_n > 0")
+    need("bed.settle_epsilon", 0 < vals["bed.settle_epsilon"] <= 1, "0 < settle_epsilon <= 1")
+    need("bed.settle_time", vals["bed.settle_time"] > 0, "settle_time > 0")
+    for key in ("analysis.margin_bottom", "analysis.margin_top"):
+        need(key, vals[key] == -1 or vals[key] >= 0, "-1 (automatic) or a margin >= 0")
+    need("analysis.n_min", vals["analysis.n_min"] == -1 or vals["analysis.n_min"] >= 0, "-1 (automatic) or n_min >= 0")
+    need("analysis.profile_bin", vals["analysis.profile_bin"] > 0, "profile_bin > 0")
+    return Config(MappingProxyType(vals), tuple(warns), frozenset(derived))
+
+
+def as_dict(cfg):
+    """Nested {'section': {'key': value}} of a Config."""
+    out = {s: {} for s in SECTIONS}
+    for k, v in cfg.values.items():
+        s, n = k.split(".", 1)
+        out[s][n] = v
+    return out
+
+
+def reference_markdown():
+    """The config reference table of the README, generated from SCHEMA."""
+    rows = ["| key | default | meaning |", "|---|---|---|"]
+    for k in SCHEMA:
+        d = ("required" if k.default is REQUIRED else "derived" if k.default is DERIVED
+             else _toml_value(k.default))
+        doc = k.doc + (f" (one of {', '.join(k.choices)})" if k.choices else "")
+        rows.append(f"| `{k.section}.{k.name}` | {d} | {doc} |")
+    return "\n".join(rows)
+
+
+__all__ = ["Config", "ConfigError", "load", "resolve", "parse_set", "SCHEMA",
+           "gamma_n_from_epsilon", "restitution", "collision_time", "as_dict",
+           "reference_markdown"]

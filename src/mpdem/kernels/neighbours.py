@@ -1,0 +1,161 @@
+"""Cell binning and Verlet neighbour lists.
+
+Positions are wrapped into [0, L_x) x [0, L_y); z is open. Cells are at
+least ``r_list`` wide. In z the cell index is hashed modulo ``nz`` when the
+pile is very tall or a particle flies far away, so memory stays O(N); a hashed
+cell only adds candidates that the distance test rejects.
+"""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cell_axis(length, r_list):
+    n = int(length // r_list)
+    return max(n, 1)
+
+
+@njit(cache=True)
+def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list,
+                     nbr_start, nbr_list):
+    """Full neighbour lists of the owned mobile rows, each sorted by partner id.
+
+    Parameters
+    ----------
+    x : (n_rows_cap, 3) float64
+        Positions [d]; rows ``0..n_rows-1`` are used (owned, then ghosts).
+    n_rows, n_own : int
+        Rows present; rows ``0..n_own-1`` are owned.
+    fixed : (n_rows_cap,) uint8
+        1 for a bed (frozen) particle. Bed rows get no list; bed-bed pairs
+        are never listed.
+    ids : (n_rows_cap,) int64
+        Particle ids; each list is sorted by the partners' ids.
+    L_x, L_y : float
+        Periodic box lengths [d].
+    r_list : float
+        List cutoff, contact distance plus skin [d].
+    nbr_start : (n_own + 1,) int64, out
+        CSR offsets into ``nbr_list``.
+    nbr_list : (cap,) int64, out
+        Partner rows.
+
+    Returns
+    -------
+    int
+        Entries needed. If larger than ``len(nbr_list)``, nothing useful was
+        written past the capacity: grow ``nbr_list`` and call again.
+    """
+    cap = nbr_list.shape[0]
+    nx = _cell_axis(L_x, r_list)
+    ny = _cell_axis(L_y, r_list)
+    cx = L_x / nx
+    cy = L_y / ny
+    zmin = np.inf
+    zmax = -np.inf
+    for i in range(n_rows):
+        z = x[i, 2]
+        if z < zmin:
+            zmin = z
+        if z > zmax:
+            zmax = z
+    nz_true = int((zmax - zmin) / r_list) + 1 if n_rows > 0 else 1
+    # bound the grid to O(rows): hash z cells beyond that (see module doc)
+    nz_cap = max(3, 4 * (n_rows // (nx * ny)) + 8)
+    nz = min(nz_true, nz_cap)
+    ncell = nx * ny * nz
+    cell = np.empty(n_rows, np.int64)
+    count = np.zeros(ncell + 1, np.int64)
+    for i in range(n_rows):
+        ix = min(int(x[i, 0] / cx), nx - 1)
+        iy = min(int(x[i, 1] / cy), ny - 1)
+        iz = int((x[i, 2] - zmin) / r_list) % nz
+        c = (iz * ny + iy) * nx + ix
+        cell[i] = c
+        count[c + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    order = np.empty(n_rows, np.int64)
+    fill = count[:-1].copy()
+    for i in range(n_rows):
+        c = cell[i]
+        order[fill[c]] = i
+        fill[c] += 1
+
+    # distinct neighbouring cells along each axis (all cells if fewer than 3)
+    ox = 3 if nx >= 3 else nx
+    oy = 3 if ny >= 3 else ny
+    oz = 3 if nz >= 3 else nz
+    r2 = r_list * r_list
+    hx = 0.5 * L_x
+    hy = 0.5 * L_y
+    total = 0
+    for i in range(n_own):
+        nbr_start[i] = total
+        if fixed[i]:
+            continue
+        c = cell[i]
+        ix = c % nx
+        iy = (c // nx) % ny
+        iz = c // (nx * ny)
+        first = total
+        for a in range(oz):
+            jz = (iz + a - 1) % nz if nz >= 3 else a
+            for b in range(oy):
+                jy = (iy + b - 1) % ny if ny >= 3 else b
+                for e in range(ox):
+                    jx = (ix + e - 1) % nx if nx >= 3 else e
+                    cc = (jz * ny + jy) * nx + jx
+                    for k in range(count[cc], count[cc + 1]):
+                        j = order[k]
+                        if j == i:
+                            continue
+                        dx = x[i, 0] - x[j, 0]
+                        if dx > hx:
+                            dx -= L_x
+                        elif dx < -hx:
+                            dx += L_x
+                        dy = x[i, 1] - x[j, 1]
+                        if dy > hy:
+                            dy -= L_y
+                        elif dy < -hy:
+                            dy += L_y
+                        dz = x[i, 2] - x[j, 2]
+                        if dx * dx + dy * dy + dz * dz < r2:
+                            if total < cap:
+                                # insertion sort by partner id keeps the list ordered
+                                p = total
+                                jid = ids[j]
+                                while p > first and ids[nbr_list[p - 1]] > jid:
+                                    nbr_list[p] = nbr_list[p - 1]
+                                    p -= 1
+                                nbr_list[p] = j
+                            total += 1
+    nbr_start[n_own] = total
+    return total
+
+
+@njit(cache=True)
+def max_displacement2(x, x_ref, n_own, fixed, L_x, L_y):
+    """Largest squared displacement [d^2] of owned mobile rows since ``x_ref``."""
+    hx = 0.5 * L_x
+    hy = 0.5 * L_y
+    m = 0.0
+    for i in range(n_own):
+        if fixed[i]:
+            continue
+        dx = x[i, 0] - x_ref[i, 0]
+        if dx > hx:
+            dx -= L_x
+        elif dx < -hx:
+            dx += L_x
+        dy = x[i, 1] - x_ref[i, 1]
+        if dy > hy:
+            dy -= L_y
+        elif dy < -hy:
+            dy += L_y
+        dz = x[i, 2] - x_ref[i, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 > m:
+            m = d2
+    return m
