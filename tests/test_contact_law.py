@@ -1,0 +1,176 @@
+"""physics.md section 9, items 3 to 5, and the force kernel's invariants."""
+import math
+
+import numpy as np
+import pytest
+
+from mpdem.analysis import find_contacts
+from mpdem.build import insert_random, rng
+from mpdem.kernels.forces import contact_forces
+
+from conftest import make_engine
+
+
+def total_energy(eng):
+    """Kinetic plus Hookean elastic energy (1/2 k_n delta^2 per contact) [m g d]."""
+    st = eng.state
+    n = st.n_own
+    ke = 0.5 * np.sum(st.v[:n] ** 2) + 0.05 * np.sum(st.omega[:n] ** 2)
+    pairs, r = find_contacts(st.x[:n], st.L_x, st.L_y)
+    return ke + 0.5 * eng.phys.k_n * np.sum((1.0 - r) ** 2)
+
+
+def test_elastic_energy_conservation():
+    """9.3: no damping, no friction, no gravity: energy drift < 1e-4 over 1e5 steps."""
+    n, L = 300, 8.0
+    x = insert_random(rng(7, 99), n, L, L, 0.5, 0.5 + n * (math.pi / 6) / (L * L * 0.25))
+    v = rng(7, 98).normal(0.0, 1.0, (n, 3))
+    eng = make_engine(x, v, L=L, epsilon=1.0)
+    assert eng.phys.gamma_n == 0.0
+    e0 = total_energy(eng)
+    collisions = 0
+    for _ in range(100):
+        eng.run(1000)
+        collisions += eng.info.n_contacts
+    e1 = total_energy(eng)
+    assert collisions > 100           # the particles did collide
+    assert abs(e1 - e0) / e0 < 1e-4
+
+
+def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0, gamma_t=0.0,
+                dt=1e-4, increment=True):
+    """One call of the force kernel on two particles; returns f, torque and new slots."""
+    x = np.array(x, float)
+    v = np.array(v, float)
+    omega = np.array(omega, float)
+    fx = np.array(fixed, np.uint8)
+    ids = np.array([0, 1], np.int64)
+    nbr_start = np.array([0, 1, 2], np.int64)
+    nbr = np.array([1, 0], np.int64)
+    old_n = np.array([1 if ds_old is not None else 0, 0], np.int64)
+    old_id = np.array([[1, -1], [-1, -1]], np.int64)
+    old_ds = np.zeros((2, 2, 3))
+    if ds_old is not None:
+        old_ds[0, 0] = ds_old
+    new_n = np.zeros(2, np.int64)
+    new_id = np.full((2, 2), -1, np.int64)
+    new_ds = np.zeros((2, 2, 3))
+    f = np.zeros((2, 3))
+    t = np.zeros((2, 3))
+    res = contact_forces(2, x, v, omega, fx, ids, nbr_start, nbr, old_n, old_id, old_ds,
+                         new_n, new_id, new_ds, f, t, 10.0, 10.0, 0.0, k_n, 2 * k_n / 7,
+                         gamma_n, gamma_t, mu, 0, False, False, dt, increment)
+    return f, t, new_n, new_ds, res
+
+
+@pytest.mark.parametrize("gamma_t", [0.0, 25.0])
+def test_coulomb_limit_stick_then_slide(gamma_t):
+    """9.4: a sphere pressed on a frozen sphere and dragged tangentially sticks
+    while |F_t| < mu F_n, then slides with |F_t| = mu F_n to rounding and
+    Delta s in the tangent plane, |Delta s| = mu F_n / k_t for gamma_t = 0."""
+    mu, k_n, dt = 0.5, 2e5, 1e-4
+    k_t = 2 * k_n / 7
+    delta = 1e-3
+    # mobile sphere 0 above frozen sphere 1, sliding along x at speed u
+    x = [[5.0, 5.0, 6.0 - delta], [5.0, 5.0, 5.0]]
+    u = 0.05
+    v = [[u, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    w = np.zeros((2, 3))
+    ds = np.zeros(3)
+    F_n = k_n * delta
+    stuck = slid = 0
+    for step in range(600):
+        f, t, new_n, new_ds, res = pair_kernel(x, v, w, ds, fixed=(0, 1), mu=mu, k_n=k_n,
+                                               gamma_t=gamma_t, dt=dt)
+        ds = new_ds[0, 0].copy()
+        assert new_n[0] == 1
+        assert abs(f[0, 2] - F_n) < 1e-9 * F_n          # normal force unchanged
+        F_n = f[0, 2]                                    # n = z exactly: f_z is F_n
+        ft = f[0] - np.array([0, 0, F_n])
+        ft_mag = np.linalg.norm(ft)
+        assert ft_mag <= mu * F_n * (1 + 1e-14)
+        assert ds[2] == 0.0                              # tangent plane (n = z)
+        trial = np.linalg.norm(k_t * (step + 1) * u * dt + gamma_t * u)
+        if trial < mu * F_n:
+            stuck += 1
+            assert ft_mag == pytest.approx(trial, rel=1e-12)
+            assert ds[0] == pytest.approx((step + 1) * u * dt, rel=1e-12)
+        else:
+            slid += 1
+            assert ft_mag == pytest.approx(mu * F_n, rel=1e-14)
+            # the history reproduces the truncated force exactly
+            assert np.linalg.norm(-k_t * ds - gamma_t * np.array(v[0])) == pytest.approx(mu * F_n, rel=1e-12)
+            if gamma_t == 0:
+                assert np.linalg.norm(ds) == pytest.approx(mu * F_n / k_t, rel=1e-14)
+        assert ft[0] < 0                                  # opposes sliding
+    assert stuck > 5 and slid > 5
+
+
+def test_first_evaluation_does_not_increment():
+    f, t, n, ds, _ = pair_kernel([[5, 5, 5.999], [5, 5, 5]], [[1, 0, 0], [0, 0, 0]], np.zeros((2, 3)),
+                                 None, increment=False)
+    assert np.all(ds[0, 0] == 0)
+    f, t, n, ds, _ = pair_kernel([[5, 5, 5.999], [5, 5, 5]], [[1, 0, 0], [0, 0, 0]], np.zeros((2, 3)),
+                                 None, increment=True)
+    assert ds[0, 0, 0] == pytest.approx(1e-4)
+
+
+def test_frictionless_has_no_tangential_force_or_torque():
+    f, t, n, ds, _ = pair_kernel([[5.3, 5, 5.95], [5, 5, 5]], [[1, 0.3, 0], [0, 0, 0]],
+                                 [[0, 4, 1], [0, 0, 0]], np.array([1e-3, 0, 0]), mu=0.0, gamma_t=10.0)
+    assert np.all(t == 0)
+    assert np.all(ds == 0)
+    d = np.array([0.3, 0, 0.95])
+    assert np.allclose(np.cross(f[0], d / np.linalg.norm(d)), 0, atol=1e-9)
+
+
+def test_rolling_contact_stays_in_tangent_plane():
+    """9.5: a spinning sphere rolling over a frozen sphere under gravity:
+    Delta s . n = 0 to rounding after every step."""
+    # start touching at the static overlap m g / k_n
+    z = 5.0 + math.sqrt((1.0 - 1e-5) ** 2 - 0.02 ** 2)
+    x = [[5.0, 5.0, 5.0], [5.02, 5.0, z]]
+    v = [[0, 0, 0], [0.02, 0.01, 0.0]]
+    w = [[0, 0, 0], [0.5, 2.0, 1.0]]
+    eng = make_engine(x, v, w, fixed=[1, 0], mu=0.8, gravity=1.0)
+    st = eng.state
+    checked = 0
+    for _ in range(3000):
+        eng.step()
+        if st.slot_n[1] == 0:
+            break
+        d = st.x[1] - st.x[0]
+        n = d / np.linalg.norm(d)
+        s = st.slot_ds[1, 0]
+        if np.linalg.norm(s) > 0:
+            assert abs(s @ n) <= 4e-16 * np.linalg.norm(s)
+            checked += 1
+    assert checked > 100
+
+
+def test_pile_contacts_are_mirror_exact():
+    """Every contact's two slots are exact negatives; forces obey action-reaction
+    bit for bit; every overlapping pair has slots on both sides."""
+    n, L = 400, 6.0
+    x = insert_random(rng(3, 1), n, L, L, 0.5, 0.5 + n * (math.pi / 6) / (L * L * 0.3))
+    eng = make_engine(x, L=L, mu=0.5, gravity=1.0, gamma_t=10.0)
+    # a floor keeps the pile together
+    import dataclasses
+    eng.phys = dataclasses.replace(eng.phys, floor=True)
+    eng.run(80000)
+    st = eng.state
+    slots = {}
+    for i in range(st.n_own):
+        for k in range(st.slot_n[i]):
+            slots[(int(st.ids[i]), int(st.slot_id[i, k]))] = st.slot_ds[i, k]
+    assert len(slots) > 2 * n
+    nonzero = 0
+    for (a, b), s in slots.items():
+        assert np.array_equal(slots[(b, a)], -s)
+        nonzero += bool(np.any(s))
+    assert nonzero > len(slots) // 2
+    pairs, r = find_contacts(st.x[:n], L, L)
+    assert {(int(a), int(b)) for a, b in pairs} == {(a, b) for (a, b) in slots if a < b}
+    for i in range(st.n_own):
+        ids = st.slot_id[i, :st.slot_n[i]]
+        assert np.all(np.diff(ids) > 0)
