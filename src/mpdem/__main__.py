@@ -101,6 +101,8 @@ def parser():
     b.add_argument("--N", type=int, default=20000, help="mobile spheres (default 20000)")
     b.add_argument("--mu", type=float, default=0.5)
     b.add_argument("--cache", default=None, help="directory for the landed pile (default ~/.cache/mpdem/bench)")
+    b.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a value of the timed part (e.g. integration.skin=0.3)")
     i = sub.add_parser("info", help="what a state file holds")
     i.add_argument("file")
     i.add_argument("--digest", action="store_true", help="print a SHA-256 of the state sorted by id")

@@ -195,12 +195,18 @@ def write_table(path, ids, x, v=None, fixed=None):
     with open(path, "w") as fh:
         fh.write("# id x y z vx vy vz fixed\n")
         for k in range(n):
-            fh.write(f"{ids[k]} {x[k, 0]!r} {x[k, 1]!r} {x[k, 2]!r} "
-                     f"{v[k, 0]!r} {v[k, 1]!r} {v[k, 2]!r} {int(fixed[k])}\n")
+            row = [float(a) for a in (*x[k], *v[k])]
+            fh.write(f"{int(ids[k])} " + " ".join(map(repr, row)) + f" {int(fixed[k])}\n")
 
 
-def check_initial(ids, x, fixed, L_x, L_y, z_bed):
-    """physics.md section 8, initial-state checks; raises InputError naming the problem."""
+def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False):
+    """physics.md section 8, initial-state checks; raises InputError naming the problem.
+
+    ``z_floor`` is the lowest allowed mobile centre: z_bed + d/2 for a poured
+    pile, the mean bed height for a given file (a settled pile rests in the
+    bed's hollows). ``allow_overlap`` skips the overlap test, for mpdem
+    state files (a settled pile overlaps by design).
+    """
     if not np.all(np.isfinite(x)):
         raise InputError("initial state: non-finite positions")
     mob = fixed == 0
@@ -208,16 +214,16 @@ def check_initial(ids, x, fixed, L_x, L_y, z_bed):
     bad = (xm[:, 0] < 0) | (xm[:, 0] >= L_x) | (xm[:, 1] < 0) | (xm[:, 1] >= L_y)
     if bad.any():
         k = np.flatnonzero(mob)[np.flatnonzero(bad)[0]]
-        raise InputError(f"initial state: particle {ids[k]} at x = {x[k, 0]!r}, y = {x[k, 1]!r} "
+        raise InputError(f"initial state: particle {ids[k]} at x = {float(x[k, 0])!r}, y = {float(x[k, 1])!r} "
                          f"is outside [0, {L_x:g}) x [0, {L_y:g})")
     if fixed.any():
-        low = xm[:, 2] <= z_bed + 0.5
+        low = xm[:, 2] <= z_floor
         if low.any():
             k = np.flatnonzero(mob)[np.flatnonzero(low)[0]]
-            raise InputError(f"initial state: particle {ids[k]} at z = {x[k, 2]!r} is not above "
-                             f"z_bed + d/2 = {z_bed + 0.5:g}")
+            raise InputError(f"initial state: particle {ids[k]} at z = {float(x[k, 2])!r} is not above "
+                             f"{z_floor:g} (the bed)")
     from scipy.spatial import cKDTree
-    if len(x) < 2 or not mob.any():
+    if len(x) < 2 or not mob.any() or allow_overlap:
         return
     span = x[:, 2].max() - x[:, 2].min() + 10.0
     pts = x.copy()

@@ -13,7 +13,7 @@ import numpy as np
 
 from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, contact_forces, floor_forces
 from .kernels.integrate import kick, kick_drift, kinetic_energy
-from .kernels.neighbours import build_neighbours
+from .kernels.neighbours import build_neighbours, mirror_entries
 from .kernels.exactsum import new_accumulator, to_float
 
 
@@ -60,22 +60,35 @@ class Engine:
     state : State
     physics : Physics
     domain : Domain
+    reuse_pairs : bool
+        Compute a pair of owned mobile particles once and give the second
+        partner the exact negation (same bits as computing both views).
     """
 
-    def __init__(self, state, physics, domain):
+    def __init__(self, state, physics, domain, reuse_pairs=True):
         self.state, self.phys, self.domain = state, physics, domain
+        self.reuse_pairs = reuse_pairs
         self.model = MODEL_HERTZ if physics.model == "hertz" else MODEL_HOOKE
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
-        self.nbr_list = np.zeros(max(64, 48 * state.capacity), np.int64)
+        self._alloc_lists(max(64, 16 * state.capacity))
         self.n_rebuilds = 0
+        self.sort_every = 20
         self.info = StepInfo()
+
+    def _alloc_lists(self, size):
+        self.nbr_list = np.zeros(size, np.int64)
+        self.rev = np.full(size, -1, np.int64)
+        self.pair_on = np.zeros(size, np.uint8)
+        self.pair_val = np.zeros((size, 9))
 
     # -- neighbour lists --
     def rebuild(self):
         """Migrate/halo (domain), then cell and neighbour lists; reset x_ref."""
         s = self.state
         self.domain.rebuild(s)
+        if self.n_rebuilds % self.sort_every == 0:
+            self._sort_rows()
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
         while True:
@@ -83,9 +96,26 @@ class Engine:
                                     self.r_list, self.nbr_start, self.nbr_list)
             if need <= len(self.nbr_list):
                 break
-            self.nbr_list = np.zeros(int(need * 1.25) + 64, np.int64)
+            self._alloc_lists(int(need * 1.25) + 64)
+        if self.reuse_pairs:
+            mirror_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.rev)
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
         self.n_rebuilds += 1
+
+    def _sort_rows(self):
+        """Order owned rows by cell so neighbours are near in memory.
+
+        Sums run in partner-id order, so row order changes no result bit.
+        """
+        s = self.state
+        n = s.n_own
+        if n < 2 or s.n_rows != n:
+            return
+        c = 1.0 + self.phys.skin
+        x = s.x[:n]
+        key = (np.floor((x[:, 2] - x[:, 2].min()) / c) * (s.L_y // c + 1)
+               + np.floor(x[:, 1] / c)) * (s.L_x // c + 1) + np.floor(x[:, 0] / c)
+        s.permute(np.argsort(key, kind="stable"))
 
     # -- forces --
     def forces(self, increment=True):
@@ -94,7 +124,7 @@ class Engine:
         while True:
             max_ov, n_c, needed = contact_forces(
                 s.n_own, s.x, s.v, s.omega, s.fixed, s.ids, self.nbr_start, self.nbr_list,
-                s.slot_n, s.slot_id, s.slot_ds, s.slot_n_new, s.slot_id_new, s.slot_ds_new,
+                self.rev, self.pair_on, self.pair_val, s.slot_n, s.slot_id, s.slot_ds, s.slot_n_new, s.slot_id_new, s.slot_ds_new,
                 s.f, s.torque, s.L_x, s.L_y, p.gravity, p.k_n, p.k_t, p.gamma_n, p.gamma_t,
                 p.mu, self.model, p.limit_damping, p.rescale_history, p.dt, increment)
             if needed <= s.n_slots:

@@ -127,8 +127,10 @@ class Run:
         with open(os.path.join(self.out, "config.toml"), "w") as fh:
             fh.write(cfg.to_toml())
         L_x, L_y = cfg.box.L_x, cfg.box.L_y
+        slots = None
         if cfg.run.initial_file:
             ids, x, v, omega, fixed = self._read_initial(cfg.run.initial_file)
+            slots = self._initial_slots
             z_bed = float(x[fixed == 1, 2].max()) if fixed.any() else -math.inf
             self.bed = build.Bed(x[fixed == 1].copy(), note=f"from {cfg.run.initial_file}")
             self.h_insert = float(x[fixed == 0, 2].max() - max(z_bed, x[fixed == 0, 2].min())) if (fixed == 0).any() else 0.0
@@ -150,11 +152,14 @@ class Run:
             omega = np.zeros_like(x)
             fixed = np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)])
         self.z_bed = z_bed
-        build.check_initial(ids, x, fixed, L_x, L_y, z_bed)
+        z_floor = self.bed.z_mean if cfg.run.initial_file else z_bed + 0.5
+        build.check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=slots is not None)
         if len(self.bed.x):
             build.write_table(os.path.join(self.out, "bed.txt"), ids[fixed == 1], x[fixed == 1],
                               fixed=fixed[fixed == 1])
         self.state = State(ids, x, v, omega, fixed, L_x, L_y, slots=cfg.integration.contact_slots)
+        if slots is not None:
+            self.state.set_contacts(*slots)
         self.n_mobile = int((fixed == 0).sum())
         p = self.physics
         t_col = collision_time(p.gamma_n, p.k_n)
@@ -180,11 +185,15 @@ class Run:
         return bed
 
     def _read_initial(self, path, all_fixed=False):
+        """Particles of a text table or state file; a state file's contact
+        histories go to ``self._initial_slots`` (None for a table)."""
+        self._initial_slots = None
         if not os.path.exists(path):
             raise build.InputError(f"initial file {path}: no such file")
         if checkpoint.is_state_file(path):
             a, _ = checkpoint.read_state(path)
             ids, x, v, omega, fixed = a["id"], a["x"], a["v"], a["omega"], a["fixed"]
+            self._initial_slots = (a["count"], a["partner"], a["ds"])
         else:
             t = build.read_table(path)
             ids, x, v, fixed = t["ids"], t["x"], t["v"], t["fixed"]

@@ -117,6 +117,19 @@ class State:
             a[:n] = a[:n][order]
         self.n_rows = n
 
+    def set_contacts(self, counts, partner, ds):
+        """Load contact slots given in row order (counts per row, flat partners, Delta s)."""
+        n = self.n_own
+        counts = np.asarray(counts, np.int64)
+        if len(counts) != n:
+            raise ValueError(f"contact counts for {len(counts)} rows, state has {n}")
+        self.grow(slots=int(counts.max(initial=0)))
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        self.slot_n[:n] = counts
+        for i in np.flatnonzero(counts):
+            self.slot_id[i, :counts[i]] = partner[starts[i]:starts[i + 1]]
+            self.slot_ds[i, :counts[i]] = ds[starts[i]:starts[i + 1]]
+
     def contacts_flat(self):
         """Owned contact slots as flat arrays sorted by particle id.
 

@@ -6,6 +6,11 @@ full neighbour list sorted by partner id, and sums them in that order
 are arranged so that the two views are exact negatives in IEEE arithmetic
 (raw difference, then minimum image; symmetric sums of partner quantities).
 
+Because the two views are exact negatives, a pair of two owned mobile
+particles is computed once, by the first row met, and the second row takes
+the stored result negated (``rev`` maps an entry to its mirror entry): the
+bits are those of computing both views, at half the cost.
+
 Contact history lives in per-particle slots sorted by partner id: ``old_*``
 is read, ``new_*`` is written (double buffering), so a slot overflow can be
 repaired by growing the buffers and calling again.
@@ -22,8 +27,9 @@ MODEL_HOOKE = 0
 MODEL_HERTZ = 1
 
 
-@njit(cache=True)
-def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list,
+@njit(cache=True, error_model="numpy")
+def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list, rev,
+                   pair_on, pair_val,
                    old_n, old_id, old_ds, new_n, new_id, new_ds, f, torque,
                    L_x, L_y, gravity, k_n, k_t, gamma_n, gamma_t, mu,
                    model, limit_damping, rescale_history, dt, increment):
@@ -42,6 +48,12 @@ def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list,
         Particle ids.
     nbr_start, nbr_list : int64 arrays
         Full neighbour lists in CSR form, each sorted by partner id.
+    rev : (len(nbr_list),) int64
+        Mirror entry of each entry (``mirror_entries``); -1 for ghost or bed
+        partners. All -1 computes every view itself (same bits, twice the work).
+    pair_on : (len(nbr_list),) uint8, pair_val : (len(nbr_list), 9) float64
+        Scratch: the result of a pair computed by its first row (contact
+        flag; force, torque and Delta s of that row).
     old_n, old_id, old_ds : (n_rows,), (n_rows, C), (n_rows, C, 3)
         Contact slots before this step: count, partner ids (ascending),
         tangential displacement Delta s [d].
@@ -99,6 +111,23 @@ def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list,
         c = 0
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr_list[k]
+            m = rev[k]
+            if m >= 0 and j < i:
+                # the partner computed this pair already: take its view negated
+                if pair_on[m]:
+                    if c < cap:
+                        new_id[i, c] = ids[j]
+                        new_ds[i, c, 0] = -pair_val[m, 6]
+                        new_ds[i, c, 1] = -pair_val[m, 7]
+                        new_ds[i, c, 2] = -pair_val[m, 8]
+                    c += 1
+                    fx += -pair_val[m, 0]
+                    fy += -pair_val[m, 1]
+                    fz += -pair_val[m, 2]
+                    tx += pair_val[m, 3]
+                    ty += pair_val[m, 4]
+                    tz += pair_val[m, 5]
+                continue
             dx = x[i, 0] - x[j, 0]
             if dx > hx:
                 dx -= L_x
@@ -112,14 +141,17 @@ def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list,
             dz = x[i, 2] - x[j, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if not r2 < 1.0:
+                if m >= 0:
+                    pair_on[k] = 0
                 continue
             r = math.sqrt(r2)
             delta = 1.0 - r
             if delta > max_overlap:
                 max_overlap = delta
-            nx = dx / r
-            ny = dy / r
-            nz = dz / r
+            rinv = 1.0 / r
+            nx = dx * rinv
+            ny = dy * rinv
+            nz = dz * rinv
             meff = 1.0 if fixed[j] else 0.5
             vrx = v[i, 0] - v[j, 0]
             vry = v[i, 1] - v[j, 1]
@@ -202,13 +234,30 @@ def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list,
                 new_ds[i, c, 1] = sy
                 new_ds[i, c, 2] = sz
             c += 1
-            fx += fn * nx + ftx
-            fy += fn * ny + fty
-            fz += fn * nz + ftz
-            # T_i += -R n x F_t
-            tx -= R * (ny * ftz - nz * fty)
-            ty -= R * (nz * ftx - nx * ftz)
-            tz -= R * (nx * fty - ny * ftx)
+            fcx = fn * nx + ftx
+            fcy = fn * ny + fty
+            fcz = fn * nz + ftz
+            # T_i += -R n x F_t (the same for both partners)
+            tcx = -(R * (ny * ftz - nz * fty))
+            tcy = -(R * (nz * ftx - nx * ftz))
+            tcz = -(R * (nx * fty - ny * ftx))
+            fx += fcx
+            fy += fcy
+            fz += fcz
+            tx += tcx
+            ty += tcy
+            tz += tcz
+            if m >= 0:
+                pair_on[k] = 1
+                pair_val[k, 0] = fcx
+                pair_val[k, 1] = fcy
+                pair_val[k, 2] = fcz
+                pair_val[k, 3] = tcx
+                pair_val[k, 4] = tcy
+                pair_val[k, 5] = tcz
+                pair_val[k, 6] = sx
+                pair_val[k, 7] = sy
+                pair_val[k, 8] = sz
         f[i, 0] = fx
         f[i, 1] = fy
         f[i, 2] = fz

@@ -136,26 +136,31 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list,
 
 
 @njit(cache=True)
-def max_displacement2(x, x_ref, n_own, fixed, L_x, L_y):
-    """Largest squared displacement [d^2] of owned mobile rows since ``x_ref``."""
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
-    m = 0.0
+def mirror_entries(n_own, fixed, ids, nbr_start, nbr_list, rev):
+    """For each list entry i -> j with j an owned mobile row, the entry j -> i.
+
+    Lists are symmetric (the distance test is exactly mirror-symmetric) and
+    sorted by id, so the mirror entry is found by bisection. ``rev`` gets -1
+    where the partner is a ghost or a bed particle.
+
+    Parameters
+    ----------
+    rev : (len(nbr_list),) int64, out
+    """
     for i in range(n_own):
-        if fixed[i]:
-            continue
-        dx = x[i, 0] - x_ref[i, 0]
-        if dx > hx:
-            dx -= L_x
-        elif dx < -hx:
-            dx += L_x
-        dy = x[i, 1] - x_ref[i, 1]
-        if dy > hy:
-            dy -= L_y
-        elif dy < -hy:
-            dy += L_y
-        dz = x[i, 2] - x_ref[i, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 > m:
-            m = d2
-    return m
+        idi = ids[i]
+        for k in range(nbr_start[i], nbr_start[i + 1]):
+            j = nbr_list[k]
+            if j >= n_own or fixed[j]:
+                rev[k] = -1
+                continue
+            lo = nbr_start[j]
+            hi = nbr_start[j + 1]
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if ids[nbr_list[mid]] < idi:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            rev[k] = lo
+

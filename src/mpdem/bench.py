@@ -1,0 +1,109 @@
+"""``python -m mpdem bench``: nanoseconds per particle-step on a landed pile.
+
+The case (fixed, so figures compare across versions and with LAMMPS):
+N = 20 000 mobile spheres on the rough bed of a 20 d x 20 d box, Hookean,
+k_n = 2e5, epsilon = 0.88, gamma_t = 0, mu = 0.5, dt = 1e-4, skin 0.2 d.
+The landed pile is made once per machine and cached (about 8 minutes on
+one core): poured at phi_i = 0.3 with the benchmark's own physics and run
+for 25 tau (250 000 steps), by which time it has landed (E_k/N ~ 1e-3,
+about 4.5 contacts per particle). The timed part continues it for
+``--steps`` steps (default 2000) after 200 untimed steps (kernels compiled,
+lists built). It prints ns
+per particle-step, the share in neighbour-list rebuilds, and the peak
+memory per particle.
+"""
+from __future__ import annotations
+
+import os
+import resource
+import time
+
+import numpy as np
+
+from . import build, checkpoint, config
+from .decomp import Domain
+from .engine import Engine, Physics
+from .state import State
+
+LANDING_TIME = 25.0   # [tau] from the pour at phi_i = 0.3 to the landed pile
+
+
+def bench_config(N, mu):
+    return config.load(None, ["run.max_steps=1", f"pour.N={N}", "pour.phi_i=0.3",
+                              f"contact.mu={mu}", "box.L_x=20.0", "box.L_y=20.0"])
+
+
+def landed_pile(cfg, cache, log=print):
+    """The landed pile of the benchmark, from the cache or made now."""
+    N, mu = cfg.pour.N, cfg.contact.mu
+    path = os.path.join(cache, f"pile-N{N}-mu{mu:g}-v2.h5")
+    if os.path.exists(path):
+        a, _ = checkpoint.read_state(path)
+        return a, path
+    os.makedirs(cache, exist_ok=True)
+    log(f"bench: making the landed pile once ({N} spheres; cached in {path})")
+    bed = build.make_bed(cfg)
+    L = cfg.box.L_x
+    H = build.insertion_height(N, L, L, cfg.pour.phi_i)
+    xm = build.insert_random(build.rng(cfg.run.seed, build.STREAM_POUR), N, L, L,
+                             bed.z_top + 1, bed.z_top + 1 + H, obstacles=bed.x)
+    nb = len(bed.x)
+    st = State(np.arange(N + nb), np.concatenate([xm, bed.x]),
+               fixed=np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)]), L_x=L, L_y=L)
+    eng = Engine(st, Physics.from_config(cfg), Domain(None))
+    eng.setup()
+    t0 = time.perf_counter()
+    steps = int(round(LANDING_TIME / cfg.integration.dt))
+    for k in range(10):
+        eng.run(steps // 10)
+        et, er = eng.kinetic()
+        log(f"bench:   t = {st.time:5.1f}: E_k/N = {(et + er) / N:.2e}, contacts per particle "
+            f"{eng.info.n_contacts / N:.2f}, {time.perf_counter() - t0:.0f} s")
+    st.step, st.time = 0, 0.0
+    a = checkpoint.gather_state(st)
+    checkpoint.write_state(path, a, {"kind": "bench-pile", "step": 0, "time": 0.0,
+                                     "n_mobile": N, "n_bed": nb, "L_x": L, "L_y": L})
+    return a, path
+
+
+def run_bench(args, comm):
+    """Time the benchmark case; print figures (rank 0)."""
+    cfg = bench_config(args.N, args.mu)
+    if args.set:
+        cfg = config.load(None, ["run.max_steps=1"] + list(args.set),
+                          base={k: v for k, v in cfg.values.items() if k not in cfg.derived})
+    cache = args.cache or os.path.join(os.path.expanduser("~"), ".cache", "mpdem", "bench")
+    a, path = landed_pile(cfg, cache)
+    st = State(a["id"], a["x"], a["v"], a["omega"], a["fixed"], cfg.box.L_x, cfg.box.L_y)
+    st.set_contacts(a["count"], a["partner"], a["ds"])
+    eng = Engine(st, Physics.from_config(cfg), Domain(comm))
+    N = int((a["fixed"] == 0).sum())
+    eng.setup()
+    eng.run(200)
+    r0 = eng.n_rebuilds
+    t0 = time.perf_counter()
+    t_rebuild = 0.0
+    for _ in range(args.steps):
+        eng.step()
+    wall = time.perf_counter() - t0
+    et, er = eng.kinetic()
+    # rebuild share: time the same number of rebuilds separately
+    nreb = eng.n_rebuilds - r0
+    tr = time.perf_counter()
+    for _ in range(max(nreb, 1)):
+        eng.rebuild()
+    t_rebuild = (time.perf_counter() - tr) * (nreb / max(nreb, 1))
+    ns = 1e9 * wall / (args.steps * N)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    arrays = sum(getattr(st, f).nbytes for f in ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref",
+                                                  "slot_n", "slot_id", "slot_ds", "slot_n_new",
+                                                  "slot_id_new", "slot_ds_new"))
+    arrays += sum(b.nbytes for b in (eng.nbr_list, eng.rev, eng.pair_on, eng.pair_val, eng.nbr_start))
+    print(f"bench: N = {N} mobile + {len(st.ids) - N} bed, mu = {cfg.contact.mu:g}, k_n = {cfg.contact.k_n:g}, "
+          f"dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}, landed pile {path}")
+    print(f"bench: {args.steps} steps in {wall:.2f} s: {ns:.1f} ns per particle-step "
+          f"({args.steps / wall:.0f} steps/s), {nreb} list rebuilds ({100 * t_rebuild / wall:.0f}% of the time), "
+          f"contacts per particle {eng.info.n_contacts / N:.2f}, E_k/N {(et + er) / N:.2e}")
+    print(f"bench: peak memory {peak / N:.0f} bytes per particle (process RSS {peak / 2**20:.0f} MiB); "
+          f"particle and list arrays {arrays / N:.0f} bytes per particle")
+    return ns

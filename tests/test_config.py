@@ -1,0 +1,112 @@
+"""Configuration: defaults, derivations, validation, round trip, --set."""
+import math
+
+import pytest
+
+from mpdem import config
+from mpdem.config import ConfigError
+
+
+def cfg(**sets):
+    items = [f"{k}={v}" for k, v in sets.items()]
+    return config.load(None, ["run.max_steps=100"] + items)
+
+
+def test_defaults_follow_physics_md():
+    c = cfg()
+    assert c.contact.k_t == pytest.approx(2 * 2e5 / 7)
+    assert c.contact.gamma_n == pytest.approx(51.43, abs=0.01)
+    assert c.contact.gamma_t == 0.0
+    assert c.integration.dt == pytest.approx(1e-4)
+    assert c.stop.E_stop == pytest.approx(1e-8)
+    assert c.stop.rule == "window"
+    assert c.box.L_x == 20.0 and c.pour.N == 20000 and c.pour.phi_i == 0.13
+
+
+def test_derived_defaults_scale_with_k_n():
+    c = config.load(None, ["run.max_steps=1", "contact.k_n=2e9"])
+    assert c.integration.dt == pytest.approx(1e-6)
+    assert c.stop.E_stop == pytest.approx(1e-11)
+    assert c.contact.gamma_n == pytest.approx(5142.7, rel=1e-4)
+
+
+def test_max_steps_is_required():
+    with pytest.raises(ConfigError, match="run.max_steps is required"):
+        config.load(None, [])
+
+
+@pytest.mark.parametrize("key,value,words", [
+    ("contact.k_n", "-1", "k_n > 0"),
+    ("contact.k_n", "nan", "finite"),
+    ("contact.mu", "-0.1", "0 <= mu"),
+    ("contact.epsilon", "0", "0 < epsilon <= 1"),
+    ("contact.epsilon", "1.5", "0 < epsilon <= 1"),
+    ("contact.gamma_n", "1e6", "critical"),
+    ("contact.gamma_t", "-1", "gamma_t >= 0"),
+    ("contact.k_t", "-1", "k_t >= 0"),
+    ("pour.phi_i", "0.36", "phi_i < 0.35"),
+    ("pour.phi_i", "0", "0 < phi_i"),
+    ("pour.N", "0", "N >= 1"),
+    ("pour.K0", "-2", "K0 >= 0"),
+    ("box.L_x", "2.0", "L >= 3 d"),
+    ("integration.dt", "5e-4", "t_col / dt"),
+    ("integration.dt", "-1e-4", "dt > 0"),
+    ("stop.E_stop", "0", "E_stop > 0"),
+    ("run.max_steps", "0", "max_steps > 0"),
+    ("contact.model", '"lj"', "accepted values"),
+    ("pour.N", "1.5", "integer"),
+    ("contact.limit_damping", "1", "true or false"),
+])
+def test_bad_values_name_key_value_and_range(key, value, words):
+    with pytest.raises(ConfigError) as e:
+        cfg(**{key: value})
+    msg = str(e.value)
+    assert key in msg and words in msg
+
+
+def test_unknown_keys_are_rejected(tmp_path):
+    p = tmp_path / "c.toml"
+    p.write_text("[run]\nmax_steps = 5\n[contact]\nfriction = 0.3\n")
+    with pytest.raises(ConfigError, match="unknown key contact.friction"):
+        config.load(p)
+    with pytest.raises(ConfigError, match="unknown key"):
+        config.load(None, ["run.max_steps=1", "contact.nope=1"])
+    p.write_text("[walls]\nx = 1\n")
+    with pytest.raises(ConfigError, match="unknown section"):
+        config.load(p)
+
+
+def test_warnings_for_unusual_but_valid_values():
+    c = cfg(**{"contact.mu": "20", "contact.k_t": "1000.0", "pour.phi_i": "0.32"})
+    text = " ".join(c.warnings)
+    assert "contact.mu" in text and "contact.k_t" in text and "pour.phi_i" in text
+
+
+def test_gamma_n_and_epsilon_must_agree():
+    c = cfg(**{"contact.gamma_n": "50.0"})
+    assert c.contact.epsilon == pytest.approx(0.883, abs=1e-3)
+    with pytest.raises(ConfigError, match="disagree"):
+        cfg(**{"contact.gamma_n": "50.0", "contact.epsilon": "0.5"})
+
+
+def test_resolved_config_round_trips(tmp_path):
+    c = cfg(**{"contact.mu": "0.3", "contact.k_n": "2e6", "box.L_x": "12.5", "run.initial_file": '"a b.txt"'})
+    p = tmp_path / "resolved.toml"
+    p.write_text(c.to_toml())
+    back = config.load(p)
+    assert dict(back.values) == dict(c.values)
+    assert "derived default" in c.to_toml()
+
+
+def test_set_parses_toml_values_and_bare_strings():
+    assert config.parse_set("contact.mu=0.25") == ("contact.mu", 0.25)
+    assert config.parse_set("contact.model=hertz") == ("contact.model", "hertz")
+    assert config.parse_set("contact.limit_damping=true") == ("contact.limit_damping", True)
+    with pytest.raises(ConfigError, match="section.key=value"):
+        config.parse_set("contact.mu")
+
+
+def test_readme_config_reference_is_current():
+    from pathlib import Path
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert config.reference_markdown() in readme

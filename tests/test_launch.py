@@ -1,0 +1,25 @@
+"""Launch mistakes give one clear error and never hang."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+
+
+def test_mpi4py_of_another_mpi_is_detected(tmp_path):
+    # what a process started by a foreign mpiexec sees: a launcher size > 1, a world of 1
+    env = dict(os.environ, OMPI_COMM_WORLD_SIZE="2", PMI_SIZE="2")
+    p = subprocess.run([sys.executable, "-m", "mpdem", "run", "--set", "run.max_steps=1",
+                        "--out", str(tmp_path / "r")], env=env, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 1
+    assert "mpi4py sees a world of size 1" in p.stderr
+
+
+def test_error_on_ranks_exits_all_ranks(tmp_path):
+    # several ranks with a bad value: every rank reports and the job ends (no hang)
+    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, "-m", "mpdem", "run",
+                        "--set", "contact.mu=-1", "--out", str(tmp_path / "r")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode != 0
+    assert "contact.mu = -1" in p.stderr
