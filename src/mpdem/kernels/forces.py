@@ -20,6 +20,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .geometry import min_image
+
 R = 0.5          # particle radius [d]
 INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
 
@@ -128,16 +130,8 @@ def contact_forces(n_own, x, v, omega, fixed, ids, nbr_start, nbr_list, rev,
                     ty += pair_val[m, 4]
                     tz += pair_val[m, 5]
                 continue
-            dx = x[i, 0] - x[j, 0]
-            if dx > hx:
-                dx -= L_x
-            elif dx < -hx:
-                dx += L_x
-            dy = x[i, 1] - x[j, 1]
-            if dy > hy:
-                dy -= L_y
-            elif dy < -hy:
-                dy += L_y
+            dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
+            dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
             dz = x[i, 2] - x[j, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if not r2 < 1.0:

@@ -2,6 +2,8 @@
 import numpy as np
 from numba import njit
 
+from .geometry import min_image
+
 
 @njit(cache=True)
 def rsa_insert(cand, obstacles, out, n_done, L_x, L_y, z_lo, z_hi):
@@ -72,16 +74,8 @@ def rsa_insert(cand, obstacles, out, n_done, L_x, L_y, z_lo, z_hi):
                     jx = (ix + e) % nx
                     q = head[(jz * ny + jy) * nx + jx]
                     while q >= 0:
-                        dx = px - pos[q, 0]
-                        if dx > hx:
-                            dx -= L_x
-                        elif dx < -hx:
-                            dx += L_x
-                        dy = py - pos[q, 1]
-                        if dy > hy:
-                            dy -= L_y
-                        elif dy < -hy:
-                            dy += L_y
+                        dx = min_image(px - pos[q, 0], L_x, hx)
+                        dy = min_image(py - pos[q, 1], L_y, hy)
                         dz = pz - pos[q, 2]
                         if dx * dx + dy * dy + dz * dz < 1.0:
                             ok = False

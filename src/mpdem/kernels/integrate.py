@@ -3,6 +3,8 @@ import math
 
 from numba import njit
 
+from .geometry import min_image
+
 from .exactsum import add_exact
 from .forces import INV_I
 
@@ -62,16 +64,8 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
             z_min = z
         if z > z_max:
             z_max = z
-        dx = x[i, 0] - x_ref[i, 0]
-        if dx > hx:
-            dx -= L_x
-        elif dx < -hx:
-            dx += L_x
-        dy = x[i, 1] - x_ref[i, 1]
-        if dy > hy:
-            dy -= L_y
-        elif dy < -hy:
-            dy += L_y
+        dx = min_image(x[i, 0] - x_ref[i, 0], L_x, hx)
+        dy = min_image(x[i, 1] - x_ref[i, 1], L_y, hy)
         dz = z - x_ref[i, 2]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 > max_d2:

@@ -8,6 +8,8 @@ cell only adds candidates that the distance test rejects.
 import numpy as np
 from numba import njit
 
+from .geometry import min_image
+
 
 @njit(cache=True)
 def _cell_axis(length, r_list):
@@ -110,16 +112,8 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list,
                         j = order[k]
                         if j == i:
                             continue
-                        dx = x[i, 0] - x[j, 0]
-                        if dx > hx:
-                            dx -= L_x
-                        elif dx < -hx:
-                            dx += L_x
-                        dy = x[i, 1] - x[j, 1]
-                        if dy > hy:
-                            dy -= L_y
-                        elif dy < -hy:
-                            dy += L_y
+                        dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
+                        dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
                         dz = x[i, 2] - x[j, 2]
                         if dx * dx + dy * dy + dz * dz < r2:
                             if total < cap:
