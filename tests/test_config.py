@@ -1,5 +1,4 @@
 """Configuration: defaults, derivations, validation, round trip, --set."""
-import math
 
 import pytest
 

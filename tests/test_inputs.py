@@ -1,6 +1,5 @@
 """Initial files, initial-state checks and the run directory."""
 import json
-import math
 import subprocess
 import sys
 
@@ -132,3 +131,23 @@ def test_cli_info_and_digest(tmp_path):
     assert p.returncode == 0 and p.stdout.strip() == s["digest"]
     p = cli("info", str(out / "final.h5"))
     assert "step 300" in p.stdout and "mobile" in p.stdout
+
+
+def test_runtime_checks_stop_the_run(tmp_path):
+    from mpdem.simulation import RunError
+    # a head-on collision far too fast for k_n: overlap above checks.overlap_error
+    p = tmp_path / "fast.txt"
+    build.write_table(p, np.array([0, 1]), np.array([[2.0, 2.5, 10.0], [3.2, 2.5, 10.0]]),
+                      np.array([[300.0, 0, 0], [-300.0, 0, 0]]))
+    r = Run(small_cfg(f'run.initial_file="{p}"', "box.gravity=0.0"), str(tmp_path / "f"), quiet=True)
+    r.prepare()
+    with pytest.raises(RunError, match="overlap .* exceeds checks.overlap_error"):
+        r.run()
+    # a sphere dropping past the single bed sphere, beside it
+    p = tmp_path / "fall.txt"
+    build.write_table(p, np.array([0, 1]), np.array([[1.0, 1.0, 3.0], [3.5, 3.5, 1.0]]),
+                      fixed=np.array([0, 1], np.uint8))
+    r = Run(small_cfg(f'run.initial_file="{p}"', "run.max_steps=20000"), str(tmp_path / "g"), quiet=True)
+    r.prepare()
+    with pytest.raises(RunError, match="fell through the bed"):
+        r.run()

@@ -250,12 +250,13 @@ class Run:
         self.wall = time.perf_counter() - t0
         if thermo:
             thermo.close()
-        self.ek = ek
+        et, er = eng.kinetic()
+        self.ek = (et + er) / N
         return self.converged
 
     def _check(self, info, warned=None, escape=math.inf):
         cfg, st = self.cfg, self.state
-        if not math.isfinite(info.z_min) and self.n_mobile and st.step > 0 and math.isnan(info.z_min):
+        if math.isnan(info.z_min):
             raise RunError(f"step {st.step}: a position became NaN or infinite (check dt and k_n)")
         if info.max_overlap > cfg.checks.overlap_error:
             raise RunError(f"step {st.step}: overlap {info.max_overlap:.4g} d exceeds "

@@ -17,7 +17,6 @@ repaired by growing the buffers and calling again.
 """
 import math
 
-import numpy as np
 from numba import njit
 
 from .geometry import min_image
