@@ -13,6 +13,7 @@ import argparse
 import os
 import sys
 import time
+import tomllib
 from importlib import resources
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
@@ -43,7 +44,7 @@ def cmd_run(args, comm):
     from .simulation import Run
     if args.config is None:
         text = resources.files("mpdem").joinpath("example.toml").read_text()
-        raw = config.flatten(__import__("tomllib").loads(text), origin="built-in example")
+        raw = config.flatten(tomllib.loads(text), origin="built-in example")
         cfg = config.load(None, args.set, base=raw)
     else:
         cfg = config.load(args.config, args.set)
@@ -69,7 +70,6 @@ def cmd_info(args, comm):
     print(f"  step {attrs.get('step')}, time {attrs.get('time')}, {n} particles "
           f"({attrs.get('n_mobile')} mobile, {attrs.get('n_bed')} bed), "
           f"{len(arrays['partner'])} contact slots, box {attrs.get('L_x')} x {attrs.get('L_y')}")
-    import tomllib
     try:
         c = tomllib.loads(attrs.get("config", ""))
         ct = c.get("contact", {})

@@ -9,6 +9,14 @@ from .exactsum import add_exact
 from .forces import INV_I
 
 
+@njit(cache=True, inline="always")
+def _half_kick(i, v, omega, f, torque, h):
+    """v += h F / m and omega += h T / I for row i (m = 1, I = 0.1)."""
+    for a in range(3):
+        v[i, a] += h * f[i, a]
+        omega[i, a] += h * INV_I * torque[i, a]
+
+
 @njit(cache=True)
 def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
     """First half-kick and drift of owned mobile rows; wrap x and y.
@@ -40,9 +48,8 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
     for i in range(n_own):
         if fixed[i]:
             continue
+        _half_kick(i, v, omega, f, torque, h)
         for a in range(3):
-            v[i, a] += h * f[i, a]
-            omega[i, a] += h * INV_I * torque[i, a]
             x[i, a] += dt * v[i, a]
         # one correction suffices: nothing moves a box length in one step
         if x[i, 0] >= L_x:
@@ -80,11 +87,8 @@ def kick(n_own, v, omega, f, torque, fixed, dt):
     """Second half-kick of owned mobile rows (m = 1, I = 0.1)."""
     h = 0.5 * dt
     for i in range(n_own):
-        if fixed[i]:
-            continue
-        for a in range(3):
-            v[i, a] += h * f[i, a]
-            omega[i, a] += h * INV_I * torque[i, a]
+        if not fixed[i]:
+            _half_kick(i, v, omega, f, torque, h)
 
 
 @njit(cache=True)
