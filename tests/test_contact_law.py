@@ -38,7 +38,7 @@ def test_elastic_energy_conservation():
 
 
 def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0, gamma_t=0.0,
-                dt=1e-4, increment=True):
+                dt=1e-4, increment=True, model=0, limit_damping=False, rotate=False):
     """One call of the force kernel on two particles; returns f, torque and new slots."""
     x = np.array(x, float)
     v = np.array(v, float)
@@ -61,7 +61,7 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     res = contact_forces(2, x, v, omega, fx, ids, nbr_start, nbr, rev, np.zeros(2, np.uint8),
                          np.zeros((2, 9)), old_n, old_id, old_ds,
                          new_n, new_id, new_ds, f, t, 10.0, 10.0, 0.0, k_n, 2 * k_n / 7,
-                         gamma_n, gamma_t, mu, 0, False, False, dt, increment)
+                         gamma_n, gamma_t, mu, model, limit_damping, rotate, dt, increment)
     return f, t, new_n, new_ds, res
 
 
@@ -196,3 +196,36 @@ def test_pairs_computed_once_give_the_same_bits():
         assert eng.info.n_contacts > n
         digests.append(digest(gather_state(eng.state)))
     assert digests[0] == digests[1]
+
+
+def test_hertz_scales_spring_and_dashpot_by_sqrt_overlap():
+    """physics.md 2.7: F = sqrt(delta/d) [k_n delta n - m_eff gamma_n v_n]."""
+    from mpdem.kernels.forces import MODEL_HERTZ
+    x = [[5.0, 5.0, 5.998], [5.0, 5.0, 5.0]]
+    v = [[0, 0, -0.3], [0, 0, 0]]
+    f_hooke = pair_kernel(x, v, np.zeros((2, 3)), None, mu=0.0, gamma_n=40.0)[0][0, 2]
+    f_hertz = pair_kernel(x, v, np.zeros((2, 3)), None, mu=0.0, gamma_n=40.0, model=MODEL_HERTZ)[0][0, 2]
+    d = 1.0 - (5.998 - 5.0)
+    assert f_hooke == pytest.approx(2e5 * d + 1.0 * 40.0 * 0.3, rel=1e-9)    # bed partner: m_eff = m
+    assert f_hertz == pytest.approx(math.sqrt(d) * f_hooke, rel=1e-12)
+
+
+def test_limit_damping_clips_attraction():
+    # separating fast at a tiny overlap: the dashpot outweighs the spring
+    x = [[5.0, 5.0, 6.0 - 1e-6], [5.0, 5.0, 5.0]]
+    v = [[0, 0, 1.0], [0, 0, 0]]
+    f_free = pair_kernel(x, v, np.zeros((2, 3)), None, mu=0.0, gamma_n=50.0)[0][0, 2]
+    f_clip = pair_kernel(x, v, np.zeros((2, 3)), None, mu=0.0, gamma_n=50.0, limit_damping=True)[0][0, 2]
+    assert f_free < 0                       # attractive, unclipped by default
+    assert f_clip == 0.0
+
+
+def test_rotate_history_keeps_its_length():
+    """The documented alternative: project onto the tangent plane, then rescale to the old |Delta s|."""
+    s_old = np.array([1e-4, 0.0, 3e-5])     # has a normal component along z
+    x = [[5.0, 5.0, 5.999], [5.0, 5.0, 5.0]]
+    res = [pair_kernel(x, np.zeros((2, 3)), np.zeros((2, 3)), s_old, mu=10.0, rotate=r)[3][0, 0]
+           for r in (False, True)]
+    assert res[0][2] == 0.0 and res[1][2] == 0.0
+    assert np.linalg.norm(res[0]) == pytest.approx(1e-4, rel=1e-12)          # projection only
+    assert np.linalg.norm(res[1]) == pytest.approx(np.linalg.norm(s_old), rel=1e-12)
