@@ -58,7 +58,7 @@ def landed_pile(cfg, cache, log=print):
         eng.run(steps // 10)
         et, er = eng.kinetic()
         log(f"bench:   t = {st.time:5.1f}: E_k/N = {(et + er) / N:.2e}, contacts per particle "
-            f"{eng.info.n_contacts / N:.2f}, {time.perf_counter() - t0:.0f} s")
+            f"{eng.contacts() / N:.2f}, {time.perf_counter() - t0:.0f} s")
     st.step, st.time = 0, 0.0
     a = checkpoint.gather_state(st)
     checkpoint.write_state(path, a, {"kind": "bench-pile", "step": 0, "time": 0.0,
@@ -73,20 +73,35 @@ def run_bench(args, comm):
         cfg = config.load(None, ["run.max_steps=1"] + list(args.set),
                           base={k: v for k, v in cfg.values.items() if k not in cfg.derived})
     cache = args.cache or os.path.join(os.path.expanduser("~"), ".cache", "mpdem", "bench")
-    a, path = landed_pile(cfg, cache)
-    st = State(a["id"], a["x"], a["v"], a["omega"], a["fixed"], cfg.box.L_x, cfg.box.L_y)
-    st.set_contacts(a["count"], a["partner"], a["ds"])
-    eng = Engine(st, Physics.from_config(cfg), Domain(comm))
+    rank = comm.Get_rank() if comm is not None else 0
+    a, path = landed_pile(cfg, cache) if rank == 0 else (None, None)
+    if comm is not None and comm.Get_size() > 1:
+        a, path = comm.bcast((a, path), root=0)
+    dom = Domain(comm, r_list=1.0 + cfg.integration.skin, tolerance=cfg.decomp.balance_tolerance,
+                 damping=cfg.decomp.balance_damping)
     N = int((a["fixed"] == 0).sum())
+    dom.set_bounds(a["x"][a["fixed"] == 0, 2])
+    mine = dom.select(a["x"][:, 2])
+    st = State(a["id"][mine], a["x"][mine], a["v"][mine], a["omega"][mine], a["fixed"][mine],
+               cfg.box.L_x, cfg.box.L_y, capacity=int(1.5 * mine.sum()) + 64)
+    starts = np.concatenate([[0], np.cumsum(a["count"])])
+    rows = np.flatnonzero(mine)
+    take = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows]).astype(np.int64)
+    st.set_contacts(a["count"][rows], a["partner"][take], a["ds"][take])
+    eng = Engine(st, Physics.from_config(cfg), dom)
     eng.setup()
     eng.run(200)
     r0 = eng.n_rebuilds
+    c0 = dom.comm_seconds
     t0 = time.perf_counter()
     t_rebuild = 0.0
     for _ in range(args.steps):
         eng.step()
     wall = time.perf_counter() - t0
+    comm_share = (dom.comm_seconds - c0) / wall
     et, er = eng.kinetic()
+    contacts = eng.contacts()
+    imbalance = dom.imbalance(st)
     # rebuild share: time the same number of rebuilds separately
     nreb = eng.n_rebuilds - r0
     tr = time.perf_counter()
@@ -94,16 +109,21 @@ def run_bench(args, comm):
         eng.rebuild()
     t_rebuild = (time.perf_counter() - tr) * (nreb / max(nreb, 1))
     ns = 1e9 * wall / (args.steps * N)
+    if rank != 0:
+        return ns
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     arrays = sum(getattr(st, f).nbytes for f in ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref",
                                                   "slot_n", "slot_id", "slot_ds", "slot_n_new",
                                                   "slot_id_new", "slot_ds_new"))
     arrays += sum(b.nbytes for b in (eng.nbr_list, eng.rev, eng.pair_on, eng.pair_val, eng.nbr_start))
-    print(f"bench: N = {N} mobile + {len(st.ids) - N} bed, mu = {cfg.contact.mu:g}, k_n = {cfg.contact.k_n:g}, "
-          f"dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}, landed pile {path}")
+    print(f"bench: N = {N} mobile + {len(a['id']) - N} bed, mu = {cfg.contact.mu:g}, k_n = {cfg.contact.k_n:g}, "
+          f"dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}, ranks = {dom.size}, landed pile {path}")
     print(f"bench: {args.steps} steps in {wall:.2f} s: {ns:.1f} ns per particle-step "
           f"({args.steps / wall:.0f} steps/s), {nreb} list rebuilds ({100 * t_rebuild / wall:.0f}% of the time), "
-          f"contacts per particle {eng.info.n_contacts / N:.2f}, E_k/N {(et + er) / N:.2e}")
+          f"contacts per particle {contacts / N:.2f}, E_k/N {(et + er) / N:.2e}")
+    if dom.parallel:
+        print(f"bench: {dom.size} ranks: communication {100 * comm_share:.0f}% of rank 0's time, "
+              f"imbalance (max/mean owned) {imbalance:.2f}")
     print(f"bench: peak memory {peak / N:.0f} bytes per particle (process RSS {peak / 2**20:.0f} MiB); "
           f"particle and list arrays {arrays / N:.0f} bytes per particle")
     return ns

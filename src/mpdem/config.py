@@ -74,6 +74,8 @@ SCHEMA = (
     _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]"),
     _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]"),
     _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]"),
+    _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this"),
+    _k("decomp", "balance_damping", 0.5, "fraction of the way the slab bounds move toward balance at a rebalance"),
     _k("output", "progress_every", 10000, "steps between progress lines", int),
     _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = clamp(0.2 (h - z_bed), 3, 10)"),
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
@@ -327,6 +329,8 @@ def resolve(raw):
     need("checks.overlap_error", vals["checks.overlap_error"] > vals["checks.overlap_warn"], "overlap_error > overlap_warn")
     need("checks.escape_margin", vals["checks.escape_margin"] > 0, "escape_margin > 0")
     need("output.progress_every", vals["output.progress_every"] >= 1, "progress_every >= 1")
+    need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
+    need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
     need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")
     need("bed.gap", vals["bed.gap"] >= 0, "gap >= 0")
     need("bed.settle_density", 0 < vals["bed.settle_density"] <= 50, "0 < settle_density <= 50")

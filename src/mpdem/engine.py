@@ -75,6 +75,8 @@ class Engine:
         self.n_rebuilds = 0
         self.sort_every = 20
         self.info = StepInfo()
+        self._overlap = 0.0      # this rank's largest overlap of the last force evaluation
+        self._contacts = 0       # this rank's contacts of the last force evaluation
 
     def _alloc_lists(self, size):
         self.nbr_list = np.zeros(size, np.int64)
@@ -86,9 +88,10 @@ class Engine:
     def rebuild(self):
         """Migrate/halo (domain), then cell and neighbour lists; reset x_ref."""
         s = self.state
-        self.domain.rebuild(s)
+        s.n_rows = s.n_own                   # ghosts are rebuilt by the domain
         if self.n_rebuilds % self.sort_every == 0:
             self._sort_rows()
+        self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
         while True:
@@ -109,7 +112,7 @@ class Engine:
         """
         s = self.state
         n = s.n_own
-        if n < 2 or s.n_rows != n:
+        if n < 2:
             return
         c = 1.0 + self.phys.skin
         x = s.x[:n]
@@ -138,34 +141,44 @@ class Engine:
     def setup(self):
         """Neighbour lists and the set-up force evaluation (no history increment)."""
         self.rebuild()
-        max_ov, n_c = self.forces(increment=False)
-        self.info = StepInfo(self.domain.max(max_ov), int(self.domain.sum_int(np.array([n_c]))[0]))
+        self._overlap, self._contacts = self.forces(increment=False)
+        self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
         return self.info
 
     def step(self):
-        """One velocity-Verlet step; returns the StepInfo of the new state."""
+        """One velocity-Verlet step; returns the StepInfo (reduced over ranks).
+
+        ``info.max_overlap`` is that of the previous force evaluation: it
+        travels in the one allreduce of the step, with the displacement that
+        decides the rebuild. ``info.n_contacts`` is updated by ``contacts()``.
+        """
         s, p, dom = self.state, self.phys, self.domain
         d2, z_min, z_max = kick_drift(s.n_own, s.x, s.v, s.omega, s.f, s.torque, s.fixed,
                                       s.x_ref, p.dt, s.L_x, s.L_y)
-        # exact max: the same rebuild decision on every rank count (NaN forces one)
-        d2 = dom.max(d2)
+        # one exact max: the same rebuild decision on every rank count (NaN -> inf)
+        d2, overlap, neg_z_min, z_max = dom.max_many([d2, self._overlap, -z_min, z_max])
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
         else:
             dom.refresh(s)
-        max_ov, n_c = self.forces(increment=True)
+        self._overlap, self._contacts = self.forces(increment=True)
         kick(s.n_own, s.v, s.omega, s.f, s.torque, s.fixed, p.dt)
         s.step += 1
         s.time = s.step * p.dt
         info = self.info
-        info.max_overlap = max_ov
-        info.n_contacts = n_c
-        info.z_min, info.z_max = z_min, z_max
+        info.max_overlap = overlap
+        info.z_min, info.z_max = -neg_z_min, z_max
         info.rebuilt = rebuilt
-        if math.isnan(d2):
-            info.z_min = math.nan
+        if math.isinf(d2):
+            info.z_min = math.nan          # a position became NaN or infinite
         return info
+
+    def contacts(self):
+        """Global number of contacts (counted from both partners) of the last evaluation."""
+        n = int(self.domain.sum_int(np.array([self._contacts]))[0])
+        self.info.n_contacts = n
+        return n
 
     def run(self, n):
         """Advance n steps (no monitors); returns the last StepInfo."""

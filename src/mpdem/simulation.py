@@ -107,7 +107,8 @@ class Run:
 
     def __init__(self, cfg, out_dir, comm=None, quiet=False):
         self.cfg, self.out = cfg, out_dir
-        self.domain = Domain(comm)
+        self.domain = Domain(comm, r_list=1.0 + cfg.integration.skin,
+                             tolerance=cfg.decomp.balance_tolerance, damping=cfg.decomp.balance_damping)
         self.rank = self.domain.rank
         if self.rank == 0:
             os.makedirs(out_dir, exist_ok=True)
@@ -124,8 +125,9 @@ class Run:
         cfg, log = self.cfg, self.log
         for w in cfg.warnings:
             log.warn(w)
-        with open(os.path.join(self.out, "config.toml"), "w") as fh:
-            fh.write(cfg.to_toml())
+        if self.rank == 0:
+            with open(os.path.join(self.out, "config.toml"), "w") as fh:
+                fh.write(cfg.to_toml())
         L_x, L_y = cfg.box.L_x, cfg.box.L_y
         slots = None
         if cfg.run.initial_file:
@@ -154,13 +156,24 @@ class Run:
         self.z_bed = z_bed
         z_floor = self.bed.z_mean if cfg.run.initial_file else z_bed + 0.5
         build.check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=slots is not None)
-        if len(self.bed.x):
+        if len(self.bed.x) and self.rank == 0:
             build.write_table(os.path.join(self.out, "bed.txt"), ids[fixed == 1], x[fixed == 1],
                               fixed=fixed[fixed == 1])
-        self.state = State(ids, x, v, omega, fixed, L_x, L_y, slots=cfg.integration.contact_slots)
-        if slots is not None:
-            self.state.set_contacts(*slots)
         self.n_mobile = int((fixed == 0).sum())
+        # every rank holds the whole initial state (built identically); each keeps its slab
+        dom = self.domain
+        dom.set_bounds(x[fixed == 0, 2])
+        mine = dom.select(x[:, 2])
+        self.state = State(ids[mine], x[mine], v[mine], omega[mine], fixed[mine], L_x, L_y,
+                           slots=cfg.integration.contact_slots,
+                           capacity=int(1.5 * mine.sum()) + 64)
+        if slots is not None:
+            counts, partner, ds = slots
+            starts = np.concatenate([[0], np.cumsum(counts)])
+            rows = np.flatnonzero(mine)
+            take = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows]).astype(np.int64) \
+                if len(rows) else np.zeros(0, np.int64)
+            self.state.set_contacts(counts[rows], partner[take], ds[take])
         p = self.physics
         t_col = collision_time(p.gamma_n, p.k_n)
         log(f"mpdem: {self.n_mobile} mobile + {len(self.bed.x)} bed spheres, box {L_x:g} x {L_y:g}, "
@@ -176,7 +189,10 @@ class Run:
             ids, x, v, omega, fixed = self._read_initial(cfg.bed.file, all_fixed=True)
             bed = build.Bed(x.copy(), note=f"from {cfg.bed.file}")
         else:
-            bed = build.make_bed(cfg, progress=self.log)
+            # rank 0 makes the bed; the others receive the same positions
+            bed = build.make_bed(cfg, progress=self.log) if self.rank == 0 else None
+            if self.domain.parallel:
+                bed = self.domain.comm.bcast(bed, root=0)
         dens = len(bed.x) / (cfg.box.L_x * cfg.box.L_y)
         self.log(f"bed: {len(bed.x)} frozen spheres, {dens:.3f} per d^2, z_bed = {bed.z_top:.4f}; {bed.note}")
         if not cfg.bed.density_min <= dens <= cfg.bed.density_max:
@@ -227,6 +243,8 @@ class Run:
         while st.step < max_steps:
             info = eng.step()
             self._check(info, warned, escape)
+            if st.step % stop.n_sample == 0 or st.step % every == 0:
+                eng.contacts()
             if st.step % stop.n_sample == 0:
                 et, er = eng.kinetic()
                 ek = (et + er) / N
@@ -243,9 +261,13 @@ class Run:
                 rate = (st.step - s_last) / max(now - t_last, 1e-9)
                 t_last, s_last = now, st.step
                 t_stop = stop.time_to_stop(self.physics.dt) / self.physics.dt / rate
+                par = ""
+                if self.domain.parallel:
+                    comm_share = self.domain.comm_seconds / max(now - t0, 1e-9)
+                    par = f"  imbalance {self.domain.imbalance(st):4.2f}  comm {100 * comm_share:3.0f}%"
                 log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek:9.3e}  "
                     f"max_delta {info.max_overlap:8.2e}  contacts/N {info.n_contacts / N:5.2f}  "
-                    f"{rate:7.0f} steps/s  eta cap {_fmt_seconds((max_steps - st.step) / rate)}  "
+                    f"{rate:7.0f} steps/s{par}  eta cap {_fmt_seconds((max_steps - st.step) / rate)}  "
                     f"stop ~{_fmt_seconds(t_stop)}")
         self.wall = time.perf_counter() - t0
         if thermo:
@@ -279,7 +301,11 @@ class Run:
     def finish(self):
         """Write RUN/final.h5 and summary.json; print bulk z and phi."""
         cfg, st, log = self.cfg, self.state, self.log
-        arrays = checkpoint.gather_state(st)
+        arrays = self.domain.gather_arrays(checkpoint.gather_state(st))
+        migrated = int(self.domain.sum_int(np.array([self.domain.n_migrated]))[0])
+        if self.rank != 0:
+            log.close()
+            return None
         attrs = {"kind": "final", "step": st.step, "time": st.time, "n_mobile": self.n_mobile,
                  "n_bed": len(self.bed.x), "L_x": st.L_x, "L_y": st.L_y, "z_bed": self.z_bed,
                  "converged": self.converged, "config": cfg.to_toml()}
@@ -290,6 +316,8 @@ class Run:
         summary = {"steps": steps, "time": st.time, "converged": self.converged,
                    "E_k_per_particle": self.ek, "wall_seconds": self.wall,
                    "ns_per_particle_step": ns, "ranks": self.domain.size,
+                   "comm_share": self.domain.comm_seconds / max(self.wall, 1e-9),
+                   "migrated": migrated, "rebalances": self.domain.n_rebalances,
                    "digest": checkpoint.digest(arrays)}
         log(f"end: {'converged' if self.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
             f"{steps} steps, t = {st.time:.4g}, E_k/N = {self.ek:.3e}, wall {self.wall:.1f} s "
