@@ -3,7 +3,7 @@
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
-RANKS  ?= 1
+RANKS  ?= 2
 
 .PHONY: setup run test test-serial test-mpi bench clean
 
@@ -23,7 +23,7 @@ test-mpi:
 	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \
 	  for n in 2 3 4; do \
 	    echo "== mpi_tests under mpiexec -n $$n"; \
-	    timeout 900 $(MPIEXEC) -n $$n $(PY) -m pytest -q --color=no -p no:cacheprovider mpi_tests || exit 1; \
+	    timeout 600 $(MPIEXEC) -n $$n $(PY) -m pytest -q --color=no -p no:cacheprovider mpi_tests || exit 1; \
 	  done; \
 	else echo "== no mpi_tests yet"; fi
 

@@ -1,0 +1,140 @@
+"""The slab decomposition gives the one-rank result bit for bit (design.md 2.1).
+
+Run under ``mpiexec -n K python -m pytest mpi_tests`` for K = 2, 3, 4: each
+test runs the same pile on COMM_WORLD and, on rank 0, on COMM_SELF (one
+rank), and compares digests of the state sorted by id.
+"""
+import os
+import tempfile
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from mpdem import build, checkpoint, config
+from mpdem.simulation import Run
+
+PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
+        "output.progress_every=100000", "stop.sample_interval=0.01"]
+
+
+def shared_dir(comm):
+    return comm.bcast(tempfile.mkdtemp() if comm.Get_rank() == 0 else None)
+
+
+def run(cfg, out, comm):
+    r = Run(cfg, out, comm, quiet=True)
+    r.prepare()
+    r.run()
+    return r, r.finish()
+
+
+def serial_digest(cfg, out, comm):
+    """The one-rank digest, computed on rank 0 and shared."""
+    d = None
+    if comm.Get_rank() == 0:
+        _, s = run(cfg, out, MPI.COMM_SELF)
+        d = s["digest"]
+    return comm.bcast(d)
+
+
+def test_pour_and_landing_match_one_rank(comm):
+    """Free fall, landing, migrations and rebalances: the digest of one rank."""
+    cfg = config.load(None, PILE + ["run.max_steps=40000"])
+    base = shared_dir(comm)
+    r, s = run(cfg, os.path.join(base, "par"), comm)
+    ref = serial_digest(cfg, os.path.join(base, "ser"), comm)
+    migrated = int(r.domain.sum_int(np.array([r.domain.n_migrated]))[0])
+    assert migrated > 20
+    assert r.domain.n_rebalances >= 1
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref
+        assert s["migrated"] == migrated
+
+
+def test_particles_and_contacts_are_conserved(comm):
+    cfg = config.load(None, PILE + ["run.max_steps=30000"])
+    base = shared_dir(comm)
+    r, s = run(cfg, os.path.join(base, "c"), comm)
+    st = r.state
+    n_total = int(r.domain.sum_int(np.array([st.n_own]))[0])
+    assert n_total == r.n_mobile + len(r.bed.x)
+    ids = np.concatenate(comm.allgather(st.ids[:st.n_own].copy()))
+    assert len(np.unique(ids)) == len(ids) == n_total
+    # every contact slot has its mirror on the partner's owner, exactly negated
+    slots = {}
+    for part in comm.allgather([(int(st.ids[i]), int(st.slot_id[i, k]), st.slot_ds[i, k].copy())
+                                for i in range(st.n_own) for k in range(st.slot_n[i])]):
+        for a, b, ds in part:
+            slots[(a, b)] = ds
+    fixed_ids = set(np.concatenate(comm.allgather(st.ids[:st.n_own][st.fixed[:st.n_own] == 1])).tolist())
+    assert len(slots) > 0
+    for (a, b), ds in slots.items():
+        if b in fixed_ids:
+            continue
+        assert np.array_equal(slots[(b, a)], -ds)
+
+
+def test_ghosts_equal_a_brute_force_search(comm):
+    cfg = config.load(None, PILE + ["run.max_steps=5000"])
+    base = shared_dir(comm)
+    r = Run(cfg, os.path.join(base, "g"), comm, quiet=True)
+    r.prepare()
+    r.run()
+    r.engine.rebuild()
+    st, dom = r.state, r.domain
+    everything = comm.allgather((st.ids[:st.n_own].copy(), st.x[:st.n_own].copy()))
+    all_ids = np.concatenate([e[0] for e in everything])
+    all_x = np.concatenate([e[1] for e in everything])
+    lo = dom.bounds[comm.Get_rank()] - dom.r_list
+    hi = dom.bounds[comm.Get_rank() + 1] + dom.r_list
+    mine = set(st.ids[:st.n_own].tolist())
+    want = {int(i) for i, z in zip(all_ids, all_x[:, 2]) if lo <= z < hi and int(i) not in mine}
+    ghosts = st.ids[st.n_own:st.n_rows]
+    assert set(ghosts.tolist()) == want and len(ghosts) == len(want)
+    # ghost coordinates are exact copies of the owners'
+    where = {int(i): k for k, i in enumerate(all_ids)}
+    for k in range(st.n_own, st.n_rows):
+        assert np.array_equal(st.x[k], all_x[where[int(st.ids[k])]])
+
+
+def test_pile_too_small_for_the_ranks(comm):
+    """Fewer particles than ranks: most ranks own nothing and still take part."""
+    base = shared_dir(comm)
+    p = os.path.join(base, "tiny.txt")
+    if comm.Get_rank() == 0:
+        build.write_table(p, np.array([4, 9, 1]),
+                          np.array([[1.0, 1.0, 1.0], [1.3, 1.1, 2.2], [3.5, 3.5, 1.0]]),
+                          np.array([[0.0, 0.0, 0.0], [0.1, 0.0, -1.0], [0.0, 0.0, 0.0]]),
+                          np.array([1, 0, 1], np.uint8))
+    comm.Barrier()
+    cfg = config.load(None, ["run.max_steps=8000", "box.L_x=5.0", "box.L_y=5.0", f'run.initial_file="{p}"',
+                             "output.progress_every=100000", "contact.mu=0.5"])
+    r, s = run(cfg, os.path.join(base, "tp"), comm)
+    owners = comm.allgather(r.state.n_own)
+    assert sum(owners) == 3
+    if comm.Get_size() > 3:
+        assert 0 in owners
+    ref = serial_digest(cfg, os.path.join(base, "ts"), comm)
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref
+
+
+def test_a_rank_that_owns_nothing(comm):
+    """Bounds pushed so that rank 0 owns nothing for a while: same digest."""
+    cfg = config.load(None, PILE + ["run.max_steps=3000", "decomp.balance_tolerance=100.0"])
+    base = shared_dir(comm)
+    r = Run(cfg, os.path.join(base, "e"), comm, quiet=True)
+    r.prepare()
+    if comm.Get_size() > 1:
+        # move everything away from rank 0's slab; migration at the first rebuild follows
+        r.domain.bounds[1] = -1e9
+        r.domain.bounds[1:-1] = np.maximum.accumulate(r.domain.bounds[1:-1])
+    r.run()
+    owned0 = comm.bcast(r.state.n_own, root=0)
+    s = r.finish()
+    ref = serial_digest(cfg, os.path.join(base, "es"), comm)
+    if comm.Get_size() > 1:
+        assert owned0 == 0
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref
