@@ -23,3 +23,22 @@ def test_error_on_ranks_exits_all_ranks(tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert p.returncode != 0
     assert "contact.mu = -1" in p.stderr
+
+
+def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
+    """Rank 1 fails while rank 0 waits in a collective: all ranks end, with the message."""
+    script = tmp_path / "one_rank_fails.py"
+    script.write_text(
+        "import sys\n"
+        "import mpdem.__main__ as cli\n"
+        "def handler(args, comm):\n"
+        "    if comm.Get_rank() == 1:\n"
+        "        raise RuntimeError('boom on rank 1')\n"
+        "    comm.Barrier()  # without the abort, rank 0 would wait here for ever\n"
+        "    return 0\n"
+        "cli.cmd_info = handler\n"
+        "sys.exit(cli.main(['info', 'nothing.h5']))\n")
+    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode != 0
+    assert "boom on rank 1" in p.stderr and "internal error on rank 1" in p.stderr
