@@ -23,7 +23,7 @@ import numpy as np
 from . import build, checkpoint, config
 from .decomp import Domain
 from .engine import Engine, Physics
-from .state import State
+from .state import State, select_contacts
 
 LANDING_TIME = 25.0   # [tau] from the pour at phi_i = 0.3 to the landed pile
 
@@ -84,10 +84,7 @@ def run_bench(args, comm):
     mine = dom.select(a["x"][:, 2])
     st = State(a["id"][mine], a["x"][mine], a["v"][mine], a["omega"][mine], a["fixed"][mine],
                cfg.box.L_x, cfg.box.L_y, capacity=int(1.5 * mine.sum()) + 64)
-    starts = np.concatenate([[0], np.cumsum(a["count"])])
-    rows = np.flatnonzero(mine)
-    take = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows]).astype(np.int64)
-    st.set_contacts(a["count"][rows], a["partner"][take], a["ds"][take])
+    st.set_contacts(*select_contacts(a["count"], a["partner"], a["ds"], np.flatnonzero(mine)))
     eng = Engine(st, Physics.from_config(cfg), dom)
     eng.setup()
     eng.run(200)

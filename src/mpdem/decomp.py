@@ -25,6 +25,8 @@ import time
 
 import numpy as np
 
+from .state import select_contacts
+
 SLOT_FIELDS = ("slot_n", "slot_id", "slot_ds")
 MOVE_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref")
 
@@ -59,33 +61,27 @@ class Domain:
         return self.size > 1
 
     # -- exact reductions (order independent, so rank-count independent) --
-    def max_many(self, values):
-        """Element-wise global max of a float array; NaN becomes +inf first."""
-        a = np.asarray(values, float)
-        a = np.where(np.isnan(a), np.inf, a)
+    def _allreduce(self, a, op):
         if not self.parallel:
             return a
         from mpi4py import MPI
         out = np.empty_like(a)
         t = time.perf_counter()
-        self.comm.Allreduce(a, out, op=MPI.MAX)
+        self.comm.Allreduce(a, out, op=getattr(MPI, op))
         self.comm_seconds += time.perf_counter() - t
         return out
+
+    def max_many(self, values):
+        """Element-wise global max of a float array; NaN becomes +inf first."""
+        a = np.asarray(values, float)
+        return self._allreduce(np.where(np.isnan(a), np.inf, a), "MAX")
 
     def max(self, value):
         return float(self.max_many([value])[0])
 
     def sum_int(self, arr):
         """Exact global sum of an int64 array (fixed-point accumulators, counts)."""
-        a = np.ascontiguousarray(arr, np.int64)
-        if not self.parallel:
-            return a
-        from mpi4py import MPI
-        out = np.empty_like(a)
-        t = time.perf_counter()
-        self.comm.Allreduce(a, out, op=MPI.SUM)
-        self.comm_seconds += time.perf_counter() - t
-        return out
+        return self._allreduce(np.ascontiguousarray(arr, np.int64), "SUM")
 
     def allgather(self, obj):
         if not self.parallel:
@@ -252,12 +248,7 @@ def merge_sorted(parts):
     counts = np.concatenate([p["count"] for p in parts])
     partner = np.concatenate([p["partner"] for p in parts])
     ds = np.concatenate([np.asarray(p["ds"]).reshape(-1, 3) for p in parts])
-    starts = np.concatenate([[0], np.cumsum(counts)])[:-1]
-    sel = np.concatenate([np.arange(starts[i], starts[i] + counts[i]) for i in order]) \
-        if len(order) else np.zeros(0, np.int64)
-    out["count"] = counts[order]
-    out["partner"] = partner[sel.astype(np.int64)]
-    out["ds"] = ds[sel.astype(np.int64)]
+    out["count"], out["partner"], out["ds"] = select_contacts(counts, partner, ds, order)
     return out
 
 

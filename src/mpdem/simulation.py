@@ -20,7 +20,7 @@ from . import analysis, build, checkpoint
 from .config import collision_time
 from .decomp import Domain
 from .engine import Engine, Physics
-from .state import State
+from .state import State, select_contacts
 
 
 class RunError(RuntimeError):
@@ -168,12 +168,7 @@ class Run:
                            slots=cfg.integration.contact_slots,
                            capacity=int(1.5 * mine.sum()) + 64)
         if slots is not None:
-            counts, partner, ds = slots
-            starts = np.concatenate([[0], np.cumsum(counts)])
-            rows = np.flatnonzero(mine)
-            take = np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows]).astype(np.int64) \
-                if len(rows) else np.zeros(0, np.int64)
-            self.state.set_contacts(counts[rows], partner[take], ds[take])
+            self.state.set_contacts(*select_contacts(*slots, np.flatnonzero(mine)))
         p = self.physics
         t_col = collision_time(p.gamma_n, p.k_n)
         log(f"mpdem: {self.n_mobile} mobile + {len(self.bed.x)} bed spheres, box {L_x:g} x {L_y:g}, "

@@ -14,6 +14,17 @@ import numpy as np
 ROW_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref")
 
 
+def select_contacts(counts, partner, ds, rows):
+    """The flat contact slots (per-row counts, partners, Delta s) of some rows.
+
+    Returns counts[rows] and the matching segments of ``partner`` and ``ds``.
+    """
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    take = (np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows])
+            if len(rows) else np.zeros(0)).astype(np.int64)
+    return counts[rows], partner[take], np.asarray(ds).reshape(-1, 3)[take]
+
+
 class State:
     """Particle state of one rank.
 
