@@ -314,9 +314,13 @@ class Run:
                    "comm_share": self.domain.comm_seconds / max(self.wall, 1e-9),
                    "migrated": migrated, "rebalances": self.domain.n_rebalances,
                    "digest": checkpoint.digest(arrays)}
+        par = ""
+        if self.domain.parallel:
+            par = (f"; {self.domain.size} ranks, communication {100 * summary['comm_share']:.0f}%, "
+                   f"{migrated} migrations, {self.domain.n_rebalances} rebalances")
         log(f"end: {'converged' if self.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
             f"{steps} steps, t = {st.time:.4g}, E_k/N = {self.ek:.3e}, wall {self.wall:.1f} s "
-            f"({ns:.0f} ns per particle-step)")
+            f"({ns:.0f} ns per particle-step{par})")
         try:
             a = cfg.analysis
             bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], st.L_x, st.L_y, cfg.contact.mu,
