@@ -59,3 +59,16 @@ def test_exact_sum_is_order_independent_and_correctly_rounded():
     total = parts[0] + parts[1] + parts[2]
     assert to_float(total) == float(exact)
     assert math.fsum(vals) == float(exact)
+
+
+def test_select_contacts_takes_the_right_segments():
+    from mpdem.state import select_contacts
+    counts = np.array([2, 0, 3, 1, 0])
+    partner = np.array([10, 11, 20, 21, 22, 30])
+    ds = np.arange(18.0).reshape(6, 3)
+    c, p, d = select_contacts(counts, partner, ds, [3, 0, 1, 2])
+    assert c.tolist() == [1, 2, 0, 3]
+    assert p.tolist() == [30, 10, 11, 20, 21, 22]
+    assert np.array_equal(d, ds[[5, 0, 1, 2, 3, 4]])
+    c, p, d = select_contacts(counts, partner, ds, [])
+    assert len(c) == len(p) == len(d) == 0

@@ -127,6 +127,22 @@ class Domain:
         """Mask of the rows this rank owns among heights z."""
         return self.owner_of(z) == self.rank
 
+    def scatter(self, a, L_x, L_y, slots=16):
+        """This rank's State from the whole particle set ``a`` held on every rank.
+
+        ``a`` has ``id, x, v, omega, fixed`` and, for a state that carries
+        contact histories, ``count, partner, ds`` (rows in the same order).
+        Sets the bounds at the quantiles of the mobile heights first.
+        """
+        from .state import State
+        self.set_bounds(a["x"][a["fixed"] == 0, 2])
+        mine = self.select(a["x"][:, 2])
+        st = State(a["id"][mine], a["x"][mine], a["v"][mine], a["omega"][mine], a["fixed"][mine],
+                   L_x, L_y, slots=slots, capacity=int(1.5 * mine.sum()) + 64)
+        if "count" in a:
+            st.set_contacts(*select_contacts(a["count"], a["partner"], a["ds"], np.flatnonzero(mine)))
+        return st
+
     # -- particle movement --
     def rebuild(self, state):
         """Migrate, rebalance if uneven, then build the halo (ghost rows)."""
@@ -134,8 +150,7 @@ class Domain:
         if not self.parallel:
             return
         self._migrate(state)
-        mob = int(np.count_nonzero(state.fixed[:state.n_own] == 0))
-        counts = self.sum_int(np.eye(self.size, dtype=np.int64)[self.rank] * mob)
+        counts = self._owned_counts(state)
         mean = counts.sum() / self.size
         if mean > 0 and counts.max() / mean > 1.0 + self.tolerance:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
@@ -218,12 +233,16 @@ class Domain:
             _set_xvw(state, slice(k, k + m), b)
         self.comm_seconds += time.perf_counter() - t
 
+    def _owned_counts(self, state):
+        """Owned mobile particles of every rank, (P,) int64 (a collective)."""
+        mob = int(np.count_nonzero(state.fixed[:state.n_own] == 0))
+        return self.sum_int(np.eye(self.size, dtype=np.int64)[self.rank] * mob)
+
     def imbalance(self, state):
         """max / mean owned mobile particles over ranks (1 on one rank)."""
         if not self.parallel:
             return 1.0
-        mob = int(np.count_nonzero(state.fixed[:state.n_own] == 0))
-        counts = self.sum_int(np.eye(self.size, dtype=np.int64)[self.rank] * mob)
+        counts = self._owned_counts(state)
         mean = counts.sum() / self.size
         return float(counts.max() / mean) if mean else 1.0
 

@@ -49,7 +49,6 @@ class StepInfo:
     n_contacts: int = 0
     z_min: float = math.inf
     z_max: float = -math.inf
-    rebuilt: bool = False
 
 
 class Engine:
@@ -88,7 +87,6 @@ class Engine:
     def rebuild(self):
         """Migrate/halo (domain), then cell and neighbour lists; reset x_ref."""
         s = self.state
-        s.n_rows = s.n_own                   # ghosts are rebuilt by the domain
         if self.n_rebuilds % self.sort_every == 0:
             self._sort_rows()
         self.domain.rebuild(s)
@@ -127,7 +125,8 @@ class Engine:
         while True:
             max_ov, n_c, needed = contact_forces(
                 s.n_own, s.x, s.v, s.omega, s.fixed, s.ids, self.nbr_start, self.nbr_list,
-                self.rev, self.pair_on, self.pair_val, s.slot_n, s.slot_id, s.slot_ds, s.slot_n_new, s.slot_id_new, s.slot_ds_new,
+                        self.rev, self.pair_on, self.pair_val, s.slot_n, s.slot_id, s.slot_ds,
+                s.slot_n_new, s.slot_id_new, s.slot_ds_new,
                 s.f, s.torque, s.L_x, s.L_y, p.gravity, p.k_n, p.k_t, p.gamma_n, p.gamma_t,
                 p.mu, self.model, p.limit_damping, p.rescale_history, p.dt, increment)
             if needed <= s.n_slots:
@@ -169,7 +168,6 @@ class Engine:
         info = self.info
         info.max_overlap = overlap
         info.z_min, info.z_max = -neg_z_min, z_max
-        info.rebuilt = rebuilt
         if math.isinf(d2):
             info.z_min = math.nan          # a position became NaN or infinite
         return info

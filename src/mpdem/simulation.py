@@ -20,7 +20,6 @@ from . import analysis, build, checkpoint
 from .config import collision_time
 from .decomp import Domain
 from .engine import Engine, Physics
-from .state import State, select_contacts
 
 
 class RunError(RuntimeError):
@@ -161,14 +160,10 @@ class Run:
                               fixed=fixed[fixed == 1])
         self.n_mobile = int((fixed == 0).sum())
         # every rank holds the whole initial state (built identically); each keeps its slab
-        dom = self.domain
-        dom.set_bounds(x[fixed == 0, 2])
-        mine = dom.select(x[:, 2])
-        self.state = State(ids[mine], x[mine], v[mine], omega[mine], fixed[mine], L_x, L_y,
-                           slots=cfg.integration.contact_slots,
-                           capacity=int(1.5 * mine.sum()) + 64)
+        whole = {"id": ids, "x": x, "v": v, "omega": omega, "fixed": fixed}
         if slots is not None:
-            self.state.set_contacts(*select_contacts(*slots, np.flatnonzero(mine)))
+            whole.update(zip(("count", "partner", "ds"), slots))
+        self.state = self.domain.scatter(whole, L_x, L_y, slots=cfg.integration.contact_slots)
         p = self.physics
         t_col = collision_time(p.gamma_n, p.k_n)
         log(f"mpdem: {self.n_mobile} mobile + {len(self.bed.x)} bed spheres, box {L_x:g} x {L_y:g}, "

@@ -19,10 +19,13 @@ def select_contacts(counts, partner, ds, rows):
 
     Returns counts[rows] and the matching segments of ``partner`` and ``ds``.
     """
-    starts = np.concatenate([[0], np.cumsum(counts)])
-    take = (np.concatenate([np.arange(starts[i], starts[i + 1]) for i in rows])
-            if len(rows) else np.zeros(0)).astype(np.int64)
-    return counts[rows], partner[take], np.asarray(ds).reshape(-1, 3)[take]
+    counts = np.asarray(counts, np.int64)
+    rows = np.asarray(rows, np.int64)
+    starts = np.cumsum(counts) - counts
+    c = counts[rows]
+    # segment k of the output starts at sum(c[:k]) and reads from starts[rows[k]]
+    take = np.arange(c.sum()) + np.repeat(starts[rows] - (np.cumsum(c) - c), c)
+    return c, partner[take], np.asarray(ds).reshape(-1, 3)[take]
 
 
 class State:
