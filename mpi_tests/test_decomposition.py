@@ -58,7 +58,7 @@ def test_particles_and_contacts_are_conserved(comm):
     r, s = run(cfg, os.path.join(base, "c"), comm)
     st = r.state
     n_total = int(r.domain.sum_int(np.array([st.n_own]))[0])
-    assert n_total == r.n_mobile + len(r.bed.x)
+    assert n_total == r.n_mobile + r.n_bed
     ids = np.concatenate(comm.allgather(st.ids[:st.n_own].copy()))
     assert len(np.unique(ids)) == len(ids) == n_total
     # every contact slot has its mirror on the partner's owner, exactly negated

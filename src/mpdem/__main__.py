@@ -1,8 +1,14 @@
-"""Command line: ``python -m mpdem run|bench|info``.
+"""Command line: ``python -m mpdem run|restart|info|export|bench``.
 
-    python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR]
-    python -m mpdem bench [--steps N] [--set ...]
+    python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS]
+    python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS]
     python -m mpdem info FILE [--digest]
+    python -m mpdem export FILE --format lammps-dump|xyz [--out PATH]
+    python -m mpdem bench [--steps N] [--set ...]
+
+Exit status: 0 finished (converged), 3 finished at run.max_steps without
+converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
+a checkpoint ("not finished, restart me"), 1 error, 2 usage error.
 
 MPI starts here and the communicator is passed down; an exception on any
 rank aborts all ranks with its message.
@@ -16,7 +22,24 @@ import time
 import tomllib
 from importlib import resources
 
-EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+T_START = time.monotonic()
+
+
+def walltime(text):
+    """Seconds of ``[D-]HH:MM:SS``, ``MM:SS`` or plain seconds (argparse type)."""
+    try:
+        days, _, rest = text.rpartition("-")
+        parts = [float(p) for p in rest.split(":")]
+        if not 1 <= len(parts) <= 3 or any(p < 0 for p in parts):
+            raise ValueError
+        sec = sum(p * 60 ** k for k, p in enumerate(reversed(parts))) + 86400 * float(days or 0)
+        if sec <= 0:
+            raise ValueError
+        return sec
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--walltime {text!r}: accepted [D-]HH:MM:SS, MM:SS or seconds, greater than 0") from None
 
 
 def start_mpi():
@@ -49,32 +72,92 @@ def cmd_run(args, comm):
     else:
         cfg = config.load(args.config, args.set)
     out = args.out or default_out()
-    if os.path.exists(os.path.join(out, "config.toml")) and not args.force:
+    # rank 0 looks, before any rank can write there
+    held = os.path.exists(os.path.join(out, "config.toml")) if comm.Get_rank() == 0 else None
+    if comm.bcast(held, root=0) and not args.force:
         raise config.ConfigError(f"--out {out}: already holds a run (config.toml); "
                                  f"choose another directory or pass --force")
-    run = Run(cfg, out, comm, quiet=args.quiet)
+    run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
+              t_start=T_START)
     run.prepare()
-    run.run()
+    return _go(run)
+
+
+def _go(run):
+    """Run to the end (final state, exit 0 or 3) or to an early stop (checkpoint, exit 75)."""
+    from .simulation import EXIT_RESTART
+    if run.run() == "interrupted":
+        run.log.close()
+        return EXIT_RESTART
     run.finish()
-    return EXIT_OK if run.converged else 3
+    return EXIT_OK if run.converged else EXIT_NOT_CONVERGED
+
+
+def cmd_restart(args, comm):
+    from . import checkpoint, rundir
+    from .checkpoint import StateFileError
+    from .simulation import Logger, Run
+    files, run_dir = rundir.candidates(args.target)
+    skipped = []
+    for path in files:
+        try:
+            local, attrs = checkpoint.read(path, comm)
+            cfg = rundir.restart_config(attrs, path, run_dir, args.set)
+            break
+        except StateFileError as e:
+            if not os.path.isdir(args.target):
+                raise
+            skipped.append(str(e))
+    else:
+        raise StateFileError(f"{run_dir}: no usable state file to restart from:\n  " + "\n  ".join(skipped))
+    say = Logger(os.path.join(run_dir, "log.txt"), args.quiet, comm.Get_rank())
+    for e in skipped:
+        say.warn(f"restart: skipping {e}")
+    if skipped:
+        say.warn(f"restart: falling back to {path} (step {attrs['step']})")
+    if attrs.get("converged"):
+        say(f"restart: {path}: the run converged at step {attrs['step']}; nothing to do")
+        return EXIT_OK
+    if int(attrs["step"]) >= cfg.run.max_steps:
+        say(f"restart: {path} is at step {attrs['step']} and run.max_steps = {cfg.run.max_steps}; "
+            f"raise it with --set run.max_steps=... to go on")
+        return EXIT_NOT_CONVERGED
+    say.close()
+    run = Run(cfg, run_dir, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
+              t_start=T_START)
+    run.resume(path, local, attrs)
+    return _go(run)
+
+
+def cmd_export(args, comm):
+    from . import export
+    out = export.export_file(args.file, args.format, args.out)
+    print(f"wrote {out}")
+    return EXIT_OK
 
 
 def cmd_info(args, comm):
     from . import checkpoint
-    arrays, attrs = checkpoint.read_state(args.file)
+    arrays, attrs = checkpoint.read_state(args.file, pairs=True)
     if args.digest:
         print(checkpoint.digest(arrays))
         return EXIT_OK
     n = len(arrays["id"])
-    print(f"{args.file}: {attrs.get('format')} version {attrs.get('version')}, kind {attrs.get('kind')}")
+    print(f"{args.file}: {attrs.get('format')} version {attrs.get('version')}, kind {attrs.get('kind')}, "
+          f"written by {attrs.get('ranks', '?')} rank(s), checksums verified")
     print(f"  step {attrs.get('step')}, time {attrs.get('time')}, {n} particles "
           f"({attrs.get('n_mobile')} mobile, {attrs.get('n_bed')} bed), "
-          f"{len(arrays['partner'])} contact slots, box {attrs.get('L_x')} x {attrs.get('L_y')}")
+          f"{len(arrays['partner'])} contact slots, box {attrs.get('L_x')} x {attrs.get('L_y')}"
+          + (f", converged" if attrs.get("converged") else ""))
+    if "id_i" in arrays:
+        print(f"  contact list: {len(arrays['id_i'])} contacts (F_n, F_t, Delta s)")
     try:
         c = tomllib.loads(attrs.get("config", ""))
         ct = c.get("contact", {})
         print(f"  contact {ct.get('model')} k_n {ct.get('k_n')} mu {ct.get('mu')} "
-              f"epsilon {ct.get('epsilon')} dt {c.get('integration', {}).get('dt')}")
+              f"epsilon {ct.get('epsilon')} dt {c.get('integration', {}).get('dt')}, "
+              f"N {c.get('pour', {}).get('N')} phi_i {c.get('pour', {}).get('phi_i')} "
+              f"seed {c.get('run', {}).get('seed')} max_steps {c.get('run', {}).get('max_steps')}")
     except tomllib.TOMLDecodeError:
         pass
     return EXIT_OK
@@ -96,6 +179,21 @@ def parser():
     r.add_argument("--out", help="run directory (default runs/run-DATE-TIME)")
     r.add_argument("--force", action="store_true", help="reuse an --out that holds a run")
     r.add_argument("--quiet", action="store_true", help="progress to the log file only")
+    rs = sub.add_parser("restart", help="continue a run from its newest valid checkpoint or a state file")
+    rs.add_argument("target", metavar="RUN_DIR|STATE_FILE")
+    rs.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="change run.max_steps, stop.*, checks.*, decomp.*, output.* or analysis.*")
+    rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
+    for q in (r, rs):
+        q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
+                       help="write a checkpoint and exit (status 75) before this much wall time")
+        q.add_argument("--walltime-margin", type=float, default=None, metavar="SECONDS",
+                       help="seconds kept free before --walltime besides twice the last checkpoint "
+                            "write time (default min(60, walltime / 20))")
+    e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
+    e.add_argument("file")
+    e.add_argument("--format", required=True, choices=("lammps-dump", "xyz"))
+    e.add_argument("--out", help="output path (default: FILE with .dump or .xyz)")
     b = sub.add_parser("bench", help="benchmark: ns per particle-step on a landed pile")
     b.add_argument("--steps", type=int, default=2000, help="timed steps (default 2000)")
     b.add_argument("--N", type=int, default=20000, help="mobile spheres (default 20000)")
@@ -116,7 +214,8 @@ def main(argv=None):
     from .checkpoint import StateFileError
     from .config import ConfigError
     from .simulation import RunError
-    handlers = {"run": cmd_run, "info": cmd_info, "bench": cmd_bench}
+    handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
+                "bench": cmd_bench}
     try:
         return handlers[args.cmd](args, comm)
     except (ConfigError, InputError, StateFileError, RunError, NotImplementedError) as e:

@@ -36,7 +36,7 @@ def bench_config(N, mu):
 def landed_pile(cfg, cache, log=print):
     """The landed pile of the benchmark, from the cache or made now."""
     N, mu = cfg.pour.N, cfg.contact.mu
-    path = os.path.join(cache, f"pile-N{N}-mu{mu:g}-v2.h5")
+    path = os.path.join(cache, f"pile-N{N}-mu{mu:g}-v3.h5")
     if os.path.exists(path):
         a, _ = checkpoint.read_state(path)
         return a, path
@@ -61,8 +61,8 @@ def landed_pile(cfg, cache, log=print):
             f"{eng.contacts() / N:.2f}, {time.perf_counter() - t0:.0f} s")
     st.step, st.time = 0, 0.0
     a = checkpoint.gather_state(st)
-    checkpoint.write_state(path, a, {"kind": "bench-pile", "step": 0, "time": 0.0,
-                                     "n_mobile": N, "n_bed": nb, "L_x": L, "L_y": L})
+    checkpoint.write(path, a, {"kind": "bench-pile", "step": 0, "time": 0.0, "n": N + nb,
+                               "n_mobile": N, "n_bed": nb, "L_x": L, "L_y": L})
     return a, path
 
 

@@ -1,38 +1,125 @@
-"""State files (HDF5): the only place that reads or writes them.
+"""State files (HDF5): the only module that reads or writes them.
 
-Format ``mpdem-state`` version 1, rows sorted by particle id:
+Format ``mpdem-state`` version 2. One file holds the whole state, written
+collectively by all ranks (h5py ``mpio`` driver), rows in rank order:
 
 ``/particles/{id, x, v, omega, f, torque, fixed}``
-    per-particle datasets, shapes (n,) or (n, 3);
+    per-particle datasets, shapes (n,) or (n, 3); rows in any order, the
+    ``id`` column says which particle a row is;
 ``/contacts/{count, partner, ds}``
-    contact slots: per-particle counts (n,), then flat partner ids (M,) and
-    tangential displacements (M, 3), in particle-id order;
-attributes: ``format``, ``version``, ``kind``, ``step``, ``time``,
-``n_mobile``, ``n_bed``, ``L_x``, ``L_y``, ``z_bed``, ``config`` (TOML text).
+    contact slots: per-row counts (n,), aligned with ``/particles``, then the
+    flat partner ids (M,) and tangential displacements Delta s (M, 3) of the
+    rows in row order;
+``/pairs/{id_i, id_j, delta, F_n, F_t, ds_i}`` (snapshots only)
+    every contact once: ids, overlap [d], normal force (signed, along the
+    unit vector from j to i) [m g], tangential force on i (P, 3) [m g],
+    Delta s of i (P, 3) [d];
+attributes: ``format``, ``version``, ``kind`` (checkpoint, snapshot, final),
+``step``, ``time``, ``n``, ``n_mobile``, ``n_bed``, ``L_x``, ``L_y``,
+``config`` (the resolved TOML), ``checksum_<group>`` and the run's own
+continuation values (stop-rule samples, counters; see ``simulation``).
 
-Files are written under a temporary name and renamed, so a crash never leaves
-a half-written file under a real name. (Parallel collective writing and
-restart checkpoints arrive with the checkpoint issue.)
+Checksums are order independent (a sum over rows of a 64-bit hash of the
+row, mod 2^64), so any number of ranks can write a file and any number can
+verify it while reading its own share of rows.
+
+Files are written under ``<name>.tmp`` and renamed when complete, so a
+crash never leaves a half-written file under a real name.
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import signal
 
 import h5py
 import numpy as np
 
 FORMAT = "mpdem-state"
-VERSION = 1
+VERSION = 2
+KINDS = ("checkpoint", "snapshot", "final")
 PARTICLE_FIELDS = ("id", "x", "v", "omega", "f", "torque", "fixed")
+CONTACT_FIELDS = ("count", "partner", "ds")
+PAIR_FIELDS = ("id_i", "id_j", "delta", "F_n", "F_t", "ds_i")
+GROUPS = {"particles": PARTICLE_FIELDS, "contacts": CONTACT_FIELDS, "pairs": PAIR_FIELDS}
+DTYPES = {"id": np.int64, "fixed": np.uint8, "count": np.int32, "partner": np.int64,
+          "id_i": np.int64, "id_j": np.int64, "delta": np.float64, "F_n": np.float64}
+WIDE = {"x", "v", "omega", "f", "torque", "ds", "F_t", "ds_i"}     # (n, 3) datasets
+# the row-length dataset of each group (contacts' slot rows are counted by count)
+ROWS_OF = {"particles": "id", "contacts": "partner", "pairs": "id_i"}
+
+# Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
+KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
+_writes = 0
 
 
 class StateFileError(ValueError):
-    """A state file that cannot be used."""
+    """A state file that cannot be used (named, with the reason)."""
+
+
+# -- order-independent checksums --
+_C1, _C2, _C3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def _mix(z):
+    """splitmix64 finaliser on a uint64 array (wrapping arithmetic)."""
+    z = z + _C1
+    z = (z ^ (z >> np.uint64(30))) * _C2
+    z = (z ^ (z >> np.uint64(27))) * _C3
+    return z ^ (z >> np.uint64(31))
+
+
+def _words(a, n):
+    """Columns of 64-bit words of an array with n rows."""
+    a = np.ascontiguousarray(a)
+    if n == 0:
+        return []
+    if a.dtype.itemsize != 8:
+        a = a.astype(np.int64)
+    return a.reshape(n, -1).view(np.uint64).T
+
+
+def _row_hashes(cols, n, salt):
+    with np.errstate(over="ignore"):
+        h = np.full(n, np.uint64(salt), np.uint64)
+        for c in cols:
+            for w in _words(c, n):
+                h = _mix(h ^ w)
+        return h
+
+
+def checksums(local):
+    """Partial checksums of this rank's rows, one uint64 per group present.
+
+    Particles hash (id, fields, count) per row; contact slots hash
+    (owner id, partner, Delta s) per slot; pairs hash all their columns.
+    """
+    n = len(local["id"])
+    out = {"particles": _row_hashes([local[k] for k in PARTICLE_FIELDS] + [local["count"]], n, 1)}
+    owner = np.repeat(np.asarray(local["id"], np.int64), np.asarray(local["count"], np.int64))
+    out["contacts"] = _row_hashes([owner, local["partner"], local["ds"]], len(owner), 2)
+    if "id_i" in local:
+        out["pairs"] = _row_hashes([local[k] for k in PAIR_FIELDS], len(local["id_i"]), 3)
+    return {g: np.sum(h, dtype=np.uint64) for g, h in out.items()}
+
+
+def digest(arrays):
+    """SHA-256 over the state sorted by id (positions, velocities, angular
+    velocities, forces, torques, contact slots), as hex."""
+    h = hashlib.sha256()
+    for name in PARTICLE_FIELDS + CONTACT_FIELDS:
+        a = np.ascontiguousarray(arrays[name])
+        if name == "count":
+            a = a.astype(np.int64)
+        a = a.astype(a.dtype.newbyteorder("<"), copy=False)
+        h.update(name.encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def gather_state(state):
-    """The owned particles of a State as id-sorted arrays (one rank)."""
+    """The owned particles of a State as id-sorted arrays (this rank's rows)."""
     n = state.n_own
     counts, partner, ds, order = state.contacts_flat()
     return {
@@ -43,61 +130,211 @@ def gather_state(state):
     }
 
 
-def digest(arrays):
-    """SHA-256 over the state sorted by id (positions, velocities, angular
-    velocities, forces, torques, contact slots), as hex."""
-    h = hashlib.sha256()
-    for name in PARTICLE_FIELDS + ("count", "partner", "ds"):
-        a = np.ascontiguousarray(arrays[name])
-        a = a.astype(a.dtype.newbyteorder("<"), copy=False)
-        h.update(name.encode())
-        h.update(str(a.shape).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+# -- collective helpers (comm None or size 1: serial) --
+def _size(comm):
+    return 1 if comm is None else comm.Get_size()
 
 
-def write_state(path, arrays, attrs):
-    """Write id-sorted arrays and attributes atomically to ``path``."""
+def _allgather(comm, obj):
+    return [obj] if _size(comm) == 1 else comm.allgather(obj)
+
+
+def _agree(comm, err):
+    """Raise the same StateFileError on every rank if any rank had one."""
+    errs = [e for e in _allgather(comm, err) if e]
+    if errs:
+        raise StateFileError(errs[0])
+
+
+def _sum_u64(comm, values):
+    a = np.array(values, np.uint64)
+    if _size(comm) == 1:
+        return a
+    from mpi4py import MPI
+    out = np.empty_like(a)
+    comm.Allreduce(a, out, op=MPI.SUM)
+    return out
+
+
+def _open(path, mode, comm):
+    if _size(comm) > 1:
+        return h5py.File(path, mode, driver="mpio", comm=comm)
+    return h5py.File(path, mode)
+
+
+# -- writing --
+def write(path, local, attrs, comm=None):
+    """Write a state file collectively: each rank gives its own rows.
+
+    Parameters
+    ----------
+    path : str
+        Final name (the same on every rank); written as ``path + '.tmp'``
+        and renamed by rank 0 when every rank has finished.
+    local : dict of arrays
+        This rank's rows: PARTICLE_FIELDS, ``count`` (rows,), ``partner``
+        (M,), ``ds`` (M, 3); optionally the PAIR_FIELDS of a snapshot.
+    attrs : dict
+        Attributes, identical on every rank.
+    comm : mpi4py communicator or None
+    """
+    global _writes
+    groups = [g for g in GROUPS if ROWS_OF[g] in local]
+    lengths = np.array([len(local[ROWS_OF[g]]) for g in groups], np.int64)
+    all_len = np.array(_allgather(comm, lengths)).reshape(-1, len(groups))
+    rank = 0 if comm is None else comm.Get_rank()
+    start, total = all_len[:rank].sum(axis=0), all_len.sum(axis=0)
+    sums = _sum_u64(comm, [checksums(local)[g] for g in groups])
     tmp = f"{path}.tmp"
-    with h5py.File(tmp, "w") as f:
+    _writes += attrs.get("kind") == "checkpoint"
+    with _open(tmp, "w", comm) as f:
         f.attrs["format"] = FORMAT
         f.attrs["version"] = VERSION
         for k, v in attrs.items():
             f.attrs[k] = v
-        g = f.create_group("particles")
-        for name in PARTICLE_FIELDS:
-            g.create_dataset(name, data=arrays[name])
-        c = f.create_group("contacts")
-        c.create_dataset("count", data=arrays["count"])
-        c.create_dataset("partner", data=arrays["partner"])
-        c.create_dataset("ds", data=np.asarray(arrays["ds"]).reshape(-1, 3))
-        f.flush()
-    os.replace(tmp, path)
+        for gi, g in enumerate(groups):
+            grp = f.create_group(g)
+            f.attrs[f"checksum_{g}"] = sums[gi]
+            for name in GROUPS[g]:
+                # per-particle counts follow the particle rows, slots their own
+                k = 0 if name == "count" else gi
+                a, b = int(start[k]), int(start[k] + lengths[k])
+                shape = (int(total[k]), 3) if name in WIDE else (int(total[k]),)
+                ds = grp.create_dataset(name, shape=shape, dtype=DTYPES.get(name, np.float64))
+                if b > a:
+                    ds[a:b] = np.asarray(local[name]).reshape((b - a,) + shape[1:])
+            if g == "particles" and os.environ.get(KILL_ENV) == str(_writes) and attrs.get("kind") == "checkpoint":
+                f.flush()
+                os.kill(os.getpid(), signal.SIGKILL)
+    if comm is not None and _size(comm) > 1:
+        comm.Barrier()
+    if rank == 0:
+        fd = os.open(tmp, os.O_RDONLY)
+        os.fsync(fd)
+        os.close(fd)
+        os.replace(tmp, path)
+    if comm is not None and _size(comm) > 1:
+        comm.Barrier()
 
 
-def read_state(path):
-    """Read a state file: (arrays, attrs). Raises StateFileError if unusable."""
+# -- reading --
+def _attrs(f):
+    return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+
+
+def _check_layout(f, path):
+    """Format, version and dataset shapes; returns the groups present."""
+    if f.attrs.get("format") != FORMAT:
+        return None, f"{path}: not an mpdem state file (format = {f.attrs.get('format')!r})"
+    ver = f.attrs.get("version")
+    if ver != VERSION:
+        return None, (f"{path}: format version {ver} is not supported "
+                      f"(this mpdem reads version {VERSION})")
+    groups = [g for g in GROUPS if g in f] if "particles" in f else []
+    for g in ("particles", "contacts"):
+        if g not in f:
+            return None, f"{path}: missing group /{g}"
+    for g in groups:
+        n = None
+        for name in GROUPS[g]:
+            if name not in f[g]:
+                return None, f"{path}: missing dataset /{g}/{name}"
+            m = f[g][name].shape[0]
+            if g == "contacts" and name == "count":
+                if m != f["particles"]["id"].shape[0]:
+                    return None, f"{path}: /contacts/count has {m} rows, /particles {f['particles']['id'].shape[0]}"
+                continue
+            if n is not None and m != n:
+                return None, f"{path}: datasets of /{g} have different lengths"
+            n = m
+        if f"checksum_{g}" not in f.attrs:
+            return None, f"{path}: no checksum for /{g}"
+    return groups, None
+
+
+def read(path, comm=None, pairs=False):
+    """Read this rank's share of a state file (any rank count) and verify it.
+
+    Rank r of P reads particle rows [r n / P, (r+1) n / P) and their contact
+    slots (and, with ``pairs``, the same share of the pair list). Every
+    rank raises the same StateFileError if the file is unusable: not HDF5,
+    another format or version, missing datasets, or a checksum mismatch.
+
+    Returns
+    -------
+    local : dict of arrays (this rank's rows, file order)
+    attrs : dict
+    """
+    err, f = None, None
+    try:
+        f = _open(path, "r", comm)
+    except (OSError, ValueError) as e:
+        err = f"{path}: cannot open as HDF5 ({e})"
+    _agree(comm, err)
+    with f:
+        groups, err = _check_layout(f, path)
+        _agree(comm, err)
+        attrs = _attrs(f)
+        P, r = _size(comm), (0 if comm is None else comm.Get_rank())
+        local, err = {}, None
+        try:
+            n = f["particles"]["id"].shape[0]
+            lo, hi = r * n // P, (r + 1) * n // P
+            for name in PARTICLE_FIELDS:
+                local[name] = f["particles"][name][lo:hi]
+            local["count"] = f["contacts"]["count"][lo:hi].astype(np.int64)
+            before = np.array(_allgather(comm, int(local["count"].sum())), np.int64)
+            a = int(before[:r].sum())
+            b = a + int(before[r])
+            if b > f["contacts"]["partner"].shape[0]:
+                raise OSError("contact counts exceed the slot datasets")
+            local["partner"] = f["contacts"]["partner"][a:b]
+            local["ds"] = f["contacts"]["ds"][a:b]
+            if pairs and "pairs" in groups:
+                m = f["pairs"]["id_i"].shape[0]
+                for name in PAIR_FIELDS:
+                    local[name] = f["pairs"][name][r * m // P:(r + 1) * m // P]
+        except (OSError, KeyError, ValueError) as e:
+            err = f"{path}: unreadable ({e}); the file is truncated or damaged"
+        _agree(comm, err)
+    have = ["particles", "contacts"] + (["pairs"] if "id_i" in local else [])
+    sums = _sum_u64(comm, [checksums(local)[g] for g in have])
+    bad = [g for g, s in zip(have, sums) if int(s) != int(attrs[f"checksum_{g}"])]
+    if bad:
+        raise StateFileError(f"{path}: checksum mismatch in /{', /'.join(bad)}; the file is damaged")
+    return local, attrs
+
+
+def sort_by_id(local):
+    """Rows (with their contact slots and pairs) in ascending id order."""
+    from .state import select_contacts
+    order = np.argsort(local["id"], kind="stable")
+    out = {k: local[k][order] for k in PARTICLE_FIELDS}
+    out["count"], out["partner"], out["ds"] = select_contacts(local["count"], local["partner"],
+                                                              local["ds"], order)
+    if "id_i" in local:
+        po = np.lexsort((local["id_j"], local["id_i"]))
+        out.update({k: local[k][po] for k in PAIR_FIELDS})
+    return out
+
+
+def read_state(path, pairs=False):
+    """Read a whole state file on one process, rows sorted by id: (arrays, attrs)."""
+    local, attrs = read(path, None, pairs=pairs)
+    return sort_by_id(local), attrs
+
+
+def read_attrs(path):
+    """The attributes of a state file, after the layout checks (no data read)."""
     try:
         f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as e:
+    except (OSError, ValueError) as e:
         raise StateFileError(f"{path}: cannot open as HDF5 ({e})") from None
     with f:
-        if f.attrs.get("format") != FORMAT:
-            raise StateFileError(f"{path}: not an mpdem state file (format = {f.attrs.get('format')!r})")
-        if int(f.attrs.get("version", -1)) != VERSION:
-            raise StateFileError(f"{path}: format version {f.attrs.get('version')} is not supported "
-                                 f"(this mpdem reads version {VERSION})")
-        try:
-            arrays = {n: f["particles"][n][()] for n in PARTICLE_FIELDS}
-            for n in ("count", "partner", "ds"):
-                arrays[n] = f["contacts"][n][()]
-        except KeyError as e:
-            raise StateFileError(f"{path}: missing dataset {e}") from None
-        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
-    n = len(arrays["id"])
-    if any(len(arrays[k]) != n for k in PARTICLE_FIELDS) or arrays["count"].sum() != len(arrays["partner"]):
-        raise StateFileError(f"{path}: inconsistent dataset lengths")
-    return arrays, attrs
+        _, err = _check_layout(f, path)
+        if err:
+            raise StateFileError(err)
+        return _attrs(f)
 
 
 def is_state_file(path):

@@ -77,6 +77,10 @@ SCHEMA = (
     _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this"),
     _k("decomp", "balance_damping", 0.5, "fraction of the way the slab bounds move toward balance at a rebalance"),
     _k("output", "progress_every", 10000, "steps between progress lines", int),
+    _k("output", "checkpoint_every", 0, "steps between checkpoints (RUN/checkpoints/ckpt-NNNNN.h5); 0 = none on a step schedule", int),
+    _k("output", "checkpoint_seconds", 1800.0, "wall-clock seconds between checkpoints; 0 = none on a clock schedule"),
+    _k("output", "checkpoint_keep", 3, "newest checkpoints kept; older ones are deleted", int),
+    _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int),
     _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = clamp(0.2 (h - z_bed), 3, 10)"),
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
     _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
@@ -329,6 +333,9 @@ def resolve(raw):
     need("checks.overlap_error", vals["checks.overlap_error"] > vals["checks.overlap_warn"], "overlap_error > overlap_warn")
     need("checks.escape_margin", vals["checks.escape_margin"] > 0, "escape_margin > 0")
     need("output.progress_every", vals["output.progress_every"] >= 1, "progress_every >= 1")
+    for key in ("output.checkpoint_every", "output.checkpoint_seconds", "output.snapshot_every"):
+        need(key, vals[key] >= 0, "0 (off) or a positive interval")
+    need("output.checkpoint_keep", vals["output.checkpoint_keep"] >= 1, "checkpoint_keep >= 1")
     need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
     need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
     need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")

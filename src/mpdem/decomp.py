@@ -134,14 +134,24 @@ class Domain:
         contact histories, ``count, partner, ds`` (rows in the same order).
         Sets the bounds at the quantiles of the mobile heights first.
         """
-        from .state import State
         self.set_bounds(a["x"][a["fixed"] == 0, 2])
-        mine = self.select(a["x"][:, 2])
-        st = State(a["id"][mine], a["x"][mine], a["v"][mine], a["omega"][mine], a["fixed"][mine],
-                   L_x, L_y, slots=slots, capacity=int(1.5 * mine.sum()) + 64)
-        if "count" in a:
-            st.set_contacts(*select_contacts(a["count"], a["partner"], a["ds"], np.flatnonzero(mine)))
-        return st
+        return _local_state(a, np.flatnonzero(self.select(a["x"][:, 2])), L_x, L_y, slots)
+
+    def distribute(self, a, L_x, L_y, slots=16):
+        """This rank's State from a share of the particles read by each rank.
+
+        ``a`` holds some rows (``id, x, v, omega, f, torque, fixed, count,
+        partner, ds``, as ``checkpoint.read`` gives them); together the ranks
+        hold every particle once. Bounds are set at the quantiles of all
+        mobile heights, then rows travel to the rank that owns them.
+        """
+        zm = a["x"][a["fixed"] == 0, 2]
+        self.set_bounds(np.concatenate(self.allgather(zm)))
+        if self.parallel:
+            owner = self.owner_of(a["x"][:, 2])
+            parts = [_subset(a, np.flatnonzero(owner == r)) for r in range(self.size)]
+            a = merge_sorted(self._alltoall(parts))
+        return _local_state(a, np.arange(len(a["id"])), L_x, L_y, slots)
 
     # -- particle movement --
     def rebuild(self, state):
@@ -269,6 +279,26 @@ def merge_sorted(parts):
     ds = np.concatenate([np.asarray(p["ds"]).reshape(-1, 3) for p in parts])
     out["count"], out["partner"], out["ds"] = select_contacts(counts, partner, ds, order)
     return out
+
+
+def _subset(a, rows):
+    """Rows of a state-array dict, with their contact slots."""
+    out = {k: a[k][rows] for k in ("id", "x", "v", "omega", "f", "torque", "fixed")}
+    out["count"], out["partner"], out["ds"] = select_contacts(a["count"], a["partner"], a["ds"], rows)
+    return out
+
+
+def _local_state(a, rows, L_x, L_y, slots):
+    """A State of the given rows of a state-array dict (forces and slots if present)."""
+    from .state import State
+    st = State(a["id"][rows], a["x"][rows], a["v"][rows], a["omega"][rows], a["fixed"][rows],
+               L_x, L_y, slots=slots, capacity=int(1.5 * len(rows)) + 64)
+    for k in ("f", "torque"):
+        if k in a:
+            getattr(st, k)[:len(rows)] = a[k][rows]
+    if "count" in a:
+        st.set_contacts(*select_contacts(a["count"], a["partner"], a["ds"], rows))
+    return st
 
 
 def _xvw(state, rows):

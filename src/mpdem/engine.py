@@ -49,6 +49,8 @@ class StepInfo:
     n_contacts: int = 0
     z_min: float = math.inf
     z_max: float = -math.inf
+    flags: tuple = ()
+
 
 
 class Engine:
@@ -76,6 +78,8 @@ class Engine:
         self.info = StepInfo()
         self._overlap = 0.0      # this rank's largest overlap of the last force evaluation
         self._contacts = 0       # this rank's contacts of the last force evaluation
+        # the driver's per-rank flags (signal, wall time), agreed by max in each step's allreduce
+        self.flags = []
 
     def _alloc_lists(self, size):
         self.nbr_list = np.zeros(size, np.int64)
@@ -144,6 +148,20 @@ class Engine:
         self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
         return self.info
 
+    def resume(self, max_overlap=0.0):
+        """Set-up for a state read from a checkpoint: lists only.
+
+        Forces, torques and contact slots come from the file (they carry the
+        half-step velocities of the damping terms), so nothing is recomputed
+        and the next step is bit for bit the one the straight run takes.
+        """
+        s = self.state
+        self.rebuild()
+        self._overlap = max_overlap
+        self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
+        self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
+        return self.info
+
     def step(self):
         """One velocity-Verlet step; returns the StepInfo (reduced over ranks).
 
@@ -155,7 +173,7 @@ class Engine:
         d2, z_min, z_max = kick_drift(s.n_own, s.x, s.v, s.omega, s.f, s.torque, s.fixed,
                                       s.x_ref, p.dt, s.L_x, s.L_y)
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
-        d2, overlap, neg_z_min, z_max = dom.max_many([d2, self._overlap, -z_min, z_max])
+        d2, overlap, neg_z_min, z_max, *flags = dom.max_many([d2, self._overlap, -z_min, z_max] + self.flags)
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
@@ -168,6 +186,7 @@ class Engine:
         info = self.info
         info.max_overlap = overlap
         info.z_min, info.z_max = -neg_z_min, z_max
+        info.flags = tuple(flags)
         if math.isinf(d2):
             info.z_min = math.nan          # a position became NaN or infinite
         return info

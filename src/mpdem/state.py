@@ -138,11 +138,11 @@ class State:
         if len(counts) != n:
             raise ValueError(f"contact counts for {len(counts)} rows, state has {n}")
         self.grow(slots=int(counts.max(initial=0)))
-        starts = np.concatenate([[0], np.cumsum(counts)])
         self.slot_n[:n] = counts
-        for i in np.flatnonzero(counts):
-            self.slot_id[i, :counts[i]] = partner[starts[i]:starts[i + 1]]
-            self.slot_ds[i, :counts[i]] = ds[starts[i]:starts[i + 1]]
+        # a row-major mask of the used slots takes the flat slots in order
+        mask = np.arange(self.n_slots)[None, :] < counts[:, None]
+        self.slot_id[:n][mask] = partner
+        self.slot_ds[:n][mask] = np.asarray(ds).reshape(-1, 3)
 
     def contacts_flat(self):
         """Owned contact slots as flat arrays sorted by particle id.

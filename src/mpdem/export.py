@@ -1,0 +1,217 @@
+"""Exports of state files for visualisation tools (serial, no MPI).
+
+XDMF sidecars (ParaView, VisIt) only point into the HDF5 state file, so they
+are small and stay valid as long as the pair of files is kept together; the
+LAMMPS dump and extended XYZ formats (OVITO, ASE, VMD) are text copies.
+Particles only: the contact slots and a snapshot's pair list are not
+exported (``checkpoint.read_state(path, pairs=True)`` reads them).
+
+Reduced units throughout: lengths [d], times [sqrt(d/g)], forces [m g].
+"""
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+
+from . import checkpoint
+
+R = 0.5     # particle radius [d]
+# XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads
+# "UInt" as 32-bit whatever its Precision, so one unsigned byte is "UChar".
+XDMF_TYPES = {"f8": ("Float", "8"), "i8": ("Int", "8"), "i4": ("Int", "4"), "u1": ("UChar", "1")}
+# node attributes of the XDMF grid: name -> dataset (all aligned with /particles)
+XDMF_ATTRIBUTES = {"id": "particles/id", "fixed": "particles/fixed", "v": "particles/v",
+                   "omega": "particles/omega", "f": "particles/f", "torque": "particles/torque",
+                   "contacts": "contacts/count"}
+
+
+def _write_atomic(path, chunks):
+    """Write an iterable of strings to ``path`` via ``path.tmp`` and a rename."""
+    tmp = f"{path}.tmp"
+    with open(tmp, "w") as fh:
+        fh.writelines(chunks)
+    os.replace(tmp, path)
+
+
+# -- XDMF --
+def _data_item(ds, ref):
+    """A DataItem for an HDF5 dataset; ``ref`` is the HDF5 file as the XDMF file sees it."""
+    kind, precision = XDMF_TYPES[ds.dtype.str[1:]]
+    item = ET.Element("DataItem", Dimensions=" ".join(map(str, ds.shape)), NumberType=kind,
+                      Precision=precision, Format="HDF")
+    item.text = f"{ref}:{ds.name}"
+    return item
+
+
+def _grid(h5_path, xmf_dir):
+    """The Polyvertex grid of one state file.
+
+    Parameters
+    ----------
+    h5_path : str
+    xmf_dir : str
+        Directory of the XDMF file the grid goes in; dataset paths are
+        relative to it.
+
+    Returns
+    -------
+    (time, step, grid) : float, int, Element
+    """
+    attrs = checkpoint.read_attrs(h5_path)          # layout checks; raises StateFileError
+    time, step = float(attrs["time"]), int(attrs["step"])
+    ref = os.path.relpath(os.path.abspath(h5_path), xmf_dir)
+    grid = ET.Element("Grid", Name=os.path.splitext(os.path.basename(h5_path))[0], GridType="Uniform")
+    ET.SubElement(grid, "Time", Value=repr(time))
+    with h5py.File(h5_path, "r") as f:
+        x = f["particles/x"]
+        ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(x.shape[0]),
+                      NodesPerElement="1")
+        ET.SubElement(grid, "Geometry", GeometryType="XYZ").append(_data_item(x, ref))
+        for name, path in XDMF_ATTRIBUTES.items():
+            ds = f[path]
+            ET.SubElement(grid, "Attribute", Name=name, Center="Node",
+                          AttributeType="Vector" if ds.ndim == 2 else "Scalar").append(_data_item(ds, ref))
+    return time, step, grid
+
+
+def _write_xdmf_doc(path, grid):
+    """Wrap a grid in an XDMF 3 document and write it atomically."""
+    root = ET.Element("Xdmf", Version="3.0")
+    ET.SubElement(root, "Domain").append(grid)
+    ET.indent(root)
+    _write_atomic(path, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
+
+
+def write_xdmf(h5_path):
+    """Write the XDMF 3 sidecar ``<name>.xmf`` of a state file ``<name>.h5``.
+
+    The sidecar describes the particles as a Polyvertex grid of n points:
+    geometry XYZ from ``/particles/x`` (n, 3) [d]; node attributes ``id``
+    (n,) int64, ``fixed`` (n,) uint8 (1 for bed), ``v`` (n, 3) [sqrt(g d)],
+    ``omega`` (n, 3) [sqrt(g/d)], ``f`` (n, 3) [m g], ``torque`` (n, 3)
+    [m g d] and ``contacts`` (n,) int32 (contact slots per particle); the
+    grid's Time is the file's ``time``. Datasets are referenced through the
+    HDF5 file's base name, so the two files can be moved together.
+
+    There is no diameter dataset (every sphere has d = 1): in ParaView show
+    the points with the Point Gaussian representation, Gaussian radius 0.5
+    (or a Glyph filter with sphere radius 0.5, scale off).
+
+    Parameters
+    ----------
+    h5_path : str
+        An mpdem state file (read only; not modified).
+
+    Returns
+    -------
+    str : path of the written ``.xmf`` file, next to the ``.h5``.
+    """
+    xmf = os.path.splitext(h5_path)[0] + ".xmf"
+    _write_xdmf_doc(xmf, _grid(h5_path, os.path.dirname(os.path.abspath(xmf)))[2])
+    return xmf
+
+
+def write_xdmf_series(paths, out_path):
+    """Write one XDMF 3 temporal collection of several state files.
+
+    Each snapshot's grid (as in ``write_xdmf``) is inlined, sorted by time
+    (then step), with dataset paths relative to ``out_path``'s directory, so
+    the series file may live anywhere as long as the files keep their
+    relative places. (Inlining rather than xi:include: readers resolve the
+    HDF5 paths of an included file against the including file.)
+
+    Parameters
+    ----------
+    paths : iterable of str
+        State files (``.h5``) or their sidecars (``.xmf``, standing for the
+        ``.h5`` of the same name).
+    out_path : str
+
+    Returns
+    -------
+    str : ``out_path``
+    """
+    xmf_dir = os.path.dirname(os.path.abspath(out_path))
+    h5s = [os.path.splitext(p)[0] + ".h5" if p.endswith(".xmf") else p for p in map(str, paths)]
+    grids = sorted((_grid(p, xmf_dir) for p in h5s), key=lambda g: g[:2])
+    series = ET.Element("Grid", Name="series", GridType="Collection", CollectionType="Temporal")
+    series.extend(g for _, _, g in grids)
+    _write_xdmf_doc(out_path, series)
+    return out_path
+
+
+# -- text formats --
+def _z_bounds(x):
+    """Lowest sphere bottom and highest sphere top [d] of positions (n, 3)."""
+    return (x[:, 2].min() - R, x[:, 2].max() + R) if len(x) else (-R, R)
+
+
+def _rows(fmt, columns):
+    """Lines ``fmt % row`` over columns of equal length (exact Python scalars)."""
+    return (fmt % row + "\n" for row in zip(*(np.asarray(c).tolist() for c in columns)))
+
+
+def _lammps_dump(a, attrs):
+    """LAMMPS text dump (one frame): box pp pp ff, atom types 1 mobile, 2 bed."""
+    zlo, zhi = _z_bounds(a["x"])
+    bounds = ((0.0, attrs["L_x"]), (0.0, attrs["L_y"]), (zlo, zhi))
+    yield (f"ITEM: TIMESTEP\n{int(attrs['step'])}\nITEM: NUMBER OF ATOMS\n{len(a['id'])}\n"
+           "ITEM: BOX BOUNDS pp pp ff\n" + "".join(f"{lo:.17g} {hi:.17g}\n" for lo, hi in bounds)
+           + "ITEM: ATOMS id type x y z vx vy vz omegax omegay omegaz fx fy fz radius\n")
+    yield from _rows("%d %d" + " %.17g" * 13,
+                     [a["id"], 1 + (a["fixed"] != 0), *a["x"].T, *a["v"].T, *a["omega"].T, *a["f"].T,
+                      np.full(len(a["id"]), R)])
+
+
+def _xyz(a, attrs):
+    """Extended XYZ (one frame): species M mobile, B bed; cell origin at z_lo."""
+    zlo, zhi = _z_bounds(a["x"])
+    yield (f"{len(a['id'])}\n"
+           f'Lattice="{attrs["L_x"]:.17g} 0 0 0 {attrs["L_y"]:.17g} 0 0 0 {zhi - zlo:.17g}" '
+           f'Origin="0 0 {zlo:.17g}" '
+           "Properties=species:S:1:pos:R:3:velo:R:3:omega:R:3:radius:R:1:id:I:1 "
+           f'pbc="T T F" Time={float(attrs["time"]):.17g} Step={int(attrs["step"])}\n')
+    yield from _rows("%s" + " %.17g" * 10 + " %d",
+                     [np.where(a["fixed"] != 0, "B", "M"), *a["x"].T, *a["v"].T, *a["omega"].T,
+                      np.full(len(a["id"]), R), a["id"]])
+
+
+FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz)}
+
+
+def export_file(path, fmt, out=None):
+    """Export the particles of a state file as text, rows in id order.
+
+    ``lammps-dump``: a LAMMPS dump frame (``ITEM: TIMESTEP`` ...), box
+    ``0 L_x``, ``0 L_y`` and z from the lowest sphere bottom to the highest
+    top (boundaries pp pp ff), columns ``id type x y z vx vy vz omegax
+    omegay omegaz fx fy fz radius`` with type 1 mobile, 2 bed, radius 0.5.
+    ``xyz``: extended XYZ with ``Lattice`` (L_x, L_y, z extent), ``Origin``
+    (0, 0, z_lo), ``pbc="T T F"``, ``Time``, ``Step`` and properties
+    species (M mobile, B bed), pos, velo, omega, radius, id.
+
+    Floats are written with 17 significant digits, so they read back exactly.
+    Particles only (no contacts or pairs).
+
+    Parameters
+    ----------
+    path : str
+        An mpdem state file (checksums are verified).
+    fmt : {"lammps-dump", "xyz"}
+    out : str, optional
+        Output path; default ``path`` with the suffix ``.dump`` or ``.xyz``.
+
+    Returns
+    -------
+    str : the output path (written atomically).
+    """
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}")
+    suffix, render = FORMATS[fmt]
+    out = out or os.path.splitext(path)[0] + suffix
+    arrays, attrs = checkpoint.read_state(path)
+    _write_atomic(out, render(arrays, attrs))
+    return out

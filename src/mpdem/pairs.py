@@ -1,0 +1,67 @@
+"""The contact list of a snapshot: every contact once, with its forces.
+
+Computed from the contact slots after a step, with the contact law of
+physics.md 2 evaluated as the step did: positions of the step, velocities of
+the half step (owned rows: v - f dt / 2; ghost rows already hold the half-step
+values they were sent with), the slot's Delta s. The forces are those the
+step applied, to rounding (the sum over a particle's pairs plus gravity gives
+its force to about 1e-15 relative).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .kernels.forces import INV_I, R
+
+
+def contact_pairs(state, phys):
+    """This rank's share of the contact list (pairs i < j, or j in the bed).
+
+    Parameters
+    ----------
+    state : State
+        After a step: owned rows, ghost rows and contact slots current.
+    phys : Physics
+
+    Returns
+    -------
+    dict with ``id_i, id_j`` (P,) int64, ``delta`` (P,) overlap [d],
+    ``F_n`` (P,) normal force along n = (x_i - x_j)/r [m g], ``F_t`` (P, 3)
+    tangential force on i [m g], ``ds_i`` (P, 3) Delta s of i [d].
+    """
+    s, n, m = state, state.n_own, state.n_rows
+    ids = s.ids[:m]
+    cnt = s.slot_n[:n].astype(np.int64)
+    mask = np.arange(s.n_slots)[None, :] < cnt[:, None]
+    i = np.repeat(np.arange(n), cnt)
+    jid = s.slot_id[:n][mask]
+    ds = s.slot_ds[:n][mask]
+    order = np.argsort(ids, kind="stable")
+    j = order[np.searchsorted(ids[order], jid)]
+    fixed = s.fixed[:m]
+    keep = (fixed[j] == 1) | (ids[i] < jid)
+    i, j, jid, ds = i[keep], j[keep], jid[keep], ds[keep]
+    # half-step velocities, as the force evaluation saw them
+    vh, wh = s.v[:m].copy(), s.omega[:m].copy()
+    vh[:n] -= 0.5 * phys.dt * s.f[:n]
+    wh[:n] -= 0.5 * phys.dt * INV_I * s.torque[:n]
+    d = s.x[i] - s.x[j]
+    for a, L in ((0, s.L_x), (1, s.L_y)):
+        d[:, a] -= L * np.round(d[:, a] / L)
+    r = np.sqrt((d * d).sum(axis=1))
+    delta = 1.0 - r
+    nrm = d / r[:, None]
+    meff = np.where(fixed[j] == 1, 1.0, 0.5)
+    vr = vh[i] - vh[j]
+    vn = (vr * nrm).sum(axis=1)
+    w = R * wh[i] + R * wh[j]
+    vt = vr - vn[:, None] * nrm - np.cross(w, nrm)
+    scale = np.sqrt(np.maximum(delta, 0.0)) if phys.model == "hertz" else np.ones_like(delta)
+    F_n = scale * (phys.k_n * delta - meff * phys.gamma_n * vn)
+    if phys.limit_damping:
+        F_n = np.maximum(F_n, 0.0)
+    if phys.mu > 0.0:
+        F_t = -scale[:, None] * (phys.k_t * ds + (meff * phys.gamma_t)[:, None] * vt)
+    else:
+        F_t = np.zeros_like(ds)
+    return {"id_i": ids[i], "id_j": jid, "delta": delta, "F_n": F_n, "F_t": F_t, "ds_i": ds}

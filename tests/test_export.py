@@ -1,0 +1,161 @@
+"""Exports of state files: XDMF sidecars and series, LAMMPS dump, extended XYZ."""
+import os
+import shlex
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+import pytest
+
+from mpdem import checkpoint, export
+
+L_X, L_Y = 6.0, 7.5
+# dtype -> (NumberType, Precision) as XDMF 3 readers understand them
+XDMF_NUMBER = {np.dtype("f8"): ("Float", "8"), np.dtype("i8"): ("Int", "8"),
+               np.dtype("i4"): ("Int", "4"), np.dtype("u1"): ("UChar", "1")}
+
+
+def write_state(path, time=0.123456789, step=1234, n=50, seed=0):
+    """A random snapshot (rows shuffled, contact slots, pairs); returns id-sorted arrays and attrs."""
+    rng = np.random.default_rng(seed)
+    ids = rng.permutation(n).astype(np.int64) + 100
+    x = rng.random((n, 3)) * [L_X, L_Y, 10.0] + [0, 0, 1.0]
+    count = rng.integers(0, 4, n)
+    m, p = int(count.sum()), 7
+    local = dict(id=ids, x=x, v=rng.normal(size=(n, 3)), omega=rng.normal(size=(n, 3)),
+                 f=rng.normal(size=(n, 3)), torque=rng.normal(size=(n, 3)),
+                 fixed=(ids < 112).astype(np.uint8), count=count,
+                 partner=rng.choice(ids, m), ds=rng.normal(size=(m, 3)) * 1e-3)
+    for name in checkpoint.PAIR_FIELDS:
+        shape = (p, 3) if name in checkpoint.WIDE else (p,)
+        local[name] = rng.integers(100, 100 + n, shape) if name in ("id_i", "id_j") else rng.normal(size=shape)
+    attrs = dict(kind="snapshot", step=step, time=time, n=n, n_mobile=int((ids >= 112).sum()),
+                 n_bed=int((ids < 112).sum()), L_x=L_X, L_y=L_Y, config="")
+    checkpoint.write(str(path), local, attrs)
+    order = np.argsort(ids)
+    return {k: local[k][order] for k in checkpoint.PARTICLE_FIELDS}, attrs
+
+
+def data_items(xmf):
+    """(HDF5 file, dataset, DataItem) for every DataItem of an XDMF file."""
+    for item in ET.parse(xmf).getroot().iter("DataItem"):
+        assert item.get("Format") == "HDF"
+        fname, dset = item.text.strip().split(":")
+        yield fname, dset, item
+
+
+def test_xdmf_sidecar_matches_the_datasets(tmp_path):
+    h5 = tmp_path / "snap.h5"
+    a, attrs = write_state(h5)
+    xmf = export.write_xdmf(str(h5))
+    assert xmf == str(tmp_path / "snap.xmf") and not os.path.exists(xmf + ".tmp")
+    root = ET.parse(xmf).getroot()
+    assert root.tag == "Xdmf" and root.get("Version") == "3.0"
+    grid = root.find("Domain/Grid")
+    assert float(grid.find("Time").get("Value")) == attrs["time"]
+    topo = grid.find("Topology")
+    assert topo.get("TopologyType") == "Polyvertex" and topo.get("NumberOfElements") == "50"
+    geo = grid.find("Geometry")
+    assert geo.get("GeometryType") == "XYZ" and geo.find("DataItem").text.strip() == "snap.h5:/particles/x"
+    kinds = {att.get("Name"): (att.get("AttributeType"), att.find("DataItem").text.strip().split(":")[1])
+             for att in grid.findall("Attribute")}
+    for name, kind in (("id", "Scalar"), ("fixed", "Scalar"), ("v", "Vector"), ("omega", "Vector"), ("f", "Vector")):
+        assert kinds[name] == (kind, f"/particles/{name}")
+    seen = set()
+    with h5py.File(h5, "r") as f:
+        for fname, dset, item in data_items(xmf):
+            assert fname == "snap.h5"          # base name: the pair of files can move together
+            ds = f[dset]
+            assert item.get("Dimensions").split() == [str(s) for s in ds.shape]
+            assert ds.shape[0] == 50
+            assert (item.get("NumberType"), item.get("Precision")) == XDMF_NUMBER[ds.dtype]
+            seen.add(dset)
+    assert {"/particles/x", "/particles/id", "/particles/fixed"} <= seen
+
+
+def test_xdmf_series_is_in_time_order(tmp_path):
+    times = {"a": 2.0, "b": 0.5, "c": 1.25}
+    for k, (name, t) in enumerate(times.items()):
+        write_state(tmp_path / f"{name}.h5", time=t, step=100 * k, n=10 + k, seed=k)
+    inputs = [export.write_xdmf(str(tmp_path / "a.h5")), str(tmp_path / "b.h5"), str(tmp_path / "c.h5")]
+    out = tmp_path / "view" / "all.xmf"
+    out.parent.mkdir()
+    assert export.write_xdmf_series(inputs, str(out)) == str(out)
+    series = ET.parse(out).getroot().find("Domain/Grid")
+    assert (series.get("GridType"), series.get("CollectionType")) == ("Collection", "Temporal")
+    grids = series.findall("Grid")
+    assert [float(g.find("Time").get("Value")) for g in grids] == [0.5, 1.25, 2.0]
+    for g, name, n in zip(grids, "bca", (11, 12, 10)):
+        assert g.find("Topology").get("NumberOfElements") == str(n)
+        for item in g.iter("DataItem"):
+            fname, dset = item.text.strip().split(":")
+            target = os.path.normpath(out.parent / fname)
+            assert target == str(tmp_path / f"{name}.h5")
+            with h5py.File(target, "r") as f:
+                assert item.get("Dimensions").split() == [str(s) for s in f[dset].shape]
+
+
+def parse_dump(path):
+    lines = open(path).read().splitlines()
+    assert lines[0] == "ITEM: TIMESTEP" and lines[2] == "ITEM: NUMBER OF ATOMS"
+    assert lines[4] == "ITEM: BOX BOUNDS pp pp ff" and lines[8].startswith("ITEM: ATOMS ")
+    n = int(lines[3])
+    box = np.array([[float(v) for v in line.split()] for line in lines[5:8]])
+    names = lines[8].split()[2:]
+    rows = [line.split() for line in lines[9:]]
+    assert len(rows) == n and all(len(r) == len(names) for r in rows)
+    return int(lines[1]), box, {c: [r[i] for r in rows] for i, c in enumerate(names)}
+
+
+def floats(table, *names):
+    return np.array([[float(v) for v in table[c]] for c in names]).T
+
+
+def test_lammps_dump_round_trip(tmp_path):
+    h5 = tmp_path / "snap.h5"
+    a, attrs = write_state(h5)
+    out = export.export_file(str(h5), "lammps-dump")
+    assert out == str(tmp_path / "snap.dump")
+    step, box, t = parse_dump(out)
+    assert step == 1234
+    z = a["x"][:, 2]
+    assert np.array_equal(box, [[0, L_X], [0, L_Y], [z.min() - 0.5, z.max() + 0.5]])
+    assert np.array_equal([int(v) for v in t["id"]], a["id"])
+    assert np.array_equal([int(v) for v in t["type"]], np.where(a["fixed"] == 1, 2, 1))
+    assert set(np.where(a["fixed"] == 1, 2, 1)) == {1, 2}
+    for key, cols in (("x", "x y z"), ("v", "vx vy vz"), ("omega", "omegax omegay omegaz"), ("f", "fx fy fz")):
+        assert np.array_equal(floats(t, *cols.split()), a[key]), key
+    assert np.all(floats(t, "radius") == 0.5)
+    other = export.export_file(str(h5), "lammps-dump", out=str(tmp_path / "other.txt"))
+    assert open(other).read() == open(out).read()
+
+
+def test_extended_xyz_round_trip(tmp_path):
+    h5 = tmp_path / "snap.h5"
+    a, attrs = write_state(h5)
+    out = export.export_file(str(h5), "xyz")
+    assert out == str(tmp_path / "snap.xyz")
+    lines = open(out).read().splitlines()
+    assert int(lines[0]) == 50 and len(lines) == 52
+    info = dict(kv.split("=", 1) for kv in shlex.split(lines[1]))
+    z = a["x"][:, 2]
+    zlo, zhi = z.min() - 0.5, z.max() + 0.5
+    assert np.array_equal([float(v) for v in info["Lattice"].split()], [L_X, 0, 0, 0, L_Y, 0, 0, 0, zhi - zlo])
+    assert np.array_equal([float(v) for v in info["Origin"].split()], [0, 0, zlo])
+    assert info["Properties"] == "species:S:1:pos:R:3:velo:R:3:omega:R:3:radius:R:1:id:I:1"
+    assert info["pbc"] == "T T F" and float(info["Time"]) == attrs["time"] and int(info["Step"]) == 1234
+    rows = [line.split() for line in lines[2:]]
+    assert all(len(r) == 12 for r in rows)
+    assert [r[0] for r in rows] == ["B" if f else "M" for f in a["fixed"]]
+    num = np.array([[float(v) for v in r[1:11]] for r in rows])
+    assert np.array_equal(num[:, 0:3], a["x"]) and np.array_equal(num[:, 3:6], a["v"])
+    assert np.array_equal(num[:, 6:9], a["omega"]) and np.all(num[:, 9] == 0.5)
+    assert np.array_equal([int(r[11]) for r in rows], a["id"])
+
+
+def test_unknown_format_is_named(tmp_path):
+    h5 = tmp_path / "snap.h5"
+    write_state(h5)
+    with pytest.raises(ValueError, match=r"'vtk'.*lammps-dump.*xyz"):
+        export.export_file(str(h5), "vtk")
+    assert sorted(os.listdir(tmp_path)) == ["snap.h5"]

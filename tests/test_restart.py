@@ -1,0 +1,173 @@
+"""Exact restart (design.md 2.1): a run split into segments, on any rank counts,
+gives the digest of the straight run; signals, wall time and a crash in the
+middle of a checkpoint write lose nothing.
+
+The pile (200 spheres, K0 = 5, 5 x 5 box) lands, bounces and converges at a
+stop rule with a 10-sample window; checkpoints at K = 40000 steps fall before
+convergence (about 90 000 steps), so the window straddles each restart.
+"""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+K = 40000
+PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
+        "stop.sample_interval=0.01", "stop.window=0.1", "stop.E_stop=0.05",
+        "run.max_steps=400000", f"output.checkpoint_every={K}", "output.progress_every=2000"]
+
+
+def mpdem(*args, n=1, env=None, timeout=600, check=None):
+    """Run ``python -m mpdem`` on n ranks; returns the CompletedProcess."""
+    cmd = ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [sys.executable, "-m", "mpdem", *map(str, args)]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                       env=dict(os.environ, **(env or {})))
+    if check is not None:
+        assert p.returncode == check, p.stdout[-3000:] + p.stderr[-3000:]
+    return p
+
+
+def sets(*extra):
+    return [a for kv in PILE + list(extra) for a in ("--set", kv)]
+
+
+def digest(path):
+    return mpdem("info", "--digest", path, check=0).stdout.strip()
+
+
+def summary(run):
+    return json.loads((run / "summary.json").read_text())
+
+
+def rewind(src, dst, keep):
+    """A copy of run directory src as it was when checkpoint number ``keep`` was the newest."""
+    shutil.copytree(src, dst)
+    for p in (dst / "checkpoints").glob("ckpt-*.h5"):
+        if int(p.stem.split("-")[1]) > keep:
+            p.unlink()
+    for name in ("final.h5", "final.xmf", "summary.json"):
+        (dst / name).unlink(missing_ok=True)
+    return dst
+
+
+def thermo(run):
+    """Thermo rows without the wall-clock and rebuild columns."""
+    return [ln.split(",")[:9] for ln in (run / "thermo.csv").read_text().splitlines()]
+
+
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory):
+    """The straight run on one rank: (run dir, digest, converged step)."""
+    run = tmp_path_factory.mktemp("straight") / "run"
+    mpdem("run", *sets(), "--out", run, "--quiet", check=0)
+    s = summary(run)
+    assert s["converged"] and s["steps"] > 2 * K, "the pile must converge after two checkpoints"
+    assert digest(run / "final.h5") == s["digest"]
+    return run, s["digest"], s["steps"]
+
+
+@pytest.mark.parametrize("n_first,n_second", [(1, 2), (3, 1)])
+def test_restart_on_other_rank_counts_gives_the_straight_digest(straight, tmp_path, n_first, n_second):
+    run, ref, steps = straight
+    first = tmp_path / "first"
+    if n_first == 1:
+        first = run
+    else:
+        mpdem("run", *sets(), "--out", first, "--quiet", n=n_first, check=0)
+        assert summary(first)["digest"] == ref          # the straight run on 3 ranks, too
+    again = rewind(first, tmp_path / "again", keep=0)   # the checkpoint at step K
+    mpdem("restart", again, "--quiet", n=n_second, check=0)
+    s = summary(again)
+    assert (s["digest"], s["steps"], s["segments"]) == (ref, steps, 2)
+    assert thermo(again) == thermo(run)                  # the table continues, no row twice
+    # file numbering continues: the restarted run wrote checkpoint 1 at step 2K again
+    assert (again / "checkpoints" / "ckpt-00001.h5").exists()
+
+
+def test_restart_from_a_final_state_with_more_steps(straight, tmp_path):
+    """2 ranks stop at run.max_steps = K (exit 3); 3 ranks continue with a larger cap."""
+    run, ref, steps = straight
+    short = tmp_path / "short"
+    mpdem("run", *sets(f"run.max_steps={K}"), "--out", short, "--quiet", n=2, check=3)
+    assert summary(short)["status"] == "max_steps"
+    p = mpdem("restart", short, n=3, check=3)                     # nothing to do at the cap
+    assert "raise it with --set run.max_steps" in p.stdout + p.stderr
+    mpdem("restart", short, "--set", "run.max_steps=400000", "--quiet", n=3, check=0)
+    assert summary(short)["digest"] == ref
+    p = mpdem("restart", short, check=0)                          # finished: nothing to do
+    assert "nothing to do" in p.stdout
+
+
+def _pids_of(run, n):
+    """PIDs of the n rank processes of the run writing to ``run``."""
+    out = subprocess.run(["pgrep", "-f", f"mpdem run .*--out {run}"], capture_output=True, text=True).stdout
+    pids = [int(p) for p in out.split() if int(p) != os.getpid()]
+    # the mpiexec process matches too: keep the python ones
+    return [p for p in pids if "python" in Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="replace").split("\0")[0]][:n]
+
+
+def _wait_for(path, text, timeout=120):
+    t = time.monotonic()
+    while time.monotonic() - t < timeout:
+        if path.exists() and text in path.read_text():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"{text!r} never appeared in {path}")
+
+
+@pytest.mark.parametrize("sig,n,rank", [(signal.SIGUSR1, 2, 1), (signal.SIGTERM, 1, 0)])
+def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, sig, n, rank):
+    run, ref, steps = straight
+    out = tmp_path / "sig"
+    cmd = ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [
+        sys.executable, "-m", "mpdem", "run", *sets(), "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for(out / "log.txt", "step      2000")
+    pids = _pids_of(out, n)
+    assert len(pids) == n
+    os.kill(sorted(pids)[rank], sig)      # one rank only; the others must agree
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 75, stdout[-2000:] + stderr[-2000:]
+    assert f"signal {signal.Signals(sig).name}" in (out / "log.txt").read_text()
+    assert not (out / "final.h5").exists()
+    mpdem("restart", out, "--quiet", n=2, check=0)
+    s = summary(out)
+    assert (s["digest"], s["steps"]) == (ref, steps)
+
+
+def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path):
+    run, ref, steps = straight
+    out = tmp_path / "wall"
+    t = time.monotonic()
+    p = mpdem("run", *sets(), "--out", out, "--walltime", "00:00:05", "--walltime-margin", "0", "--quiet",
+              check=75)
+    assert time.monotonic() - t < 5 + 30         # stopped at the limit, not at the end of the run
+    log = (out / "log.txt").read_text()
+    assert "stop: the wall time" in log and "restart" in log
+    # a second short segment, then the rest: three segments in all
+    mpdem("restart", out, "--walltime", "4", "--walltime-margin", "0", "--quiet")
+    mpdem("restart", out, "--quiet", check=0)
+    s = summary(out)
+    assert (s["digest"], s["steps"]) == (ref, steps)
+    assert s["segments"] >= 2
+
+
+def test_kill_during_checkpoint_write_then_restart(straight, tmp_path):
+    """SIGKILL in the middle of writing the second checkpoint: no file under its real
+    name is half-written, and the restart falls back to the first and finishes right."""
+    run, ref, steps = straight
+    out = tmp_path / "killed"
+    p = mpdem("run", *sets(), "--out", out, "--quiet", n=2, env={"MPDEM_TEST_KILL_IN_WRITE": "2"})
+    assert p.returncode != 0
+    names = sorted(q.name for q in (out / "checkpoints").iterdir())
+    assert names == ["ckpt-00000.h5", "ckpt-00001.h5.tmp"], names
+    mpdem("restart", out, "--quiet", n=2, check=0)
+    assert summary(out)["digest"] == ref
+    assert not list((out / "checkpoints").glob("*.tmp"))
