@@ -1,0 +1,71 @@
+"""Collective state files under K ranks: written by all ranks, read back by
+all ranks (each its share, then to the slab owners) or by one process, with
+the same digest; a damaged file is refused on every rank, none hangs."""
+import os
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from mpdem import checkpoint, config, rundir
+from mpdem.checkpoint import StateFileError
+from mpdem.decomp import Domain
+
+from test_decomposition import PILE, run, shared_dir
+
+
+@pytest.fixture(scope="module")
+def landed(tmp_path_factory):
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm)
+    cfg = config.load(None, PILE + ["run.max_steps=20000", "output.checkpoint_every=20000"])
+    r, s = run(cfg, os.path.join(base, "w"), comm)
+    return r, comm.bcast(s["digest"] if comm.Get_rank() == 0 else None)
+
+
+def gathered_digest(dom, st):
+    arrays = dom.gather_arrays(checkpoint.gather_state(st))
+    return dom.comm.bcast(checkpoint.digest(arrays) if dom.rank == 0 else None)
+
+
+def test_written_by_all_read_by_all(comm, landed):
+    r, ref = landed
+    path = rundir.checkpoint_path(r.out, 0)
+    local, attrs = checkpoint.read(path, comm)
+    n = comm.allreduce(len(local["id"]))
+    assert n == attrs["n"] and attrs["ranks"] == comm.Get_size() and attrs["step"] == 20000
+    dom = Domain(comm)
+    st = dom.distribute(local, attrs["L_x"], attrs["L_y"])
+    assert gathered_digest(dom, st) == ref
+    # every rank owns the particles of its slab after the redistribution
+    z = st.x[:st.n_own, 2]
+    assert np.all((z >= dom.bounds[dom.rank]) & (z < dom.bounds[dom.rank + 1]))
+    # one process reads the same file whole
+    if comm.Get_rank() == 0:
+        whole, _ = checkpoint.read_state(path)
+        assert checkpoint.digest(whole) == ref
+    # the final file holds the contact list once: as many pairs as one rank finds
+    fin, _ = checkpoint.read(rundir.final_path(r.out), comm, pairs=True)
+    pairs = comm.allgather(np.column_stack([fin["id_i"], fin["id_j"]]))
+    if comm.Get_rank() == 0:
+        p = np.concatenate(pairs)
+        assert len(p) > 0 and len(np.unique(p, axis=0)) == len(p)
+
+
+def test_damaged_file_is_refused_on_every_rank(comm, landed):
+    r, _ = landed
+    src = rundir.checkpoint_path(r.out, 0)
+    bad = os.path.join(os.path.dirname(src), "bad.h5")
+    if comm.Get_rank() == 0:
+        with open(src, "rb") as a, open(bad, "wb") as b:
+            b.write(a.read())
+        with h5py.File(bad, "r+") as f:
+            # the last row: read by the last rank only, yet every rank must refuse
+            v = f["particles/v"][()]
+            v[-1, 0] = -v[-1, 0] if v[-1, 0] else 1e-300
+            f["particles/v"][...] = v
+    comm.Barrier()
+    with pytest.raises(StateFileError, match="checksum mismatch in /particles"):
+        checkpoint.read(bad, comm)
+    comm.Barrier()
