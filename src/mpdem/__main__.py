@@ -164,8 +164,8 @@ def cmd_info(args, comm):
 
 
 def cmd_bench(args, comm):
-    from .bench import run_bench
-    run_bench(args, comm)
+    from .bench import run_bench, run_io_bench
+    (run_io_bench if args.io else run_bench)(args, comm)
     return EXIT_OK
 
 
@@ -201,6 +201,10 @@ def parser():
     b.add_argument("--cache", default=None, help="directory for the landed pile (default ~/.cache/mpdem/bench)")
     b.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a value of the timed part (e.g. integration.skin=0.3)")
+    b.add_argument("--io", action="store_true",
+                   help="time a checkpoint write and read of N synthetic particles instead "
+                        "(the file goes to --cache, default the system temp directory)")
+    b.add_argument("--repeat", type=int, default=3, help="repetitions of the IO benchmark (default 3)")
     i = sub.add_parser("info", help="what a state file holds")
     i.add_argument("file")
     i.add_argument("--digest", action="store_true", help="print a SHA-256 of the state sorted by id")

@@ -119,3 +119,55 @@ def run_bench(args, comm):
     print(f"bench: peak memory {peak / N:.0f} bytes per particle (process RSS {peak / 2**20:.0f} MiB); "
           f"particle and list arrays {arrays / N:.0f} bytes per particle")
     return ns
+
+
+def synthetic_share(N, rank, size, slots=6, seed=0):
+    """This rank's share of a synthetic N-particle state for timing file IO.
+
+    Particles sit on a jittered cubic lattice (spacing 1.1 d) in a 100 x 100
+    box, ids split into contiguous blocks by rank; each has ``slots``
+    contact slots with random partners. Shapes as ``checkpoint.read`` gives.
+    """
+    lo, hi = rank * N // size, (rank + 1) * N // size
+    rng = np.random.default_rng([seed, rank])
+    ids = np.arange(lo, hi, dtype=np.int64)
+    side = 90
+    g = np.column_stack([ids % side, (ids // side) % side, ids // side ** 2]) * 1.1
+    n = hi - lo
+    a = {"id": ids, "x": g + 0.01 * rng.random((n, 3)), "v": rng.standard_normal((n, 3)),
+         "omega": rng.standard_normal((n, 3)), "f": rng.standard_normal((n, 3)),
+         "torque": rng.standard_normal((n, 3)), "fixed": np.zeros(n, np.uint8),
+         "count": np.full(n, slots, np.int64)}
+    a["partner"] = rng.integers(0, N, n * slots)
+    a["ds"] = 1e-3 * rng.standard_normal((n * slots, 3))
+    return a
+
+
+def run_io_bench(args, comm):
+    """Time a checkpoint write and read (with the split to slab owners) of N particles."""
+    import tempfile
+    rank, size = comm.Get_rank(), comm.Get_size()
+    a = synthetic_share(args.N, rank, size)
+    d = comm.bcast(tempfile.mkdtemp(prefix="mpdem-io-", dir=args.cache) if rank == 0 else None)
+    path = os.path.join(d, "ckpt.h5")
+    attrs = {"kind": "checkpoint", "step": 0, "time": 0.0, "n": args.N, "L_x": 100.0, "L_y": 100.0}
+    times = {"write": [], "read": []}
+    for _ in range(args.repeat):
+        comm.Barrier()
+        t = time.perf_counter()
+        checkpoint.write(path, a, attrs, comm)
+        comm.Barrier()
+        times["write"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        local, _ = checkpoint.read(path, comm)
+        Domain(comm).distribute(local, 100.0, 100.0)
+        comm.Barrier()
+        times["read"].append(time.perf_counter() - t)
+    if rank == 0:
+        mb = os.path.getsize(path) / 2**20
+        for k, v in times.items():
+            print(f"bench-io: {k} {args.N} particles ({mb:.0f} MiB) on {size} ranks: best {min(v):.2f} s, "
+                  f"median {sorted(v)[len(v) // 2]:.2f} s ({mb / min(v):.0f} MiB/s) over {len(v)}")
+        import shutil
+        shutil.rmtree(d)
+    return times
