@@ -24,6 +24,8 @@ from importlib import resources
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
 T_START = time.monotonic()
+# stop signals received before the run loop takes over (a job may end during set-up)
+SIGNALS = []
 
 
 def walltime(text):
@@ -78,7 +80,7 @@ def cmd_run(args, comm):
         raise config.ConfigError(f"--out {out}: already holds a run (config.toml); "
                                  f"choose another directory or pass --force")
     run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
-              t_start=T_START)
+              t_start=T_START, signals=SIGNALS)
     run.prepare()
     return _go(run)
 
@@ -124,7 +126,7 @@ def cmd_restart(args, comm):
         return EXIT_NOT_CONVERGED
     say.close()
     run = Run(cfg, run_dir, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
-              t_start=T_START)
+              t_start=T_START, signals=SIGNALS)
     run.resume(path, local, attrs)
     return _go(run)
 
@@ -212,6 +214,17 @@ def parser():
 
 
 def main(argv=None):
+    import signal
+    old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
+           for s in (signal.SIGTERM, signal.SIGUSR1)}
+    try:
+        return _main(argv)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _main(argv):
     args = parser().parse_args(argv)
     comm = start_mpi()
     from .build import InputError

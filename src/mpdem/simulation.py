@@ -119,9 +119,13 @@ class Run:
         checkpoint's write time; default min(60, walltime / 20).
     t_start : float or None
         ``time.monotonic()`` at the start of the program.
+    signals : list or None
+        Stop signals received so far (the CLI records them from its start);
+        the run appends the ones it receives.
     """
 
-    def __init__(self, cfg, out_dir, comm=None, quiet=False, walltime=None, margin=None, t_start=None):
+    def __init__(self, cfg, out_dir, comm=None, quiet=False, walltime=None, margin=None, t_start=None,
+                 signals=None):
         self.cfg, self.out = cfg, out_dir
         self.domain = Domain(comm, r_list=1.0 + cfg.integration.skin,
                              tolerance=cfg.decomp.balance_tolerance, damping=cfg.decomp.balance_damping)
@@ -138,7 +142,7 @@ class Run:
         self.state = None
         self.status = None          # "converged", "max_steps" or "interrupted"
         self.wall = 0.0
-        self._signal = 0
+        self.signals = [] if signals is None else signals
         # what a restart needs besides the particles (saved in every state file)
         self.cont = {"stop_samples": [], "n_rebuilds": 0, "wall_seconds": 0.0, "n_checkpoints": 0,
                      "n_snapshots": 0, "segments": 1, "max_overlap": 0.0}
@@ -297,7 +301,7 @@ class Run:
         try:
             while self.status is None and st.step < max_steps:
                 now = time.monotonic()
-                flags[0] = float(self._signal)
+                flags[0] = float(max(self.signals, default=0))
                 flags[1] = float(self.t_end is not None and now + self.margin + 2 * self.last_write >= self.t_end)
                 flags[2] = float(out.checkpoint_seconds > 0 and now >= next_clock)
                 info = eng.step()
@@ -358,7 +362,7 @@ class Run:
         return self.status
 
     def _on_signal(self, signum, frame):
-        self._signal = signum
+        self.signals.append(int(signum))
 
     def _open_thermo(self):
         if self.rank != 0:
