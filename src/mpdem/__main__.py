@@ -30,12 +30,13 @@ SIGNALS = []
 
 def walltime(text):
     """Seconds of ``[D-]HH:MM:SS``, ``MM:SS`` or plain seconds (argparse type)."""
+    import math
     try:
-        days, _, rest = text.rpartition("-")
-        parts = [float(p) for p in rest.split(":")]
-        if not 1 <= len(parts) <= 3 or any(p < 0 for p in parts):
+        days, dash, rest = text.partition("-") if "-" in text else ("0", "", text)
+        parts = [float(p) for p in [days] + rest.split(":")]
+        if (dash and not days) or not 2 <= len(parts) <= 4 or any(not math.isfinite(p) or p < 0 for p in parts):
             raise ValueError
-        sec = sum(p * 60 ** k for k, p in enumerate(reversed(parts))) + 86400 * float(days or 0)
+        sec = sum(p * 60 ** k for k, p in enumerate(reversed(parts[1:]))) + 86400 * parts[0]
         if sec <= 0:
             raise ValueError
         return sec
@@ -58,6 +59,17 @@ def start_mpi():
             f"wrapper), or rebuild mpi4py (tools/setup.sh).\n")
         sys.exit(EXIT_ERROR)
     return comm
+
+
+def margin(text):
+    """Seconds >= 0 (argparse type of --walltime-margin)."""
+    try:
+        sec = float(text)
+        if sec >= 0 and sec != float("inf"):
+            return sec
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(f"--walltime-margin {text!r}: accepted seconds >= 0")
 
 
 def default_out():
@@ -99,11 +111,17 @@ def cmd_restart(args, comm):
     from . import checkpoint, rundir
     from .checkpoint import StateFileError
     from .simulation import Logger, Run
-    files, run_dir = rundir.candidates(args.target)
+    # rank 0 chooses the order; every rank then reads the same files collectively
+    found = _on_rank0(comm, rundir.candidates, args.target)
+    files, run_dir = found
     skipped = []
     for path in files:
         try:
             local, attrs = checkpoint.read(path, comm)
+            missing = [k for k in ("run_state", "n_mobile", "n_bed", "config") if k not in attrs]
+            if attrs.get("kind") not in ("checkpoint", "snapshot", "final") or missing:
+                raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
+                                     f"restart accepts the checkpoints, snapshots and final.h5 of a run")
             cfg = rundir.restart_config(attrs, path, run_dir, args.set)
             break
         except StateFileError as e:
@@ -120,7 +138,8 @@ def cmd_restart(args, comm):
     if attrs.get("converged"):
         say(f"restart: {path}: the run converged at step {attrs['step']}; nothing to do")
         return EXIT_OK
-    if int(attrs["step"]) >= cfg.run.max_steps:
+    # a checkpoint at the cap still goes on, to write the final state
+    if attrs.get("kind") == "final" and int(attrs["step"]) >= cfg.run.max_steps:
         say(f"restart: {path} is at step {attrs['step']} and run.max_steps = {cfg.run.max_steps}; "
             f"raise it with --set run.max_steps=... to go on")
         return EXIT_NOT_CONVERGED
@@ -131,15 +150,32 @@ def cmd_restart(args, comm):
     return _go(run)
 
 
+def _on_rank0(comm, fn, *args):
+    """fn(*args) on rank 0, its result (or its StateFileError) on every rank."""
+    from .checkpoint import StateFileError
+    res = None
+    if comm.Get_rank() == 0:
+        try:
+            res = fn(*args)
+        except StateFileError as e:
+            res = e
+    res = comm.bcast(res, root=0) if comm.Get_size() > 1 else res
+    if isinstance(res, StateFileError):
+        raise res
+    return res
+
+
 def cmd_export(args, comm):
     from . import export
-    out = export.export_file(args.file, args.format, args.out)
-    print(f"wrote {out}")
+    if comm.Get_rank() == 0:          # one writer, however it was launched
+        print(f"wrote {export.export_file(args.file, args.format, args.out)}")
     return EXIT_OK
 
 
 def cmd_info(args, comm):
     from . import checkpoint
+    if comm.Get_rank() != 0:
+        return EXIT_OK
     arrays, attrs = checkpoint.read_state(args.file, pairs=True)
     if args.digest:
         print(checkpoint.digest(arrays))
@@ -189,7 +225,7 @@ def parser():
     for q in (r, rs):
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
                        help="write a checkpoint and exit (status 75) before this much wall time")
-        q.add_argument("--walltime-margin", type=float, default=None, metavar="SECONDS",
+        q.add_argument("--walltime-margin", type=margin, default=None, metavar="SECONDS",
                        help="seconds kept free before --walltime besides twice the last checkpoint "
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")

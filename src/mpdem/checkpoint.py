@@ -283,7 +283,12 @@ def read(path, comm=None, pairs=False):
             for name in PARTICLE_FIELDS:
                 local[name] = f["particles"][name][lo:hi]
             local["count"] = f["contacts"]["count"][lo:hi].astype(np.int64)
-            before = np.array(_allgather(comm, int(local["count"].sum())), np.int64)
+        except (OSError, KeyError, ValueError) as e:
+            err = f"{path}: unreadable ({e}); the file is truncated or damaged"
+        _agree(comm, err)
+        # every rank takes part in this gather: no rank may have left early
+        before = np.array(_allgather(comm, int(local["count"].sum())), np.int64)
+        try:
             a = int(before[:r].sum())
             b = a + int(before[r])
             if b > f["contacts"]["partner"].shape[0]:

@@ -96,11 +96,12 @@ def candidates(target):
                 return int(read_attrs(p)["step"])
             except (StateFileError, KeyError):
                 return -1
-        return sorted(files, key=step, reverse=True), run
+        # newest first; at equal steps the final state (it knows the run ended)
+        return sorted(files, key=lambda p: (step(p), p == final_path(run)), reverse=True), run
     if not os.path.exists(target):
         raise StateFileError(f"{target}: no such file or directory")
     d = os.path.dirname(os.path.abspath(target))
-    run = os.path.dirname(d) if os.path.basename(d) == CKPT_DIR else d
+    run = os.path.dirname(d) if os.path.basename(d) in (CKPT_DIR, SNAP_DIR) else d
     return [target], run
 
 
@@ -133,7 +134,7 @@ def restart_config(attrs, path, run, sets):
         bad = [k for k in config.KEYS if not k.startswith(MUTABLE) and new.values[k] != cfg.values[k]]
         if bad:
             raise config.ConfigError(
-                f"--set {bad[0]}: a restart can change only {', '.join(m.rstrip('.') for m in MUTABLE)}; "
+                f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only {', '.join(m.rstrip('.') for m in MUTABLE)}; "
                 f"to continue with other physics start a new run with --set run.initial_file={path}")
         cfg = new
     return cfg
@@ -145,7 +146,10 @@ def truncate_thermo(path, step):
         return
     with open(path) as fh:
         lines = fh.readlines()
-    keep = lines[:1] + [ln for ln in lines[1:] if ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
+    width = lines[0].count(",") if lines else 0
+    # whole rows only (a kill may have cut the last one), up to the checkpoint's step
+    keep = lines[:1] + [ln for ln in lines[1:] if ln.endswith("\n") and ln.count(",") == width
+                        and ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
     tmp = f"{path}.tmp"
     with open(tmp, "w") as fh:
         fh.writelines(keep)

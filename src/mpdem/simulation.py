@@ -322,7 +322,7 @@ class Run:
                 sig, late, clock = info.flags
                 if out.snapshot_every and st.step % out.snapshot_every == 0:
                     self.write_snapshot()
-                if sig or late:
+                if (sig or late) and st.step < max_steps:
                     if thermo:
                         thermo.flush()
                     path = self.write_checkpoint()
