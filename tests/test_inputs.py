@@ -1,5 +1,6 @@
 """Initial files, initial-state checks and the run directory."""
 import json
+import os
 import subprocess
 import sys
 
@@ -113,7 +114,7 @@ def test_run_directory_contents(tmp_path):
 
 def cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "mpdem", *args], capture_output=True, text=True,
-                          timeout=600, cwd=cwd)
+                          timeout=600, cwd=cwd, env=dict(os.environ))
 
 
 def test_cli_reports_bad_values_before_work(tmp_path):

@@ -5,6 +5,10 @@ import sys
 from pathlib import Path
 
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
+# os.environ, not the C environment: tests that call mpdem's main() in this
+# process have made it an MPI singleton, whose PMIx variables would confuse a
+# child mpiexec (it then exits 1 without a word)
+ENV = dict(os.environ)
 
 
 def test_mpi4py_of_another_mpi_is_detected(tmp_path):
@@ -20,7 +24,7 @@ def test_error_on_ranks_exits_all_ranks(tmp_path):
     # several ranks with a bad value: every rank reports and the job ends (no hang)
     p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, "-m", "mpdem", "run",
                         "--set", "contact.mu=-1", "--out", str(tmp_path / "r")],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "contact.mu = -1" in p.stderr
 
@@ -39,6 +43,6 @@ def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
         "cli.cmd_info = handler\n"
         "sys.exit(cli.main(['info', 'nothing.h5']))\n")
     p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script)],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "boom on rank 1" in p.stderr and "internal error on rank 1" in p.stderr

@@ -128,7 +128,8 @@ def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, 
     out = tmp_path / "sig"
     cmd = ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [
         sys.executable, "-m", "mpdem", "run", *sets(), "--out", str(out)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # env: os.environ, not the C environment of this process (see tests/test_launch.py)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
     _wait_for(out / "log.txt", "step      2000")
     pids = _pids_of(out, n)
     assert len(pids) == n
