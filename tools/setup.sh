@@ -63,6 +63,13 @@ MSG
   fi
   have_system || { echo "setup: $pkgs installed but $mpicc/$h5pc still not found" >&2; exit 1; }
 fi
+# shellcheck lints the job scripts in the tests; a developer tool, so best effort
+if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  say "installing shellcheck (lints jobs/ in the tests)"
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends shellcheck >/dev/null 2>&1 \
+    || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends shellcheck >/dev/null; } \
+    || say "shellcheck not installed; the lint test of jobs/ will be skipped"
+fi
 
 mpi_version=$("$mpiexec_real" --version 2>&1 | head -n 1 | tr -c 'A-Za-z0-9.' '_')
 hdf5_version=$(pkg-config --modversion "$h5pc")

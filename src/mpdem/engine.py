@@ -157,7 +157,6 @@ class Engine:
         """
         s = self.state
         self.rebuild()
-        self.n_rebuilds -= 1           # the straight run did not rebuild here
         self._overlap = max_overlap
         self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
         self.info = StepInfo(self.domain.max(self._overlap), self.contacts())

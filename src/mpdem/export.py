@@ -17,8 +17,9 @@ import h5py
 import numpy as np
 
 from . import checkpoint
+from .kernels.forces import R      # particle radius [d]
+from .rundir import write_atomic
 
-R = 0.5     # particle radius [d]
 # XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads
 # "UInt" as 32-bit whatever its Precision, so one unsigned byte is "UChar".
 XDMF_TYPES = {"f8": ("Float", "8"), "i8": ("Int", "8"), "i4": ("Int", "4"), "u1": ("UChar", "1")}
@@ -26,14 +27,6 @@ XDMF_TYPES = {"f8": ("Float", "8"), "i8": ("Int", "8"), "i4": ("Int", "4"), "u1"
 XDMF_ATTRIBUTES = {"id": "particles/id", "fixed": "particles/fixed", "v": "particles/v",
                    "omega": "particles/omega", "f": "particles/f", "torque": "particles/torque",
                    "contacts": "contacts/count"}
-
-
-def _write_atomic(path, chunks):
-    """Write an iterable of strings to ``path`` via ``path.tmp`` and a rename."""
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as fh:
-        fh.writelines(chunks)
-    os.replace(tmp, path)
 
 
 # -- XDMF --
@@ -82,7 +75,7 @@ def _write_xdmf_doc(path, grid):
     root = ET.Element("Xdmf", Version="3.0")
     ET.SubElement(root, "Domain").append(grid)
     ET.indent(root)
-    _write_atomic(path, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
+    write_atomic(path, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
 
 
 def write_xdmf(h5_path):
@@ -213,5 +206,5 @@ def export_file(path, fmt, out=None):
     suffix, render = FORMATS[fmt]
     out = out or os.path.splitext(path)[0] + suffix
     arrays, attrs = checkpoint.read_state(path)
-    _write_atomic(out, render(arrays, attrs))
+    write_atomic(out, render(arrays, attrs))
     return out

@@ -27,6 +27,14 @@ CKPT_DIR, SNAP_DIR = "checkpoints", "snapshots"
 MUTABLE = ("run.max_steps", "stop.", "checks.", "decomp.", "output.", "analysis.")
 
 
+def write_atomic(path, chunks):
+    """Write a string, or an iterable of strings, to ``path`` via ``path.tmp`` and a rename."""
+    tmp = f"{path}.tmp"
+    with open(tmp, "w") as fh:
+        fh.writelines([chunks] if isinstance(chunks, str) else chunks)
+    os.replace(tmp, path)
+
+
 def checkpoint_path(run, k):
     return os.path.join(run, CKPT_DIR, f"ckpt-{k:05d}.h5")
 
@@ -112,9 +120,9 @@ def restart_config(attrs, path, run, sets):
     checkpoint's in a key that changes the arithmetic, and ConfigError when
     --set tries to change such a key.
     """
-    text = attrs.get("config", "")
     try:
-        cfg = config.resolve(config.flatten(tomllib.loads(text), origin=path))
+        raw = config.flatten(tomllib.loads(attrs.get("config", "")), origin=path)
+        cfg = config.resolve(raw)
     except (tomllib.TOMLDecodeError, config.ConfigError) as e:
         raise StateFileError(f"{path}: its config is unusable ({e})") from None
     ours = os.path.join(run, "config.toml")
@@ -123,21 +131,26 @@ def restart_config(attrs, path, run, sets):
             mine = config.load(ours)
         except config.ConfigError as e:
             raise StateFileError(f"{ours}: {e}") from None
-        diff = [k for k in config.KEYS if not k.startswith(MUTABLE) and cfg.values[k] != mine.values[k]]
+        diff = _fixed_keys_differing(cfg, mine)
         if diff:
             k = diff[0]
             raise StateFileError(f"{path} does not match {ours}: {k} = {cfg.values[k]!r} in the checkpoint, "
                                  f"{mine.values[k]!r} in the run directory ({len(diff)} keys differ); "
                                  f"restart from a checkpoint of this run")
     if sets:
-        new = config.load(None, sets, base=config.flatten(tomllib.loads(text), origin=path))
-        bad = [k for k in config.KEYS if not k.startswith(MUTABLE) and new.values[k] != cfg.values[k]]
+        new = config.load(None, sets, base=raw)
+        bad = _fixed_keys_differing(new, cfg)
         if bad:
             raise config.ConfigError(
                 f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only {', '.join(m.rstrip('.') for m in MUTABLE)}; "
                 f"to continue with other physics start a new run with --set run.initial_file={path}")
         cfg = new
     return cfg
+
+
+def _fixed_keys_differing(a, b):
+    """Keys outside MUTABLE whose values differ between two Configs."""
+    return [k for k in config.KEYS if not k.startswith(MUTABLE) and a.values[k] != b.values[k]]
 
 
 def truncate_thermo(path, step):
@@ -150,7 +163,4 @@ def truncate_thermo(path, step):
     # whole rows only (a kill may have cut the last one), up to the checkpoint's step
     keep = lines[:1] + [ln for ln in lines[1:] if ln.endswith("\n") and ln.count(",") == width
                         and ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as fh:
-        fh.writelines(keep)
-    os.replace(tmp, path)
+    write_atomic(path, keep)

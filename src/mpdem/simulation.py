@@ -158,7 +158,7 @@ class Run:
         for w in cfg.warnings:
             log.warn(w)
         if self.rank == 0:
-            _write_text(os.path.join(self.out, "config.toml"), cfg.to_toml())
+            rundir.write_atomic(os.path.join(self.out, "config.toml"), cfg.to_toml())
             rundir.clear(self.out)
         L_x, L_y = cfg.box.L_x, cfg.box.L_y
         slots = None
@@ -257,9 +257,8 @@ class Run:
         st = self.state = self.domain.distribute(local, float(attrs["L_x"]), float(attrs["L_y"]),
                                                  slots=cfg.integration.contact_slots)
         st.step, st.time = int(attrs["step"]), float(attrs["time"])
-        self.status = "converged" if bool(attrs.get("converged", False)) else None
         if self.rank == 0:
-            _write_text(os.path.join(self.out, "config.toml"), cfg.to_toml())
+            rundir.write_atomic(os.path.join(self.out, "config.toml"), cfg.to_toml())
             rundir.truncate_thermo(os.path.join(self.out, "thermo.csv"), st.step)
         self.log(f"restart: from {path} at step {st.step} (t = {st.time:.6g}), segment {self.cont['segments']}, "
                  f"{self.domain.size} ranks (written by {attrs.get('ranks', '?')})")
@@ -277,7 +276,6 @@ class Run:
         cfg, log, st = self.cfg, self.log, self.state
         out = cfg.output
         eng = self.engine = Engine(st, self.physics, self.domain)
-        eng.n_rebuilds = self.cont["n_rebuilds"]
         stop = self.stop = StopRule(cfg.stop.E_stop, cfg.stop.rule, cfg.stop.window,
                                     cfg.stop.sample_interval, self.physics.dt)
         stop.samples.extend(self.cont["stop_samples"])
@@ -286,6 +284,8 @@ class Run:
         self._first_step = st.step
         resumed = self.cont["segments"] > 1
         info = eng.resume(self.cont["max_overlap"]) if resumed else eng.setup()
+        if resumed:
+            eng.n_rebuilds = self.cont["n_rebuilds"]      # the straight run's count (no rebuild here)
         self._check(info)
         N = max(self.n_mobile, 1)
         max_steps = cfg.run.max_steps
@@ -403,11 +403,11 @@ class Run:
     def _attrs(self, kind):
         """Attributes of a state file: identical on every rank (collective)."""
         st, cfg = self.state, self.cfg
+        # one reduction: the last overlap, and one wall-clock reading for all ranks (attributes must agree)
+        overlap, wall = self.domain.max_many([self.engine._overlap, self._wall_total()])
         rs = dict(self.cont, stop_samples=list(self.stop.samples), n_rebuilds=self.engine.n_rebuilds,
-                  wall_seconds=self._wall_total(), max_overlap=self.domain.max(self.engine._overlap),
+                  wall_seconds=float(wall), max_overlap=float(overlap),
                   z_bed=self.z_bed, z_bed_mean=self.z_bed_mean, h_insert=self.h_insert)
-        # one wall-clock reading for all ranks (attributes must agree)
-        rs["wall_seconds"] = self.domain.max(rs["wall_seconds"])
         return {"kind": kind, "step": st.step, "time": st.time, "n": self.n_mobile + self.n_bed,
                 "n_mobile": self.n_mobile, "n_bed": self.n_bed, "L_x": st.L_x, "L_y": st.L_y,
                 "z_bed": self.z_bed, "converged": self.converged, "ranks": self.domain.size,
@@ -487,15 +487,8 @@ class Run:
                 f"surface h = {bulk['h']:.2f}")
         except ValueError as e:
             log.warn(f"no bulk measurement: {e}")
-        _write_text(os.path.join(self.out, "summary.json"), json.dumps(summary, indent=1))
+        rundir.write_atomic(os.path.join(self.out, "summary.json"), json.dumps(summary, indent=1))
         log(f"wrote {path}")
         log.close()
         return summary
 
-
-def _write_text(path, text):
-    """Write a small text file atomically."""
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
