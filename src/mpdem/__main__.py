@@ -1,7 +1,9 @@
-"""Command line: ``python -m mpdem run|restart|info|export|bench``.
+"""Command line: ``python -m mpdem run|restart|analyze|collect|info|export|bench``.
 
     python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS]
     python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS]
+    python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...]
+    python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem info FILE [--digest]
     python -m mpdem export FILE --format lammps-dump|xyz [--out PATH]
     python -m mpdem bench [--steps N] [--set ...]
@@ -201,6 +203,28 @@ def cmd_info(args, comm):
     return EXIT_OK
 
 
+def cmd_analyze(args, comm):
+    from .analysis.report import analyze
+    if comm.Get_rank() != 0:
+        return EXIT_OK
+    if comm.Get_size() > 1:
+        print(f"analyze: one process does the work (numba threads); {comm.Get_size() - 1} rank(s) idle")
+    analyze(args.target, args.out, args.set, plots=not args.no_plots, log=_quiet(args.quiet))
+    return EXIT_OK
+
+
+def cmd_collect(args, comm):
+    from .analysis.collect import collect
+    if comm.Get_rank() != 0:
+        return EXIT_OK
+    collect(args.runs, args.out, analyze_missing=not args.no_analyze, log=_quiet(args.quiet))
+    return EXIT_OK
+
+
+def _quiet(quiet):
+    return (lambda msg: None) if quiet else print
+
+
 def cmd_bench(args, comm):
     from .bench import run_bench, run_io_bench
     (run_io_bench if args.io else run_bench)(args, comm)
@@ -243,6 +267,20 @@ def parser():
                    help="time a checkpoint write and read of N synthetic particles instead "
                         "(the file goes to --cache, default the system temp directory)")
     b.add_argument("--repeat", type=int, default=3, help="repetitions of the IO benchmark (default 3)")
+    an = sub.add_parser("analyze", help="measure a packing: z, phi, g(r), alpha, P(zeta) (physics.md 6)")
+    an.add_argument("target", metavar="RUN_DIR|STATE_FILE",
+                    help="a finished run (its final.h5) or a snapshot, checkpoint or final state")
+    an.add_argument("--out", help="output directory (default RUN/analysis, or RUN/analysis/snap-NNNNN)")
+    an.add_argument("--set", action="append", default=[], metavar="analysis.KEY=VALUE",
+                    help="change an analysis setting (repeatable)")
+    an.add_argument("--no-plots", action="store_true", help="summary and tables only")
+    an.add_argument("--quiet", action="store_true", help="print nothing")
+    co = sub.add_parser("collect", help="many runs -> the paper's tables and figures (Figs. 2-9)")
+    co.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories (or directories holding them)")
+    co.add_argument("--out", default="paper", help="output directory (default ./paper)")
+    co.add_argument("--no-analyze", action="store_true",
+                    help="use only runs that already have analysis/summary.json")
+    co.add_argument("--quiet", action="store_true", help="print nothing")
     i = sub.add_parser("info", help="what a state file holds")
     i.add_argument("file")
     i.add_argument("--digest", action="store_true", help="print a SHA-256 of the state sorted by id")
@@ -267,11 +305,12 @@ def _main(argv):
     from .checkpoint import StateFileError
     from .config import ConfigError
     from .simulation import RunError
+    from .analysis.report import AnalysisError
     handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
-                "bench": cmd_bench}
+                "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, comm)
-    except (ConfigError, InputError, StateFileError, RunError, NotImplementedError) as e:
+    except (ConfigError, InputError, StateFileError, RunError, AnalysisError, NotImplementedError) as e:
         _fail(comm, f"mpdem: error: {e}")
     except KeyboardInterrupt:
         _fail(comm, "mpdem: interrupted")

@@ -85,6 +85,15 @@ SCHEMA = (
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
     _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
     _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]"),
+    _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]"),
+    _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box"),
+    _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)"),
+    _k("analysis", "xi_min", 1e-6, "smallest xi = r/d - 1 of the logarithmic near-contact bins"),
+    _k("analysis", "xi_per_decade", 10, "logarithmic bins per decade of xi (they run from xi_min to 1)", int),
+    _k("analysis", "fit_xi_hi", 5e-2, "upper end of the power-law fit window in xi (eq. 6)"),
+    _k("analysis", "fit_xi_lo", -1.0, "lower end of the fit window in xi; -1 = max(1e-3 sqrt(2e5 / k_n), 20 x median bulk overlap)"),
+    _k("analysis", "zeta_bins", 50, "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int),
+    _k("analysis", "mobilised", 0.99, "zeta above which a contact counts as fully mobilised"),
 )
 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
@@ -348,6 +357,16 @@ def resolve(raw):
         need(key, vals[key] == -1 or vals[key] >= 0, "-1 (automatic) or a margin >= 0")
     need("analysis.n_min", vals["analysis.n_min"] == -1 or vals["analysis.n_min"] >= 0, "-1 (automatic) or n_min >= 0")
     need("analysis.profile_bin", vals["analysis.profile_bin"] > 0, "profile_bin > 0")
+    need("analysis.g_r_max", vals["analysis.g_r_max"] > 1, "g_r_max > 1 (and below half the box)")
+    need("analysis.g_dr", 0 < vals["analysis.g_dr"] < vals["analysis.g_r_max"], "0 < g_dr < g_r_max")
+    need("analysis.near_r_max", vals["analysis.near_r_max"] > 1, "near_r_max > 1 (and below half the box)")
+    need("analysis.xi_min", 0 < vals["analysis.xi_min"] < 1, "0 < xi_min < 1")
+    need("analysis.xi_per_decade", vals["analysis.xi_per_decade"] >= 1, "xi_per_decade >= 1")
+    need("analysis.fit_xi_hi", 0 < vals["analysis.fit_xi_hi"] <= 1, "0 < fit_xi_hi <= 1")
+    need("analysis.fit_xi_lo", vals["analysis.fit_xi_lo"] == -1 or 0 < vals["analysis.fit_xi_lo"] < vals["analysis.fit_xi_hi"],
+         "-1 (automatic) or 0 < fit_xi_lo < fit_xi_hi")
+    need("analysis.zeta_bins", vals["analysis.zeta_bins"] >= 1, "zeta_bins >= 1")
+    need("analysis.mobilised", 0 < vals["analysis.mobilised"] <= 1, "0 < mobilised <= 1")
     return Config(MappingProxyType(vals), tuple(warns), frozenset(derived))
 
 

@@ -1,0 +1,235 @@
+"""Bulk region, contacts, coordination and packing fraction (physics.md 6.1-6.3).
+
+Every run reports these at its end (``bulk_summary``); ``mpdem analyze``
+builds the rest of section 6 on them.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kernels.pairdist import close_pairs
+
+R = 0.5
+
+
+def slab_volume(zc, a, b, radius=R):
+    """Volume of spheres of centre height zc inside the slab a <= z <= b [d^3].
+
+    Parameters
+    ----------
+    zc : array of float
+    a, b : float or arrays broadcastable with zc
+
+    V = pi [R^2 u - u^3 / 3] between u = clamp(a - zc) and clamp(b - zc), with
+    clamp to [-R, R] (the exact sphere-slab intersection).
+    """
+    ua = np.clip(a - zc, -radius, radius)
+    ub = np.clip(b - zc, -radius, radius)
+    return math.pi * ((radius ** 2 * ub - ub ** 3 / 3) - (radius ** 2 * ua - ua ** 3 / 3))
+
+
+def phi_profile(z, L_x, L_y, z0, z1, width=0.5):
+    """Horizontally averaged packing fraction phi(z) of spheres at heights z.
+
+    Returns
+    -------
+    edges : (nb + 1,) bin edges [d] from z0 to at least z1
+    phi : (nb,) packing fraction per bin (exact sphere-slab volumes)
+    """
+    nb = max(1, int(math.ceil((z1 - z0) / width)))
+    edges = z0 + width * np.arange(nb + 1)
+    vol = np.zeros(nb)
+    base = np.floor((z - z0) / width).astype(np.int64)
+    reach = int(math.ceil(R / width))
+    for k in range(-reach, reach + 1):
+        b = base + k
+        ok = (b >= 0) & (b < nb)
+        np.add.at(vol, b[ok], slab_volume(z[ok], edges[b[ok]], edges[b[ok] + 1]))
+    return edges, vol / (L_x * L_y * width)
+
+
+def find_contacts(x, L_x, L_y):
+    """All overlapping pairs (r < d, strict) with minimum image in x and y.
+
+    Parameters
+    ----------
+    x : (n, 3) positions [d]
+
+    Returns
+    -------
+    pairs : (M, 2) int64 row indices, i < j
+    r : (M,) centre distances [d]
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    pairs = close_pairs(x, L_x, L_y, 1.0)
+    d = x[pairs[:, 0]] - x[pairs[:, 1]]
+    d[:, 0] -= L_x * np.round(d[:, 0] / L_x)
+    d[:, 1] -= L_y * np.round(d[:, 1] / L_y)
+    return pairs, np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
+def remove_rattlers(n_rows, pairs, removable, n_min):
+    """Iteratively remove particles with fewer than n_min contacts.
+
+    Parameters
+    ----------
+    n_rows : int
+    pairs : (M, 2) int contacts
+    removable : (n_rows,) bool, False for particles never removed (the bed)
+    n_min : int
+
+    Returns
+    -------
+    kept : (n_rows,) bool
+    counts : (n_rows,) int contacts among kept particles
+    """
+    kept = np.ones(n_rows, bool)
+    while True:
+        live = kept[pairs[:, 0]] & kept[pairs[:, 1]]
+        counts = np.bincount(pairs[live].ravel(), minlength=n_rows)
+        drop = kept & removable & (counts < n_min)
+        if not drop.any():
+            return kept, counts
+        kept &= ~drop
+
+
+def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5):
+    """The bulk slab [z1, z2] of a pile (physics.md 6.1).
+
+    Parameters
+    ----------
+    zm : (n_mobile,) centre heights of the mobile spheres [d]
+    z_bed : float top of the bed (highest bed centre) [d]
+    margin_bottom, margin_top : float bulk margins [d]; -1 = automatic
+    profile_bin : float bin width of phi(z) [d]
+
+    Returns
+    -------
+    dict with z1, z2, h, z_bed, margin_bottom, margin_top, phi_plateau and the
+    profile (``edges`` (nb + 1,), ``phi_z`` (nb,) arrays).
+    """
+    top = float(zm.max()) + 1.0
+    edges, phi = phi_profile(zm, L_x, L_y, z_bed, top, profile_bin)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    # plateau window of physics.md 6.1, shrunk for piles shorter than the paper's
+    h_nominal = zm.size * math.pi / 6 / (L_x * L_y * 0.6)
+    lo, hi = z_bed + min(10.0, 0.25 * h_nominal), z_bed + min(30.0, 0.75 * h_nominal)
+    win = (centres >= lo) & (centres <= hi)
+    plateau = float(np.median(phi[win])) if win.any() else float(phi.max())
+    above = np.flatnonzero(phi >= 0.5 * plateau)
+    h = float(centres[above[-1]]) if above.size else top
+    auto = min(max(0.2 * (h - z_bed), 3.0), 10.0)
+    mb = auto if margin_bottom < 0 else margin_bottom
+    mt = mb if margin_top < 0 else margin_top
+    z1, z2 = z_bed + mb, h - mt
+    if not z2 > z1:
+        raise ValueError(f"pile too short for a bulk region: z_bed = {z_bed:.3g}, h = {h:.3g}, "
+                         f"margins {mb:.3g} and {mt:.3g}")
+    return {"z1": z1, "z2": z2, "h": h, "z_bed": z_bed, "margin_bottom": mb, "margin_top": mt,
+            "phi_plateau": plateau, "edges": edges, "phi_z": phi}
+
+
+def packing_fraction(zm, L_x, L_y, z1, z2):
+    """phi_f: volume of all mobile spheres inside the slab [z1, z2] over its volume (6.3)."""
+    return float(slab_volume(zm, z1, z2).sum() / (L_x * L_y * (z2 - z1)))
+
+
+def histogram_z(counts, top=12):
+    """P(n) for n = 0 .. top, the last bin holding n >= top; sums to 1."""
+    h = np.bincount(np.minimum(counts, top), minlength=top + 1).astype(float)
+    return h / max(h.sum(), 1.0)
+
+
+def coordination(counts, kept, counts_nr, bulk):
+    """z, z without rattlers, rattler fraction and P(z) of the bulk particles (6.2).
+
+    Parameters
+    ----------
+    counts : (n,) contacts of every particle
+    kept : (n,) bool, False for rattlers; counts_nr : (n,) contacts among kept
+    bulk : (n,) bool bulk particles
+    """
+    nb = int(bulk.sum())
+    bk = bulk & kept
+    return {
+        "z": float(counts[bulk].mean()) if nb else math.nan,
+        "z_no_rattlers": float(counts_nr[bk].mean()) if bk.any() else math.nan,
+        "rattler_fraction": float(1.0 - bk.sum() / nb) if nb else math.nan,
+        "n_bulk": nb,
+        "P_z": histogram_z(counts[bulk]).tolist(),
+        "P_z_no_rattlers": histogram_z(counts_nr[bk]).tolist(),
+    }
+
+
+class Packing:
+    """A static packing with its contacts, ready for the bulk measurements.
+
+    Parameters
+    ----------
+    x : (n, 3) positions [d]; fixed : (n,) 1 for bed spheres
+    L_x, L_y : box [d]; mu : friction (sets the default rattler threshold)
+    n_min : rattler threshold; -1 = 4 for mu = 0, 2 for mu > 0
+    """
+
+    def __init__(self, x, fixed, L_x, L_y, mu, n_min=-1):
+        self.x = np.ascontiguousarray(x, dtype=np.float64)
+        self.fixed = np.asarray(fixed).astype(bool)
+        self.mobile = ~self.fixed
+        if not self.mobile.any():
+            raise ValueError("no mobile particles to analyse")
+        self.L_x, self.L_y, self.mu = float(L_x), float(L_y), float(mu)
+        zm = self.x[self.mobile, 2]
+        self.z_bed = float(self.x[self.fixed, 2].max()) if self.fixed.any() else float(zm.min()) - R
+        self.pairs, self.r = find_contacts(self.x, self.L_x, self.L_y)
+        n = len(self.x)
+        self.counts = np.bincount(self.pairs.ravel(), minlength=n)
+        self.n_min = (4 if mu == 0 else 2) if n_min < 0 else int(n_min)
+        self.kept, self.counts_nr = remove_rattlers(n, self.pairs, self.mobile, self.n_min)
+
+    def in_slab(self, z1, z2):
+        """(n,) bool: mobile particles with centres in [z1, z2]."""
+        return self.mobile & (self.x[:, 2] >= z1) & (self.x[:, 2] <= z2)
+
+    def measure(self, z1, z2):
+        """z, z_nr, rattler fraction, P(z), phi_f and bulk overlaps for the slab [z1, z2]."""
+        bulk = self.in_slab(z1, z2)
+        out = coordination(self.counts, self.kept, self.counts_nr, bulk)
+        out["phi"] = packing_fraction(self.x[self.mobile, 2], self.L_x, self.L_y, z1, z2)
+        in_bulk = bulk[self.pairs[:, 0]] | bulk[self.pairs[:, 1]]
+        overl = 1.0 - self.r[in_bulk]
+        out["overlap_median"] = float(np.median(overl)) if overl.size else 0.0
+        out["overlap_max"] = float(overl.max()) if overl.size else 0.0
+        return out
+
+    def region(self, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5):
+        """``bulk_region`` of this packing."""
+        return bulk_region(self.x[self.mobile, 2], self.z_bed, self.L_x, self.L_y,
+                           margin_bottom, margin_top, profile_bin)
+
+
+def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_min=-1,
+                 profile_bin=0.5, packing=None):
+    """Bulk z, z without rattlers, rattler fraction and phi_f of a packing.
+
+    Parameters
+    ----------
+    x : (n, 3) positions [d]; fixed : (n,) 1 for bed spheres
+    mu : friction (sets the default rattler threshold)
+    margin_bottom, margin_top : bulk margins [d]; -1 = automatic (6.1)
+    n_min : rattler threshold; -1 = 4 for mu = 0, 2 for mu > 0
+    packing : Packing of the same arguments, if already built
+
+    Returns
+    -------
+    dict with z, z_no_rattlers, rattler_fraction, phi, n_bulk, z1, z2, h,
+    z_bed, margins, n_min, phi_plateau, P(z) with and without rattlers,
+    median and maximum bulk overlap.
+    """
+    pk = packing or Packing(x, fixed, L_x, L_y, mu, n_min)
+    reg = pk.region(margin_bottom, margin_top, profile_bin)
+    out = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
+    out["n_min"] = pk.n_min
+    out.update(pk.measure(reg["z1"], reg["z2"]))
+    return out

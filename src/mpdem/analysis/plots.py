@@ -1,0 +1,102 @@
+"""PNG plots of one analysis (``mpdem analyze``); matplotlib without a display."""
+from __future__ import annotations
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def save(fig, path):
+    """Write a figure as PNG under a temporary name, then rename."""
+    tmp = f"{path}.tmp"
+    fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def _slab(ax, s, vertical=False):
+    span = ax.axvspan if vertical else ax.axhspan
+    span(s["z1"], s["z2"], color="tab:green", alpha=0.12, label=f"bulk [{s['z1']:.1f}, {s['z2']:.1f}]")
+
+
+def plot_profile(out, s, t):
+    """phi(z) and z(z) with the bulk slab, surface and phi_f."""
+    reg = t["profile"]
+    zc = 0.5 * (reg["edges"][:-1] + reg["edges"][1:])
+    _, z_all, z_nr = t["z_profile"]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(8, 4.5), sharey=True)
+    a.plot(reg["phi_z"], zc, "k-", lw=1)
+    _slab(a, s)
+    a.axhline(s["h"], color="tab:red", ls="--", lw=0.8, label=f"surface h = {s['h']:.1f}")
+    a.plot([s["phi"]] * 2, [s["z1"], s["z2"]], color="tab:blue", lw=2, label=f"$\\phi_f$ = {s['phi']:.4f}")
+    a.set(xlabel="$\\phi(z)$", ylabel="z [d]", title="packing fraction")
+    a.legend(fontsize=8, loc="lower left")
+    b.plot(z_all, zc, "k.-", ms=3, lw=0.8, label=f"all (bulk z = {s['z']:.3f})")
+    b.plot(z_nr, zc, ".-", color="tab:orange", ms=3, lw=0.8,
+           label=f"no rattlers (bulk {s['z_no_rattlers']:.3f})")
+    _slab(b, s)
+    b.set(xlabel="contacts per sphere", title="coordination")
+    b.legend(fontsize=8, loc="lower left")
+    save(fig, os.path.join(out, "profile.png"))
+
+
+def plot_coordination(out, s):
+    """P(z) of the bulk, with and without rattlers."""
+    n = np.arange(len(s["P_z"]))
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.bar(n - 0.2, s["P_z"], 0.4, label=f"all, z = {s['z']:.3f}")
+    ax.bar(n + 0.2, s["P_z_no_rattlers"], 0.4, label=f"no rattlers, z = {s['z_no_rattlers']:.3f}")
+    ax.set(xlabel="contacts n (last bin: n >= 12)", ylabel="P(n)", xticks=n)
+    ax.legend(fontsize=8)
+    save(fig, os.path.join(out, "coordination.png"))
+
+
+def plot_gofr(out, s, t):
+    """g(r) on linear bins, and the near-contact g against xi with the eq. 6 fit."""
+    g = t["gofr"]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(0.5 * (g["r_lo"] + g["r_hi"]), g["g"], "k-", lw=0.7)
+    ax.axhline(1.0, color="grey", lw=0.5)
+    ax.set(xlabel="r / d", ylabel="g(r)", xlim=(0.8, g["r_max"]),
+           title=f"bulk g(r): {g['n_ref']} reference spheres")
+    save(fig, os.path.join(out, "gofr.png"))
+
+    nr, xi, fit = t["near"], t["xi_c"], t["fit"]
+    ok = nr["g_xi"] > 0
+    fig, ax = plt.subplots(figsize=(5, 4))
+    ax.loglog(xi[ok], nr["g_xi"][ok], "ko", ms=3, label="g(r), r > d")
+    ax.axvspan(fit["xi_lo"], fit["xi_hi"], color="tab:green", alpha=0.12, label="fit window")
+    if np.isfinite(fit["alpha"]):
+        xs = np.array([fit["xi_lo"], fit["xi_hi"]])
+        ax.loglog(xs, np.exp(fit["c"]) * xs ** -fit["alpha"], "r-",
+                  label=f"$\\alpha$ = {fit['alpha']:.3f} $\\pm$ {fit['alpha_err']:.3f}")
+    ax.set(xlabel="$\\xi = r/d - 1$", ylabel="g", title="near contact (eq. 6)")
+    ax.legend(fontsize=8)
+    save(fig, os.path.join(out, "gofr_near.png"))
+
+
+def plot_zeta(out, s, t):
+    """P(zeta) normalised by its largest bin (and F_t/F_n for mu >= 1)."""
+    z = t["zeta"]
+    c = 0.5 * (z["edges"][:-1] + z["edges"][1:])
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.plot(c, z["P_zeta"], "k.-", label=f"$\\zeta = F_t/\\mu F_n$ ({z['n_contacts']} contacts)")
+    if "P_ratio" in z:
+        ax.plot(c, z["P_ratio"], ".-", color="tab:blue", label="$F_t/F_n$")
+    ax.set(xlabel="$\\zeta$", ylabel="P / max P", ylim=(0, 1.05),
+           title=f"{100 * z['mobilised_fraction']:.1f}% fully mobilised")
+    ax.legend(fontsize=8)
+    save(fig, os.path.join(out, "zeta.png"))
+
+
+def run_plots(out, s, t):
+    """All plots of one analysis into ``out``."""
+    plot_profile(out, s, t)
+    plot_coordination(out, s)
+    plot_gofr(out, s, t)
+    if "zeta" in t:
+        plot_zeta(out, s, t)
