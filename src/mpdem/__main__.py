@@ -226,8 +226,10 @@ def _quiet(quiet):
 
 
 def cmd_bench(args, comm):
-    from .bench import run_bench, run_io_bench
-    (run_io_bench if args.io else run_bench)(args, comm)
+    from .bench import run_analysis_bench, run_bench, run_io_bench
+    if args.io and args.analysis:
+        raise NotImplementedError("bench: choose one of --io and --analysis")
+    (run_io_bench if args.io else run_analysis_bench if args.analysis else run_bench)(args, comm)
     return EXIT_OK
 
 
@@ -266,7 +268,10 @@ def parser():
     b.add_argument("--io", action="store_true",
                    help="time a checkpoint write and read of N synthetic particles instead "
                         "(the file goes to --cache, default the system temp directory)")
-    b.add_argument("--repeat", type=int, default=3, help="repetitions of the IO benchmark (default 3)")
+    b.add_argument("--analysis", action="store_true",
+                   help="time `mpdem analyze` of an N-sphere snapshot (copies of the landed pile side by "
+                        "side, written by all ranks); use with --N 1000000")
+    b.add_argument("--repeat", type=int, default=3, help="repetitions of the IO and analysis benchmarks (default 3)")
     an = sub.add_parser("analyze", help="measure a packing: z, phi, g(r), alpha, P(zeta) (physics.md 6)")
     an.add_argument("target", metavar="RUN_DIR|STATE_FILE",
                     help="a finished run (its final.h5) or a snapshot, checkpoint or final state")

@@ -171,3 +171,100 @@ def run_io_bench(args, comm):
         import shutil
         shutil.rmtree(d)
     return times
+
+
+def tiled_pile(a, L, N, mu, k_n, seed=0):
+    """Copies of the landed (x-y periodic) pile side by side: at least N mobile spheres.
+
+    Parameters
+    ----------
+    a : state arrays of the landed pile (``landed_pile``), box L x L [d]
+    N : mobile spheres wanted; mu, k_n : for the contact list's forces
+
+    Returns
+    -------
+    arrays : whole state, ids 0..n-1, with a contact list ``id_i, id_j,
+        delta, F_n, F_t, ds_i`` of the geometric contacts. Its forces are
+        synthetic (F_n = k_n delta, |F_t| uniform in [0, mu F_n) in a random
+        tangent direction): the benchmark times the analysis, not physics.
+    nx, ny : tiles along x and y
+    """
+    from .analysis.bulk import find_contacts
+    n_mob = int((a["fixed"] == 0).sum())
+    tiles = -(-N // n_mob)
+    # the most nearly square nx x ny = tiles
+    nx = max(k for k in range(1, int(np.sqrt(tiles)) + 1) if tiles % k == 0)
+    ny = tiles // nx
+    x0 = a["x"].copy()
+    x0[:, 0] %= L
+    x0[:, 1] %= L
+    shifts = np.array([[i * L, j * L, 0.0] for j in range(ny) for i in range(nx)])
+    x = (x0[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
+    n = len(x)
+    out = {"id": np.arange(n, dtype=np.int64), "x": x, "fixed": np.tile(a["fixed"], nx * ny)}
+    for f in ("v", "omega", "f", "torque"):
+        out[f] = np.zeros((n, 3))
+    out["count"] = np.zeros(n, np.int64)
+    out["partner"], out["ds"] = np.zeros(0, np.int64), np.zeros((0, 3))
+    pairs, r = find_contacts(x, nx * L, ny * L)
+    rng = np.random.default_rng(seed)
+    delta = 1.0 - r
+    d = x[pairs[:, 0]] - x[pairs[:, 1]]
+    d[:, 0] -= nx * L * np.round(d[:, 0] / (nx * L))
+    d[:, 1] -= ny * L * np.round(d[:, 1] / (ny * L))
+    nrm = d / r[:, None]
+    t = np.cross(nrm, rng.standard_normal((len(r), 3)))
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    F_n = k_n * delta
+    out.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=delta, F_n=F_n,
+               F_t=t * (mu * F_n * rng.random(len(r)))[:, None], ds_i=np.zeros((len(r), 3)))
+    return out, nx, ny
+
+
+def run_analysis_bench(args, comm):
+    """Write a tiled pile of N spheres with all ranks, then time ``mpdem analyze`` of it (rank 0)."""
+    import shutil
+    import tempfile
+    from .analysis.report import analyze
+    rank, size = comm.Get_rank(), comm.Get_size()
+    cfg = bench_config(20000, args.mu)
+    cache = args.cache or os.path.join(os.path.expanduser("~"), ".cache", "mpdem", "bench")
+    a, pile = landed_pile(cfg, cache) if rank == 0 else (None, None)
+    a = comm.bcast(a, root=0) if size > 1 else a
+    L = cfg.box.L_x
+    t0 = time.perf_counter()
+    whole, nx, ny = tiled_pile(a, L, args.N, cfg.contact.mu, cfg.contact.k_n)
+    n, m = len(whole["id"]), len(whole["id_i"])
+    share = {k: whole[k][rank * n // size:(rank + 1) * n // size] for k in checkpoint.PARTICLE_FIELDS + ("count",)}
+    share["partner"], share["ds"] = whole["partner"], whole["ds"]
+    share.update({k: whole[k][rank * m // size:(rank + 1) * m // size] for k in checkpoint.PAIR_FIELDS})
+    n_mob = int((whole["fixed"] == 0).sum())
+    tcfg = config.load(None, ["run.max_steps=1", f"pour.N={n_mob}", f"box.L_x={nx * L}", f"box.L_y={ny * L}",
+                              f"contact.mu={cfg.contact.mu}"])
+    d = comm.bcast(tempfile.mkdtemp(prefix="mpdem-analysis-", dir=args.cache) if rank == 0 else None)
+    path = os.path.join(d, "snap.h5")
+    attrs = {"kind": "snapshot", "step": 0, "time": 0.0, "n": n, "n_mobile": n_mob, "n_bed": n - n_mob,
+             "L_x": nx * L, "L_y": ny * L, "config": tcfg.to_toml()}
+    t_make = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    checkpoint.write(path, share, attrs, comm)
+    t_write = time.perf_counter() - t0
+    del whole, share
+    if rank != 0:
+        return None
+    import numba
+    print(f"bench-analysis: {n_mob} mobile + {n - n_mob} bed spheres ({nx} x {ny} tiles of {pile}), "
+          f"{m} contacts, {os.path.getsize(path) / 2**20:.0f} MiB written by {size} rank(s) in {t_write:.1f} s "
+          f"(made in {t_make:.1f} s); analysing with {numba.get_num_threads()} numba threads")
+    times = []
+    for k in range(args.repeat):
+        t0 = time.perf_counter()
+        s, _ = analyze(path, os.path.join(d, "analysis"), plots=True, log=lambda msg: None)
+        times.append(time.perf_counter() - t0)
+        print(f"bench-analysis: run {k + 1}: {times[-1]:.1f} s (read {s['seconds']['read']:.1f} s); "
+              f"z = {s['z']:.3f}, phi = {s['phi']:.4f}, {s['n_bulk']} bulk spheres, "
+              f"g(r) from {s['gofr']['n_ref']} reference spheres to {s['gofr']['r_max']:g} d")
+    print(f"bench-analysis: best {min(times):.1f} s, median {sorted(times)[len(times) // 2]:.1f} s over {len(times)} "
+          f"(the first includes loading the compiled kernels)")
+    shutil.rmtree(d)
+    return times

@@ -1,0 +1,343 @@
+"""The analysis stage on structures with known answers (physics.md 6, issue 5).
+
+FCC and simple cubic crystals (z = 12 and 6, phi = pi/(3 sqrt 2) and pi/6),
+an ideal gas (g = 1), rattler removal on hand-built clusters, the fits on
+synthetic data with known parameters, and the kernels against brute force.
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numba
+import numpy as np
+import pytest
+
+from mpdem import checkpoint, config
+from mpdem.analysis import bulk, fits, forces, gofr, report
+from mpdem.kernels import pairdist
+
+# nearest-neighbour distance of the crystals: a hair below d, so neighbours overlap (contact is delta > 0)
+SQUEEZE = 1.0 - 1e-7
+
+
+def brute_pairs(x, L_x, L_y, r_c):
+    d = x[:, None, :] - x[None, :, :]
+    d[..., 0] -= L_x * np.round(d[..., 0] / L_x)
+    d[..., 1] -= L_y * np.round(d[..., 1] / L_y)
+    r = np.sqrt((d ** 2).sum(-1))
+    i, j = np.nonzero(np.triu(r < r_c, 1))
+    return set(zip(i.tolist(), j.tolist())), r
+
+
+def fcc(cells_xy, cells_z, a):
+    """FCC with cubic cell a, cells_xy^2 x cells_z cells; (n, 3) positions and the box side."""
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    g = np.array([[i, j, k] for k in range(cells_z) for j in range(cells_xy) for i in range(cells_xy)], float)
+    x = ((g[:, None, :] + basis[None, :, :]).reshape(-1, 3) + 0.25) * a
+    return x, cells_xy * a
+
+
+def simple_cubic(nxy, nz, a):
+    g = np.array([[i, j, k] for k in range(nz) for j in range(nxy) for i in range(nxy)], float)
+    return (g + 0.5) * a, nxy * a
+
+
+# ---- kernels -----------------------------------------------------------------
+
+@pytest.mark.parametrize("L,n", [(10.0, 1500), (3.0, 150), (4.2, 300)])
+def test_close_pairs_are_all_pairs_within_the_cutoff(L, n):
+    rng = np.random.default_rng(int(L * 10))
+    x = rng.random((n, 3)) * [L, L, 6.0]
+    x[:, :2] += rng.integers(-2, 3, (n, 2)) * L        # unwrapped images find the same pairs
+    want, _ = brute_pairs(x, L, L, 1.0)
+    got = pairdist.close_pairs(x, L, L, 1.0)
+    assert np.all(got[:, 0] < got[:, 1])
+    assert set(map(tuple, got.tolist())) == want and len(got) == len(want)
+
+
+def test_pair_histograms_count_every_ordered_pair_once_for_any_thread_count():
+    rng = np.random.default_rng(3)
+    L, n = 7.0, 900
+    x = rng.random((n, 3)) * [L, L, 10.0]
+    refs = np.flatnonzero((x[:, 2] > 3) & (x[:, 2] < 7)).astype(np.int64)
+    r_max, dr, per_dec, xi_min = 3.0, 0.05, 10, 1e-4
+    n_log = int(round(-math.log10(xi_min) * per_dec))
+    grid = pairdist.cell_grid(x, L, L, r_max)
+    before = numba.get_num_threads()
+    out = []
+    for t in sorted({1, before}):
+        numba.set_num_threads(t)
+        out.append(pairdist.pair_histograms(x, refs, L, L, r_max, dr, int(r_max / dr), xi_min, per_dec, n_log, *grid))
+    numba.set_num_threads(before)
+    lin, lg, over = out[0]
+    for o in out[1:]:
+        assert np.array_equal(o[0], lin) and np.array_equal(o[1], lg) and o[2] == over
+    _, r = brute_pairs(x, L, L, 1.0)
+    r = r[refs]
+    r[np.arange(len(refs)), refs] = np.inf
+    r = r[r < r_max]
+    assert np.array_equal(lin, np.bincount((r / dr).astype(int), minlength=int(r_max / dr)))
+    assert over == int((r < 1).sum())
+    xi = r[r > 1] - 1
+    q = np.floor((np.log10(xi) - math.log10(xi_min)) * per_dec).astype(int)
+    assert np.array_equal(lg, np.bincount(q[(q >= 0) & (q < n_log)], minlength=n_log))
+
+
+# ---- crystals ----------------------------------------------------------------
+
+def test_fcc_has_twelve_contacts_and_its_packing_fraction():
+    a = math.sqrt(2.0) * SQUEEZE
+    x, L = fcc(5, 12, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)          # the two lowest layers are the bed
+    s = bulk.bulk_summary(x, fixed, L, L, mu=0.5)
+    assert s["n_bulk"] > 200
+    assert s["z"] == 12.0 and s["z_no_rattlers"] == 12.0 and s["rattler_fraction"] == 0.0
+    assert s["P_z"][12] == 1.0
+    # a slab of whole periods (a/2 per layer) holds exactly the crystal's fraction
+    zm = x[fixed == 0, 2]
+    phi = bulk.packing_fraction(zm, L, L, 3 * a + 0.1, 7 * a + 0.1)
+    assert phi == pytest.approx(math.pi / (3 * math.sqrt(2)) / SQUEEZE ** 3, rel=1e-12)
+    # the automatic slab is not a whole number of layers: within the layering ripple
+    assert s["phi"] == pytest.approx(math.pi / (3 * math.sqrt(2)), abs=0.02)
+
+
+def test_simple_cubic_has_six_contacts_and_pi_over_six():
+    x, L = simple_cubic(6, 24, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    s = bulk.bulk_summary(x, fixed, L, L, mu=0.0)
+    # n_min = 4 at mu = 0: six contacts each, nobody is a rattler
+    assert s["z"] == 6.0 and s["z_no_rattlers"] == 6.0 and s["rattler_fraction"] == 0.0
+    assert s["P_z"][6] == 1.0
+    zm = x[fixed == 0, 2]
+    assert bulk.packing_fraction(zm, L, L, 5 * SQUEEZE, 15 * SQUEEZE) == pytest.approx(
+        math.pi / 6 / SQUEEZE ** 3, rel=1e-12)
+    # exactly touching spheres are not in contact (delta > 0 strictly)
+    xt, Lt = simple_cubic(4, 4, 1.0)
+    assert len(bulk.find_contacts(xt, Lt, Lt)[0]) == 0
+
+
+def test_slab_volume_is_the_exact_cap_volume():
+    R = 0.5
+    for hcap in (0.1, 0.5, 0.8):
+        # cut at height hcap below the top: the cap above the plane
+        v = bulk.slab_volume(np.array([0.0]), R - hcap, 10.0)[0]
+        assert v == pytest.approx(math.pi * hcap ** 2 * (3 * R - hcap) / 3, rel=1e-13)
+    assert bulk.slab_volume(np.array([0.0]), -1, 1)[0] == pytest.approx(math.pi / 6, rel=1e-14)
+
+
+# ---- ideal gas -----------------------------------------------------------------
+
+def test_ideal_gas_has_g_of_one_in_the_slab():
+    # independent ideal gases in the slab; g(r) per bin against 1 within the scatter over samples
+    rng = np.random.default_rng(11)
+    L, H, n = 12.0, 30.0, 4000
+    lin, log = [], []
+    for _ in range(16):
+        x = rng.random((n, 3)) * [L, L, H]
+        g = gofr.radial_distribution(x, L, L, 0.0, H, r_max=4.0, dr=0.05, xi_min=1e-3, per_decade=5)
+        assert g["rho"] == pytest.approx(n / (L * L * H))
+        assert g["n_ref"] == int(((x[:, 2] >= 4) & (x[:, 2] <= H - 4)).sum())
+        lin.append(g["g"][g["r_lo"] >= 0.5])
+        log.append(g["g_xi"][g["xi_lo"] >= 1e-2])
+    for gs in (np.array(lin), np.array(log)):
+        mean, sem = gs.mean(axis=0), gs.std(axis=0, ddof=1) / math.sqrt(len(gs))
+        assert np.all(np.abs(mean - 1) < 4.5 * sem), (mean, sem)
+        assert abs(gs.mean() - 1) < 3 * gs.mean(axis=1).std(ddof=1) / math.sqrt(len(gs))
+    # a wrong normalisation (say, the shell of r_hi only) would be off by several per cent
+    assert np.abs(np.array(lin).mean(axis=0) - 1).max() < 0.03
+
+
+def test_g_of_r_range_must_be_below_half_the_box():
+    x = np.random.default_rng(0).random((100, 3)) * 10
+    with pytest.raises(ValueError, match="half the box"):
+        gofr.radial_distribution(x, 10.0, 10.0, 0.0, 10.0, r_max=5.0)
+
+
+# ---- rattlers ------------------------------------------------------------------
+
+def test_rattler_removal_cascades_on_a_hand_built_cluster():
+    # 0 is a bed sphere; 1-2-3 a triangle resting on it; 4-5 a chain hanging from 1; 6 alone
+    pairs = np.array([[0, 1], [1, 2], [2, 3], [1, 3], [1, 5], [4, 5]])
+    removable = np.array([False, True, True, True, True, True, True])
+    kept, counts = bulk.remove_rattlers(7, pairs, removable, n_min=2)
+    # 4 has one contact -> out; then 5 has one -> out; 6 has none -> out
+    assert kept.tolist() == [True, True, True, True, False, False, False]
+    assert counts.tolist() == [1, 3, 2, 2, 0, 0, 0]
+    # with n_min = 4 (frictionless) the whole cluster goes, the bed stays
+    kept, counts = bulk.remove_rattlers(7, pairs, removable, n_min=4)
+    assert kept.tolist() == [True] + [False] * 6 and counts.sum() == 0
+    # the bulk numbers of the n_min = 2 case: spheres 1..6 are the bulk
+    k2, c2 = bulk.remove_rattlers(7, pairs, removable, 2)
+    c = bulk.coordination(np.bincount(pairs.ravel(), minlength=7), k2, c2, removable)
+    assert c["z"] == pytest.approx((4 + 2 + 2 + 1 + 2 + 0) / 6) and c["z_no_rattlers"] == pytest.approx(7 / 3)
+    assert c["rattler_fraction"] == pytest.approx(0.5) and c["n_bulk"] == 6
+
+
+def test_rattlers_found_from_positions():
+    # a square of four touching spheres in a plane, one sphere resting on one of them only
+    s = SQUEEZE
+    x = np.array([[2, 2, 5], [2 + s, 2, 5], [2, 2 + s, 5], [2 + s, 2 + s, 5], [2, 2, 5 + s]])
+    pk = bulk.Packing(x, np.zeros(5), 10.0, 10.0, mu=0.5)
+    assert pk.counts.tolist() == [3, 2, 2, 2, 1]
+    assert pk.kept.tolist() == [True, True, True, True, False]
+
+
+# ---- forces --------------------------------------------------------------------
+
+def test_force_ratios_histogram_and_mobilised_fraction():
+    mu = 0.5
+    F_n = np.array([1.0, 2.0, 1.0, 4.0, -1.0])
+    zeta = np.array([0.1, 0.55, 1.0, 0.995, 0.3])
+    F_t = np.zeros((5, 3))
+    F_t[:, 1] = zeta * mu * np.abs(F_n)
+    fr = forces.force_ratios(F_n, F_t, mu, bins=10, mobilised=0.99)
+    assert fr["n_contacts"] == 4 and fr["n_tensile"] == 1 and fr["n_above_one"] == 0
+    assert fr["count"].tolist() == [0, 1, 0, 0, 0, 1, 0, 0, 0, 2]
+    assert fr["P_zeta"].max() == 1.0 and fr["mobilised_fraction"] == pytest.approx(0.5)
+    big = forces.force_ratios(F_n, F_t * 10, 5.0, bins=10)      # mu >= 1: F_t / F_n as well
+    assert big["count_ratio"].tolist() == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0]
+
+
+def test_bulk_contacts_select_by_midpoint():
+    ids = np.array([3, 7, 9])
+    z = np.array([1.0, 2.0, 4.0])
+    sel = forces.bulk_contacts({"id_i": np.array([3, 7, 3]), "id_j": np.array([7, 9, 9])}, ids, z, 1.4, 2.6)
+    assert sel.tolist() == [True, False, True]
+
+
+# ---- fits ----------------------------------------------------------------------
+
+def test_power_law_fit_recovers_alpha():
+    rng = np.random.default_rng(5)
+    xi = np.logspace(-4, 0, 41)
+    g = 2.5 * xi ** -0.52 * np.exp(0.03 * rng.standard_normal(xi.size))
+    f = fits.power_law(xi, g, 1e-3, 5e-2)
+    assert f["n_bins"] == int(((xi >= 1e-3) & (xi <= 5e-2)).sum())
+    assert abs(f["alpha"] - 0.52) < 3 * f["alpha_err"] and 0 < f["alpha_err"] < 0.03
+    assert math.exp(f["c"]) == pytest.approx(2.5, rel=0.1)
+    assert math.isnan(fits.power_law(xi, g, 0.5, 0.6)["alpha"])     # too few bins
+
+
+def test_fit_window_follows_the_stiffness_and_the_overlap():
+    assert fits.fit_window(2e5, 1e-6) == (pytest.approx(1e-3), 5e-2)
+    assert fits.fit_window(2e9, 1e-9)[0] == pytest.approx(1e-5)
+    assert fits.fit_window(2e5, 1e-4)[0] == pytest.approx(2e-3)
+    assert fits.fit_window(2e5, 1e-4, xi_lo=3e-3) == (3e-3, 5e-2)
+
+
+def test_eq7_fit_recovers_the_paper_like_parameters():
+    rng = np.random.default_rng(7)
+    k = np.repeat([2e5, 2e6, 2e7, 2e8, 2e9], 3)
+    z_true = fits.eq7(k, 6.01, 0.134, 0.498)
+    sigma = np.full(k.size, 2e-3)
+    z = z_true + sigma * rng.standard_normal(k.size)
+    f = fits.fit_eq7(k, z, sigma)
+    for name, want in (("z_inf", 6.01), ("a", 0.134), ("alpha_n", 0.498)):
+        assert abs(f[name] - want) < 4 * f[f"{name}_err"], (name, f)
+    assert f["a_tilde"] == pytest.approx(0.134 * 2e5 ** 0.498, rel=0.3)
+    assert f["weighted"] and f["dof"] == k.size - 3
+
+
+def test_eq9_fit_recovers_the_paper_parameters():
+    rng = np.random.default_rng(9)
+    phi_i = np.repeat([0.02, 0.05, 0.08, 0.13, 0.20, 0.30], 4)
+    sigma = np.full(phi_i.size, 5e-4)
+    phi_f = fits.eq9(phi_i, 0.5778, 0.0567, 4.3) + sigma * rng.standard_normal(phi_i.size)
+    f = fits.fit_eq9(phi_i, phi_f, sigma)
+    for name, want in (("A", 0.5778), ("B", 0.0567), ("C", 4.3)):
+        assert abs(f[name] - want) < 4 * f[f"{name}_err"], (name, f)
+    with pytest.raises(ValueError, match="cannot fix 3 parameters"):
+        fits.fit_eq9(phi_i[:2], phi_f[:2])
+
+
+# ---- mpdem analyze end to end --------------------------------------------------
+
+def write_crystal(path, x, fixed, L, sets=()):
+    """A state file of a hand-built packing, as a run would write it."""
+    n = len(x)
+    cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}",
+                             f"pour.N={int((fixed == 0).sum())}"] + list(sets))
+    a = {"id": np.arange(n), "x": x, "fixed": fixed.astype(np.uint8), "count": np.zeros(n, np.int64),
+         "partner": np.zeros(0, np.int64), "ds": np.zeros((0, 3))}
+    for f in ("v", "omega", "f", "torque"):
+        a[f] = np.zeros((n, 3))
+    pairs, r = bulk.find_contacts(x, L, L)
+    F_n = cfg.contact.k_n * (1 - r)
+    F_t = np.zeros((len(r), 3))
+    F_t[:, 0] = 0.5 * cfg.contact.mu * F_n
+    a.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=1 - r, F_n=F_n, F_t=F_t, ds_i=np.zeros((len(r), 3)))
+    checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
+                                    "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
+                                    "config": cfg.to_toml()})
+
+
+def test_analyze_a_crystal_file_writes_summary_tables_and_plots(tmp_path):
+    a = math.sqrt(2.0) * SQUEEZE
+    x, L = fcc(8, 12, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    path = tmp_path / "fcc.h5"
+    write_crystal(path, x, fixed, L)
+    s, out = report.analyze(str(path), plots=True, log=lambda m: None)
+    assert out == str(tmp_path / "fcc-analysis")
+    saved = json.loads((tmp_path / "fcc-analysis" / "summary.json").read_text())
+    for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "z1", "z2", "alpha", "alpha_err"):
+        assert k in saved
+    assert saved["z"] == 12.0 and saved["step"] == 7 and saved["params"]["contact.mu"] == 0.5
+    # every contact of the crystal is at zeta = 0.5
+    assert saved["zeta"]["n_contacts"] > 0 and saved["zeta"]["mobilised_fraction"] == 0.0
+    zeta = np.genfromtxt(tmp_path / "fcc-analysis" / "zeta.csv", delimiter=",", names=True)
+    assert zeta["count"].sum() == saved["zeta"]["n_contacts"] and zeta["P"][25] == 1.0
+    # the crystal's g(r): twelve neighbours at d (the contacts), six at sqrt(2) d
+    g = np.genfromtxt(tmp_path / "fcc-analysis" / "gofr.csv", delimiter=",", names=True)
+    n_ref = saved["gofr"]["n_ref"]
+    assert g["count"][99] == 12 * n_ref and g["count"][141] == 6 * n_ref
+    assert saved["gofr"]["near_contacts_per_ref"] == 12.0
+    for name in ("profile", "coordination", "gofr", "gofr_near", "zeta"):
+        assert (tmp_path / "fcc-analysis" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        if name != "gofr_near":
+            assert (tmp_path / "fcc-analysis" / f"{name}.csv").exists()
+    assert not list((tmp_path / "fcc-analysis").glob("*.tmp"))
+
+
+def test_analyze_settings_and_errors(tmp_path):
+    x, L = simple_cubic(6, 24, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    path = tmp_path / "sc.h5"
+    write_crystal(path, x, fixed, L, ["contact.mu=0"])
+    s, _ = report.analyze(str(path), out=str(tmp_path / "o"), sets=["analysis.margin_bottom=4"],
+                          plots=False, log=lambda m: None)
+    assert s["margin_bottom"] == 4.0 and s["z"] == 6.0 and s["zeta"] is None
+    assert not (tmp_path / "o" / "profile.png").exists()
+    with pytest.raises(config.ConfigError, match="only analysis"):
+        report.analyze(str(path), sets=["contact.mu=0.3"], plots=False, log=lambda m: None)
+    with pytest.raises(config.ConfigError, match="analysis.g_r_max"):
+        report.analyze(str(path), sets=["analysis.g_r_max=0.5"], plots=False, log=lambda m: None)
+    with pytest.raises(report.AnalysisError, match="no final.h5"):
+        report.analyze(str(tmp_path), plots=False, log=lambda m: None)
+    with pytest.raises(report.AnalysisError, match="no such file"):
+        report.locate(str(tmp_path / "missing.h5"))
+
+
+def test_analyze_cli_on_a_run_directory(tmp_path):
+    run = tmp_path / "run"
+    (run / "snapshots").mkdir(parents=True)
+    a = math.sqrt(2.0) * SQUEEZE
+    x, L = fcc(8, 12, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    write_crystal(run / "final.h5", x, fixed, L)
+    write_crystal(run / "snapshots" / "snap-00002.h5", x, fixed, L)
+    env = dict(os.environ)
+    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(run), "--no-plots"],
+                       capture_output=True, text=True, env=env)
+    assert p.returncode == 0, p.stderr
+    assert "z = 12.000" in p.stdout
+    assert json.loads((run / "analysis" / "summary.json").read_text())["z"] == 12.0
+    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(run / "snapshots" / "snap-00002.h5"),
+                        "--no-plots", "--quiet"], capture_output=True, text=True, env=env)
+    assert p.returncode == 0 and p.stdout == ""
+    assert (run / "analysis" / "snap-00002" / "summary.json").exists()
+    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(tmp_path)],
+                       capture_output=True, text=True, env=env)
+    assert p.returncode == 1 and "no final.h5" in p.stderr
