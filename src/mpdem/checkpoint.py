@@ -192,6 +192,8 @@ def write(path, local, attrs, comm=None):
         f.attrs["version"] = VERSION
         for k, v in attrs.items():
             f.attrs[k] = v
+        # how many ranks wrote the file is a fact of this write, not of the caller
+        f.attrs["ranks"] = _size(comm)
         for gi, g in enumerate(groups):
             grp = f.create_group(g)
             f.attrs[f"checksum_{g}"] = sums[gi]

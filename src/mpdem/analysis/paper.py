@@ -76,6 +76,9 @@ SMALL_POINTS = (
 SMALL_PZ_PEAK = {0.0: (6, 0.295), 0.5: (5, 0.293)}
 SMALL_STEPS = {0.0: 1.34e6, 0.5: 0.64e6}
 
+# physics.md 7: "P(z): epsilon = 0.88, increasing mu" (the paper's Fig. 4)
+PZ_EPSILON = 0.88
+
 # eq. 6 (physics.md 6.5 and 7): g ~ xi^(-alpha)
 ALPHA, ALPHA_ERR = 0.52, 0.03
 

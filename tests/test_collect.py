@@ -1,0 +1,301 @@
+"""``mpdem collect``: many analysed runs -> tables, fits and figures.
+
+Synthetic run directories only (analysis/summary.json and the CSV files of
+``mpdem analyze`` written directly, no simulation): a mu = 0 stiffness sweep
+whose z follows eq. 7, a phi_i sweep whose phi_f follows eq. 9, a few mu
+values with P(z), g(r) and P(zeta), and runs that must be skipped.
+"""
+import csv
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpdem import config
+from mpdem.analysis import collect as co
+from mpdem.analysis import fits, report
+from mpdem.analysis.report import AnalysisError
+
+ROOT = Path(__file__).resolve().parents[1]
+PNG = b"\x89PNG\r\n\x1a\n"
+KN = [2e5, 2e6, 2e7, 2e8, 2e9]
+EQ7_TRUE = dict(z_inf=6.02, a=0.12, alpha_n=0.45)    # synthetic truth, not the paper's
+EQ9_TRUE = dict(A=0.58, B=0.05, C=5.0)
+PHI_I = [0.02, 0.05, 0.08, 0.13, 0.20, 0.30]
+NOISE_Z, NOISE_PHI = 2e-3, 5e-4                      # seed-to-seed scatter of the synthetic runs
+
+
+def params(**kw):
+    """summary.json params of a run with these contact.*/pour.*/run.* values (short names)."""
+    full = {"mu": "contact.mu", "epsilon": "contact.epsilon", "k_n": "contact.k_n", "phi_i": "pour.phi_i",
+            "seed": "run.seed", "N": "pour.N"}
+    raw = {"run.max_steps": 1, **{full[k]: v for k, v in kw.items()}}
+    vals = config.resolve(raw).values
+    return {k: vals[k] for k in report.PARAMS}
+
+
+def write_csv(path, head, cols):
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(head)
+        w.writerows(zip(*cols))
+
+
+def make_run(run, p, z, phi, alpha, rng, converged=True):
+    """A run directory with analysis/summary.json and the CSV tables of ``mpdem analyze``."""
+    an = Path(run) / "analysis"
+    an.mkdir(parents=True)
+    n = np.arange(13)
+    P = np.exp(-0.5 * ((n - z) / 1.2) ** 2)
+    P /= P.sum()
+    xi_edges = np.logspace(-6, 0, 61)
+    xi = np.sqrt(xi_edges[:-1] * xi_edges[1:])
+    g_near = 0.3 * xi ** -alpha * rng.uniform(0.9, 1.1, len(xi))
+    zeta = None
+    if p["contact.mu"] > 0:
+        edges = np.linspace(0, 1, 51)
+        Pz = np.exp(-((edges[:-1] - 0.2) / 0.2) ** 2) + 0.05 * rng.random(50)
+        cols, head = [edges[:-1], edges[1:], np.round(100 * Pz), Pz / Pz.max()], ["zeta_lo", "zeta_hi", "count", "P"]
+        if p["contact.mu"] >= 1:
+            cols += [np.round(100 * Pz), Pz / Pz.max()]
+            head += ["count_ratio", "P_ratio"]
+        write_csv(an / "zeta.csv", head, cols)
+        zeta = {"n_contacts": 1000, "n_tensile": 0, "n_above_one": 0, "mobilised_fraction": 0.01 * rng.random(),
+                "zeta_mean": 0.3, "zeta_max": 1.0}
+    r_lo = np.arange(300) * 0.01
+    g = 1 + np.exp(-(r_lo - 1) / 0.5) * np.cos(2 * np.pi * (r_lo - 1)) * (r_lo >= 1)
+    write_csv(an / "gofr.csv", ["r_lo", "r_hi", "count", "g"], [r_lo, r_lo + 0.01, np.round(100 * g), g])
+    write_csv(an / "gofr_near.csv", ["xi_lo", "xi_hi", "xi", "count", "g"],
+              [xi_edges[:-1], xi_edges[1:], xi, np.round(10 * g_near), g_near])
+    write_csv(an / "coordination.csv", ["n", "P", "P_no_rattlers"], [n, P, P])
+    s = {"source": str(Path(run) / "final.h5"), "kind": "final", "step": 123456, "converged": converged,
+         "n": 20400, "params": p, "z1": 10.0, "z2": 35.0, "h": 45.0, "z": z, "z_no_rattlers": z + 0.05,
+         "rattler_fraction": 0.02 + 0.001 * rng.random(), "phi": phi, "n_bulk": 10000, "P_z": list(P),
+         "P_z_no_rattlers": list(P), "overlap_median": 1e-4, "overlap_max": 1e-3,
+         "halved_margins": {"z": z + 0.001, "z_no_rattlers": z, "rattler_fraction": 0.02, "phi": phi, "n_bulk": 12000},
+         "alpha": alpha, "alpha_err": 0.01,
+         "alpha_fit": {"alpha": alpha, "alpha_err": 0.01, "c": -1.0, "n_bins": 17, "xi_lo": 1e-3, "xi_hi": 5e-2},
+         "gofr": {}, "zeta": zeta, "warnings": []}
+    (an / "summary.json").write_text(json.dumps(s))
+    return s
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory):
+    """Synthetic runs under one root, collected once; what was made and what was collected."""
+    root = tmp_path_factory.mktemp("runs")
+    rng = np.random.default_rng(20020304)
+    made = {}   # run dir -> (set tuple (mu, eps, k_n, phi_i), summary)
+
+    def add(rel, z, phi, alpha=0.52, converged=True, **kw):
+        p = params(**kw)
+        made[str(root / rel)] = ((p["contact.mu"], p["contact.epsilon"], p["contact.k_n"], p["pour.phi_i"]),
+                                 make_run(root / rel, p, z, phi, alpha, rng, converged))
+
+    for k in KN:                      # eq. 7 at mu = 0: 5 k_n x 3 seeds
+        for seed in (1, 2, 3):
+            add(f"kn/mu0_kn{k:.0e}_s{seed}", fits.eq7(k, **EQ7_TRUE) + rng.normal(0, NOISE_Z),
+                0.64 + rng.normal(0, NOISE_PHI), 0.52 + rng.normal(0, 0.01), mu=0.0, k_n=k, seed=seed)
+    for phi_i in PHI_I:               # eq. 9 at mu = 0.5: 6 phi_i x 2 seeds
+        for seed in (1, 2):
+            add(f"phi/phi{phi_i}_s{seed}", 4.9 - 0.5 * phi_i + rng.normal(0, NOISE_Z),
+                float(fits.eq9(phi_i, **EQ9_TRUE)) + rng.normal(0, NOISE_PHI), 0.5 + rng.normal(0, 0.01),
+                mu=0.5, phi_i=phi_i, seed=seed)
+    for mu in (0.1, 1.0):
+        for seed in (1, 2):
+            add(f"mu/mu{mu}_s{seed}", 5.5 - mu / 10 + rng.normal(0, NOISE_Z), 0.62 - mu / 100, mu=mu, seed=seed)
+    for seed in (1, 2):               # deep below the root: found recursively
+        add(f"mu/deep/a/b/mu10_s{seed}", 4.6 + rng.normal(0, NOISE_Z), 0.60, mu=10.0, seed=seed)
+    add("mu/mu0.5_eps0.26_s1", 4.7, 0.60, mu=0.5, epsilon=0.26, seed=1)      # a set with one seed
+    # not usable
+    bad = {}
+    p = params(mu=0.3, seed=1)
+    make_run(root / "bad/notconv", p, 5.0, 0.61, 0.5, rng, converged=False)
+    bad["notconv"] = "not converged"
+    (root / "bad/unfinished").mkdir(parents=True)
+    (root / "bad/unfinished/config.toml").write_text("")
+    bad["unfinished"] = "unfinished"
+    (root / "bad/corrupt/analysis").mkdir(parents=True)
+    (root / "bad/corrupt/analysis/summary.json").write_text("{not json")
+    bad["corrupt"] = "unreadable"
+    shutil.copytree(root / "mu/mu0.1_s1", root / "bad/copy")                # the same sample twice
+    logs = []
+    out = root.parent / (root.name + "-out")
+    res = co.collect([str(root)], str(out), analyze_missing=False, log=logs.append)
+    return dict(root=root, out=out, res=res, logs=logs, made=made, bad=bad)
+
+
+def _fit(tree, kind, **family):
+    fj = json.loads((tree["out"] / "fits.json").read_text())
+    hits = [e for e in fj[kind] if all(e["family"][k] == v for k, v in family.items())]
+    assert len(hits) == 1, fj[kind]
+    return hits[0]
+
+
+def test_eq7_parameters_recovered_within_errors(tree):
+    e = _fit(tree, "eq7", mu=0.0)
+    assert e["status"] == "fitted" and e["weighted"] and e["n_seeds"] == [3] * 5
+    assert sorted(e["k_n"]) == KN
+    for k, v in EQ7_TRUE.items():
+        assert 0 < e[f"{k}_err"] < 0.2 * abs(v), (k, e[f"{k}_err"])
+        assert abs(e[k] - v) <= 3 * e[f"{k}_err"], (k, e[k], v, e[f"{k}_err"])
+    assert e["a_tilde"] == pytest.approx(e["a"] * fits.K_REF ** e["alpha_n"])
+    chk = e["check_alpha_n"]
+    assert chk["n_runs"] == 15 and chk["one_minus_alpha"] == pytest.approx(1 - chk["alpha"])
+    assert chk["difference"] == pytest.approx(e["alpha_n"] - (1 - chk["alpha"]))
+
+
+def test_eq9_parameters_recovered_within_errors(tree):
+    e = _fit(tree, "eq9", mu=0.5, epsilon=0.88)
+    assert e["status"] == "fitted" and e["weighted"] and sorted(e["phi_i"]) == PHI_I
+    for k, v in EQ9_TRUE.items():
+        assert math.isfinite(e[f"{k}_err"]) and abs(e[k] - v) <= 3 * e[f"{k}_err"], (k, e[k], v, e[f"{k}_err"])
+    assert len(e["z"]) == len(PHI_I)
+
+
+def test_set_mean_and_standard_error_match_numpy(tree):
+    by_set = {}
+    for key, s in tree["made"].values():
+        by_set.setdefault(key, []).append(s)
+    with open(tree["out"] / "sets.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(by_set)
+    for row in rows:
+        runs = by_set[tuple(float(row[k]) for k in ("mu", "epsilon", "k_n", "phi_i"))]
+        assert int(row["n_seeds"]) == len(runs)
+        assert sorted(map(int, row["seeds"].split())) == sorted(r["params"]["run.seed"] for r in runs)
+        for q in ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction"):
+            v = np.array([r[q] for r in runs])
+            assert float(row[f"{q}_mean"]) == pytest.approx(np.mean(v), rel=1e-13, abs=0)
+            if len(v) == 1:
+                assert row[f"{q}_sem"] == ""          # no error bar from one seed
+            else:
+                assert float(row[f"{q}_sem"]) == pytest.approx(np.std(v, ddof=1) / np.sqrt(len(v)), rel=1e-12)
+    assert any(r["n_seeds"] == "1" for r in rows)
+
+
+def test_tables_and_figures_written(tree):
+    out, res = tree["out"], tree["res"]
+    for f in ("runs.csv", "sets.csv", "fits.json", "README.md", "collect.json"):
+        assert (out / f).is_file(), f
+    assert not list(out.glob("*.tmp"))
+    figs = res["figures"]
+    assert set(figs) == {f"fig{i}" for i in range(2, 10)}
+    for name, f in figs.items():
+        assert f["made"], (name, f["reason"])
+        assert (out / f["file"]).read_bytes()[:8] == PNG, name
+    with open(out / "runs.csv") as fh:
+        runs = list(csv.DictReader(fh))
+    assert len(runs) == len(tree["made"])
+    used = {os.path.normpath(r["path"]) for r in runs}
+    copy, orig = str(tree["root"] / "bad/copy"), str(tree["root"] / "mu/mu0.1_s1")
+    assert used - {copy, orig} == set(tree["made"]) - {orig} and len(used & {copy, orig}) == 1
+    assert json.loads((out / "collect.json").read_text())["n_runs"] == len(tree["made"])
+    readme = (out / "README.md").read_text()
+    assert "6.144" in readme and "within" in readme and "S01" in readme
+
+
+def test_unusable_runs_listed_with_reasons(tree):
+    skipped = {Path(s["path"]).name: s["reason"] for s in tree["res"]["skipped"]}
+    for name, words in tree["bad"].items():
+        assert words in skipped[name], (name, skipped.get(name))
+    dup = [r for n, r in skipped.items() if n in ("copy", "mu0.1_s1")]
+    assert len(dup) == 1 and "duplicate: seed 1" in dup[0]        # one sample, counted once
+    text = "\n".join(tree["logs"])
+    assert all(f"skipped {tree['root'] / 'bad' / n}" in text for n in tree["bad"])
+    assert "## Skipped" in (tree["out"] / "README.md").read_text()
+
+
+def test_directory_of_runs_found_recursively(tree):
+    root = tree["root"]
+    deep = {str(root / "mu/deep/a/b/mu10_s1"), str(root / "mu/deep/a/b/mu10_s2")}
+    used = {p for s in tree["res"]["sets"].values() for p in s["runs"]}
+    assert deep <= used
+    found, _ = co.find_runs([str(root)])
+    again, _ = co.find_runs([str(root), str(root / "mu"), str(root / "mu/mu0.1_s1")])
+    assert sorted(again) == sorted(found)                     # each run once
+    assert not any("/analysis" in p for p in found)          # the search stops at a run directory
+
+
+def test_no_usable_runs_is_a_clear_error(tmp_path):
+    rng = np.random.default_rng(1)
+    make_run(tmp_path / "r/a", params(seed=1), 5.0, 0.61, 0.5, rng, converged=False)
+    with pytest.raises(AnalysisError, match="no usable runs.*not converged"):
+        co.collect([str(tmp_path / "r")], str(tmp_path / "out"), log=lambda m: None)
+    with pytest.raises(AnalysisError, match="no usable runs.*no such directory"):
+        co.collect([str(tmp_path / "nothing")], str(tmp_path / "out"), log=lambda m: None)
+
+
+def test_missing_analysis_runs_analyze_or_is_skipped(tmp_path, monkeypatch):
+    rng = np.random.default_rng(2)
+    run = tmp_path / "r/run1"
+    run.mkdir(parents=True)
+    (run / "final.h5").write_text("not a state file")
+    calls = []
+
+    def fake_analyze(target, out=None, sets=(), plots=True, log=print):
+        calls.append((target, plots))
+        make_run(target, params(seed=1), 5.0, 0.61, 0.5, rng)
+
+    with pytest.raises(AnalysisError, match="not analysed"):
+        co.collect([str(tmp_path / "r")], str(tmp_path / "o1"), analyze_missing=False, log=lambda m: None)
+    with pytest.raises(AnalysisError, match="analysis failed"):       # the real analyze: not HDF5
+        co.collect([str(tmp_path / "r")], str(tmp_path / "o2"), log=lambda m: None)
+    monkeypatch.setattr(report, "analyze", fake_analyze)
+    res = co.collect([str(tmp_path / "r")], str(tmp_path / "o3"), log=lambda m: None)
+    assert calls == [(str(run), False)] and res["n_runs"] == 1
+
+
+def test_cli(tree, tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    out = tmp_path / "cli"
+    p = subprocess.run([sys.executable, "-m", "mpdem", "collect", str(tree["root"] / "kn"), "--out", str(out),
+                        "--no-analyze"], env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "wrote" in p.stdout and (out / "fig7_z_vs_kn.png").read_bytes()[:8] == PNG
+    assert "fig9: not made" in p.stdout
+    p = subprocess.run([sys.executable, "-m", "mpdem", "collect", str(tree["root"] / "bad" / "notconv"),
+                        "--out", str(tmp_path / "none"), "--quiet"], env=env, capture_output=True, text=True,
+                       timeout=300)
+    assert p.returncode == 1 and "no usable runs" in p.stderr and p.stdout == ""
+
+
+def test_sweep_tables_pass_the_sweep_helper(tmp_path):
+    """Every row of analysis/sweeps/*.tsv through jobs/mpdem-segment.sh --sweep (a stand-in mpdem)."""
+    fake = tmp_path / "fake-mpdem.sh"
+    fake.write_text('printf "%s\\n" "$*" >> "$FAKE_LOG"\n')
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("MPDEM_", "SLURM_", "PBS_"))}
+    env.update(MPDEM_CMD=f"bash {fake}", FAKE_LOG=str(tmp_path / "calls"))
+    tables = sorted((ROOT / "analysis/sweeps").glob("*.tsv"))
+    assert {t.name for t in tables} >= {"fig2-4.tsv", "fig7.tsv", "fig9.tsv"}
+    names, cfgs = [], {}
+    for t in tables:
+        rows = [ln for ln in t.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+        (tmp_path / "calls").write_text("")
+        for i in range(1, len(rows)):
+            p = subprocess.run(["bash", str(ROOT / "jobs/mpdem-segment.sh"), "--sweep", str(t), str(i),
+                                str(tmp_path / "sweep"), ""], env=env, capture_output=True, text=True, cwd=tmp_path)
+            assert p.returncode == 0, (t.name, i, p.stderr)
+        calls = [c.split() for c in (tmp_path / "calls").read_text().splitlines()]
+        assert len(calls) == len(rows) - 1
+        for c in calls:
+            assert c[:2] == ["run", "--out"]
+            names.append(c[2])
+            cfg = config.load(None, [c[k + 1] for k in range(len(c)) if c[k] == "--set"])   # valid inputs
+            cfgs.setdefault(t.name, []).append(cfg.values)
+    assert len(names) == len(set(names))          # no two rows share a run directory
+    mus = {(v["contact.mu"], v["contact.epsilon"]) for v in cfgs["fig2-4.tsv"]}
+    assert {m for m, _ in mus} >= {0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1, 2, 10} and {e for _, e in mus} == {0.88, 0.26}
+    fam = {}
+    for v in cfgs["fig7.tsv"]:
+        fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {}).setdefault(v["contact.k_n"], set()).add(v["run.seed"])
+    assert set(fam) == {(0.0, 0.88), (0.5, 0.88), (0.5, 0.5), (0.5, 0.26), (10.0, 0.26)}
+    assert all(sorted(k) == KN and all(len(s) >= 2 for s in k.values()) for k in fam.values())
+    assert all(v["run.max_steps"] >= 3e6 for v in cfgs["fig7.tsv"])
+    assert {v["pour.phi_i"] for v in cfgs["fig9.tsv"]} == set(PHI_I)
