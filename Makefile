@@ -10,9 +10,10 @@ RANKS  ?= 2
 setup:
 	@bash tools/setup.sh
 
-# The built-in example (about 1500 spheres) poured, settled, z and phi printed.
+# The built-in example (about 1500 spheres) poured, settled, then analysed (runs/example/analysis).
 run: setup
 	$(MPIEXEC) -n $(RANKS) $(PY) -m mpdem run --out runs/example --force
+	$(PY) -m mpdem analyze runs/example
 
 test: setup test-serial test-mpi
 

@@ -1,9 +1,11 @@
 """The analysis stage: measurements of physics.md section 6 on static packings.
 
-``bulk`` (bulk region, contacts, z, phi_f), ``gofr`` (g(r) in the slab),
-``forces`` (P(zeta)), ``fits`` (eqs. 6, 7, 9), ``report`` (``mpdem analyze``
-of one file: summary.json, CSV tables, plots), ``collect`` (many runs: the
-paper's tables and figures).
+One file: ``bulk`` (bulk region, contacts, z, phi_f), ``gofr`` (g(r) in the
+slab), ``forces`` (P(zeta)), ``fits`` (eqs. 6, 7, 9), ``report`` (``mpdem
+analyze``: summary.json, CSV tables) and ``plots``.
+Many runs (``mpdem collect``): ``runs`` (runs and parameter sets), ``collect``
+(grouping, fits, tables), ``figures`` (Figs. 2-9), ``comparison`` (against
+the paper's values in ``paper``).
 """
 from .bulk import (Packing, bulk_region, bulk_summary, coordination, find_contacts,
                    packing_fraction, phi_profile, remove_rattlers, slab_volume)

@@ -1,0 +1,209 @@
+"""``mpdem collect``'s comparison with the paper and its OUT/README.md.
+
+``comparisons`` sets this work's numbers (set means with standard errors
+over seeds, the eq. 7 and eq. 9 fits) next to the paper's values and, where
+physics.md 7 gives one, its acceptance range, with a verdict (within /
+outside / n/a). ``write_readme`` writes OUT/README.md: the parameter sets
+and seeds, that comparison table, the fits, the figures made and not made,
+and the runs skipped.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import rundir
+from . import fits, paper
+from .figures import FIGURES
+from .runs import NAN, families, fmt_kn, fmt_pm
+
+
+# ---------------------------------------------------------------- comparison with the paper
+
+def _size_note(s):
+    N, L_x, L_y = s.p("N"), s.p("L_x"), s.p("L_y")
+    if paper.is_paper_size(N, L_x, L_y):
+        return ""
+    return f"; N = {N}, {L_x:g}d x {L_y:g}d box (paper: {paper.REFERENCE['N']}, {paper.REFERENCE['L']:g}d)"
+
+
+def _cond(s, alpha=False):
+    base = f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}"
+    if alpha:
+        base += f", k_n = {fmt_kn(s.p('k_n'))}, phi_i = {s.p('phi_i'):g}"
+    return base + _size_note(s)
+
+
+def _verdict(value, accept):
+    if accept is None or not math.isfinite(value):
+        return "n/a"
+    return "within" if accept[0] <= value <= accept[1] else "outside"
+
+
+def comparisons(sets, fit_res):
+    """Rows of the README's comparison table (dicts: quantity, conditions, set, value, err, n_seeds,
+    paper, paper_err, accept, verdict, source). Verdicts only for physics.md 7's acceptance list."""
+    rows = []
+
+    def add(quantity, cond, sid, value, err, n, p_value, p_err, accept, source, note=""):
+        rows.append(dict(quantity=quantity, conditions=cond, set=sid, value=value, err=err, n_seeds=n,
+                         paper=p_value, paper_err=p_err, accept=accept, verdict=_verdict(value, accept),
+                         source=source, note=note))
+
+    for p in paper.POINTS:
+        for s in sets:
+            ref = paper.is_reference(s.p("k_n"), s.p("phi_i"))
+            if not (paper.applies(p, s.p("mu"), s.p("epsilon")) and (ref or p["quantity"] == "alpha")):
+                continue
+            m, e, n = s.stat(p["quantity"])
+            if n:
+                add(p["quantity"], _cond(s, p["quantity"] == "alpha"), s.id, m, e, n, p["value"], p["err"],
+                    p["accept"], p["source"])
+    ref = [s for s in sets if paper.is_reference(s.p("k_n"), s.p("phi_i"))]
+    for fam, members in families(ref, "contact.mu"):
+        if len(members) >= 3:
+            for q in ("z", "phi"):
+                add(f"{q}(mu) trend", f"eps = {fam['epsilon']:g}" + _fam_size(fam), " ".join(s.id for s in members),
+                    _trend(members, q), None, None, "decreases monotonically, saturates for mu >= 1", None, None,
+                    paper.SOURCE)
+    for p in paper.SMALL_POINTS:
+        for s in sets:
+            if (paper.is_small_pile(s.p("N"), s.p("L_x"), s.p("L_y")) and paper.is_reference(s.p("k_n"), s.p("phi_i"))
+                    and paper.applies(p, s.p("mu"), s.p("epsilon"))):
+                m, e, n = s.stat(p["quantity"])
+                add(p["quantity"], f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}; N = {s.p('N')}, "
+                    f"{s.p('L_x'):g}d box vs 7.1 (N = 2000, 10d box)", s.id, m, e, n, p["value"],
+                    None, None, p["source"], "one seed in 7.1; no acceptance range given")
+    for e in fit_res["eq7"]:
+        if e["status"] != "fitted":
+            continue
+        f, ids = e["family"], " ".join(e["sets"])
+        cond = f"eq. 7, mu = {f['mu']:g}, eps = {f['epsilon']:g}, phi_i = {f['phi_i']:g}"
+        if f["mu"] == 0:
+            P = paper.EQ7_MU0
+            add("z_inf", cond, ids, e["z_inf"], e["z_inf_err"], None, P["z_inf"], P["z_inf_err"],
+                P["accept_z_inf"], P["source"])
+            add("alpha_n", cond, ids, e["alpha_n"], e["alpha_n_err"], None, P["alpha_n"], P["alpha_n_err"], None,
+                P["source"])
+        else:
+            add("z_inf", cond, ids, e["z_inf"], e["z_inf_err"], None, "> 4", None, None, paper.SOURCE,
+                "frictional: z_inf depends on mu and eps")
+            add("alpha_n", cond, ids, e["alpha_n"], e["alpha_n_err"], None, paper.EQ7_FRICTIONAL_ALPHA_N, None,
+                None, paper.SOURCE, "frictional: ~ 1/4")
+        c = e["check_alpha_n"]
+        if math.isfinite(c.get("difference", NAN)):
+            add("alpha_n - (1 - alpha)", cond, ids, c["difference"], c["difference_err"], None, 0.0, None, None,
+                paper.SOURCE, "eq. 8 (mu = 0 only)")
+    for e in fit_res["eq9"]:
+        f = e["family"]
+        if e["status"] != "fitted" or (f["mu"], f["epsilon"], f["k_n"]) != (paper.EQ9["mu"], paper.EQ9["epsilon"],
+                                                                          paper.EQ9["k_n"]):
+            continue
+        phi_i = np.array(e["phi_i"])
+        dev = fits.eq9(phi_i, e["A"], e["B"], e["C"]) - paper.eq9_paper(phi_i)
+        worst = float(dev[np.argmax(np.abs(dev))])
+        tol = paper.EQ9["accept_dphi"]
+        add("eq. 9 fit - paper, worst phi_i", f"mu = {f['mu']:g}, eps = {f['epsilon']:g}" + _fam_size(f),
+            " ".join(e["sets"]), worst, None, None, 0.0, None, (-tol, tol), paper.EQ9["source"],
+            f"over phi_i = {', '.join(f'{v:g}' for v in phi_i)}")
+        for k in "ABC":
+            add(f"eq. 9 {k}", f"mu = {f['mu']:g}, eps = {f['epsilon']:g}", " ".join(e["sets"]), e[k], e[f"{k}_err"],
+                None, paper.EQ9[k], None, None, paper.EQ9["source"])
+    return rows
+
+
+def _trend(members, q):
+    """'decreasing at every step', or where the mean rises with mu (by how much, with its error)."""
+    st = [(s.p("mu"), *s.stat(q)[:2]) for s in members]
+    rises = [f"{a[0]:g} to {b[0]:g} by {fmt_pm(b[1] - a[1], math.hypot(a[2], b[2]), 3)}"
+             for a, b in zip(st, st[1:]) if b[1] > a[1]]
+    return "decreasing at every step" if not rises else "rises from mu = " + "; ".join(rises)
+
+
+def _fam_size(f):
+    return "" if paper.is_paper_size(f["N"], f["L_x"], f["L_y"]) else f"; N = {f['N']}, {f['L_x']:g}d box"
+
+
+# ---------------------------------------------------------------- README
+
+_BASE = {"z": 3, "alpha": 3, "z_inf": 3, "alpha_n": 3}   # decimals shown at least, per quantity
+
+
+def _quoted(v, err=None):
+    """A paper value as quoted (no digits added)."""
+    return v if isinstance(v, str) else f"{v!r}" + ("" if err is None else f" ± {err!r}")
+
+
+def _table(head, rows):
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def _fam_text(f, drop=()):
+    keys = [k for k in ("mu", "epsilon", "k_n", "phi_i", "N", "L_x", "model", "gamma_t/gamma_n", "gamma_t", "K0")
+            if k in f and k not in drop]
+    return ", ".join(f"{k} = {fmt_kn(f[k]) if k == 'k_n' else f[k]}" for k in keys)
+
+
+def write_readme(path, info, sets, fit_res, rows, figs, skipped):
+    """OUT/README.md: sets, seeds, numbers with errors next to the paper's, fits, figures, skipped runs."""
+    L = ["# mpdem collect: the paper's tables and figures", "",
+         f"Made by `mpdem collect` on {info['date']} from {info['n_runs']} run(s) in {info['n_sets']} parameter "
+         f"set(s); {len(skipped)} skipped (below). Inputs: {', '.join(f'`{t}`' for t in info['inputs'])}.", "",
+         "`±` is the standard error of the mean over the seeds (runs) of a set; a set with one seed has no error "
+         "bar and is marked `(1 seed)`. Paper: " + paper.SOURCE + ". Acceptance ranges: physics.md 7, "
+         "\"Suggested acceptance\" (a choice of this project, not the paper's).", "",
+         "## Parameter sets", "",
+         "Every run parameter but the seed is equal within a set (`sets.csv` has them all; runs in `runs.csv`).", ""]
+    head = ["set", "μ", "ε", "k_n", "φ_i", "N", "box", "seeds", "z", "z (no rattlers)", "φ_f", "α", "rattlers"]
+    L += [_table(head, [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), f"{s.p('phi_i'):g}",
+                         s.p("N"), f"{s.p('L_x'):g}×{s.p('L_y'):g}", " ".join(map(str, s.seeds)),
+                         fmt_pm(*s.stat("z")[:2], 3, len(s.runs)), fmt_pm(*s.stat("z_no_rattlers")[:2], 3, len(s.runs)),
+                         fmt_pm(*s.stat("phi")[:2], 4, len(s.runs)), fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
+                         fmt_pm(*s.stat("rattler_fraction")[:2], 3, len(s.runs))] for s in sets]), ""]
+    L += ["## Comparison with the paper", ""]
+    if rows:
+        L += [_table(["quantity", "conditions", "set(s)", "this work", "paper", "acceptance", "verdict"],
+                     [[r["quantity"], r["conditions"], r["set"],
+                       fmt_pm(r["value"], r["err"], _BASE.get(r["quantity"], 4), r["n_seeds"]),
+                       _quoted(r["paper"], r["paper_err"]),
+                       "—" if r["accept"] is None else f"{r['accept'][0]!r} … {r['accept'][1]!r}",
+                       r["verdict"] + (f" ({r['note']})" if r["note"] else "")] for r in rows]), "",
+              "Paper values without an error were quoted without one. 7.1 rows: the reference implementation at "
+              "development size (physics.md 7.1), not the paper.", ""]
+    else:
+        L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of physics.md 7).", ""]
+    L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
+          "(fit weights 1/σ², σ the standard error over seeds):", ""]
+    L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]
+    L += ["", "Eq. 9, φ_f = A + B exp(−C φ_i), per family of sets differing in φ_i:", ""]
+    L += [_fit_lines(e, "eq9") for e in fit_res["eq9"]] or ["- no family with ≥ 2 values of φ_i"]
+    L += ["", "## Figures", "", f"Figs. 2-6 and 8 use the sets at {figs['_slice']}.", ""]
+    for name, fname, shows in FIGURES:
+        f = figs[name]
+        L.append(f"- `{fname}`: {shows}. " + ("Made." if f["made"] else f"**Not made**: {f['reason']}."))
+    for name, notes in figs["_notes"].items():
+        L += [f"  - note ({name}): {n}" for n in notes]
+    L += ["", "## Skipped", ""]
+    L += [_table(["run", "reason"], [[f"`{s['path']}`", s["reason"]] for s in skipped])] if skipped else ["None."]
+    rundir.write_atomic(path, "\n".join(L) + "\n")
+
+
+def _fit_lines(e, kind):
+    xs = e["k_n"] if kind == "eq7" else e["phi_i"]
+    pts = ", ".join((fmt_kn(x) if kind == "eq7" else f"{x:g}") + f" ({n})" for x, n in zip(xs, e["n_seeds"]))
+    head = f"- {_fam_text(e['family'], ('k_n',) if kind == 'eq7' else ('phi_i',))} [sets {' '.join(e['sets'])}]; " \
+           f"points (seeds): {pts}: "
+    if e["status"] != "fitted":
+        return head + f"**{e['status']}**: {e['reason']}"
+    if kind == "eq7":
+        c = e["check_alpha_n"]
+        s = (f"z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, ã = {fmt_pm(e['a_tilde'], e['a_tilde_err'], 1)}, "
+             f"α_n = {fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; α = {fmt_pm(c['alpha'], c['alpha_err'], 3)} over "
+             f"{c['n_runs']} runs, so 1 − α = {fmt_pm(c['one_minus_alpha'], c['alpha_err'], 3)}")
+    else:
+        s = f"A = {fmt_pm(e['A'], e['A_err'], 4)}, B = {fmt_pm(e['B'], e['B_err'], 4)}, C = {fmt_pm(e['C'], e['C_err'], 2)}"
+    s += f"; χ² = {e['chi2']:.3g} for {e['dof']} degrees of freedom" + (" (weighted)" if e["weighted"] else "")
+    return head + s + (f". Note: {e['note']}" if e.get("note") else "")

@@ -1,0 +1,150 @@
+"""Runs, parameter sets and families of sets, shared by ``collect``, ``figures`` and ``comparison``.
+
+A ``Run`` is one analysed run directory (its summary.json and the numbers
+read from it); a ``Set`` is the runs of one parameter set (every parameter
+of ``report.PARAMS`` but the seed equal), with the mean and standard error
+of a quantity over its seeds (``mean_sem``). ``families`` groups sets that
+differ in one parameter only (the curves of the figures, the eq. 7 and eq. 9
+fits). ``fmt_kn`` and ``fmt_pm`` are the number texts of the figures and
+README.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .report import PARAMS
+
+SHORT = {k: k.split(".", 1)[1] for k in PARAMS}   # contact.mu -> mu, run.seed -> seed, ...
+# k_t, gamma_n, gamma_t and dt follow k_n in a stiffness sweep (physics.md 3, 4.2)
+FOLLOW_K_N = ("contact.k_n", "contact.k_t", "contact.gamma_n", "contact.gamma_t", "integration.dt")
+NAN = float("nan")
+
+
+# ---------------------------------------------------------------- runs and sets
+
+@dataclass
+class Run:
+    """One analysed run: its directory, its summary.json and the numbers read from it."""
+    path: str
+    s: dict
+    q: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.q = quantities(self.s)
+
+    @property
+    def params(self):
+        return self.s["params"]
+
+
+@dataclass
+class Set:
+    """The runs of one parameter set (all of ``PARAMS`` but the seed equal)."""
+    id: str
+    params: dict
+    runs: list
+
+    def p(self, short):
+        """A parameter by its short name (mu, epsilon, k_n, phi_i, N, L_x, ...)."""
+        return self.params[next(k for k in PARAMS if SHORT[k] == short)]
+
+    @property
+    def seeds(self):
+        return [r.params["run.seed"] for r in self.runs]
+
+    def stat(self, q):
+        """(mean, standard error, count) of quantity ``q`` over the runs; see ``mean_sem``."""
+        return mean_sem([r.q[q] for r in self.runs])
+
+
+def num(v):
+    """A JSON number as float; nan for anything else (None, a bool, a string)."""
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else NAN
+
+
+def quantities(s):
+    """The per-run numbers of a summary.json (nan where absent or null)."""
+    hm, zt = s.get("halved_margins") or {}, s.get("zeta") or {}
+    q = {k: num(s.get(k)) for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "alpha", "alpha_err",
+                                    "n_bulk", "overlap_median", "overlap_max", "step")}
+    q.update(mobilised_fraction=num(zt.get("mobilised_fraction")), z_halved=num(hm.get("z")),
+             phi_halved=num(hm.get("phi")))
+    return q
+
+
+def mean_sem(values):
+    """Mean and standard error of the mean of the finite values.
+
+    Returns
+    -------
+    (mean, sem, n): sem = std(ddof=1) / sqrt(n), nan when n < 2 (no error bar
+    from a single seed); mean nan when n = 0.
+    """
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], float)
+    n = len(v)
+    mean = float(np.mean(v)) if n else NAN
+    sem = float(np.std(v, ddof=1) / np.sqrt(n)) if n >= 2 else NAN
+    return mean, sem, n
+
+
+# ---------------------------------------------------------------- families
+
+def _sig(x):
+    return float(f"{x:.10g}")
+
+
+def family_key(params, vary):
+    """What a family of sets that differ only in ``vary`` (a PARAMS key) shares.
+
+    For ``contact.k_n`` the parameters that follow k_n enter as the scale-free
+    k_t/k_n, gamma_n/sqrt(k_n) and gamma_t/gamma_n (10 significant digits) and
+    dt is left out.
+
+    Returns
+    -------
+    tuple of (name, value) pairs, short names.
+    """
+    skip = {"run.seed", vary} | (set(FOLLOW_K_N) if vary == "contact.k_n" else set())
+    key = [(SHORT[k], params[k]) for k in PARAMS if k not in skip]
+    if vary == "contact.k_n":
+        k, g_n, g_t = params["contact.k_n"], params["contact.gamma_n"], params["contact.gamma_t"]
+        key += [("k_t/k_n", _sig(params["contact.k_t"] / k)), ("gamma_n/sqrt(k_n)", _sig(g_n / math.sqrt(k))),
+                ("gamma_t/gamma_n", _sig(g_t / g_n) if g_n else g_t)]
+    return tuple(key)
+
+
+def families(sets, vary):
+    """[(family dict, sets sorted by ``vary``)] in the order of the first set of each."""
+    fam = {}
+    for s in sets:
+        fam.setdefault(family_key(s.params, vary), []).append(s)
+    return [(dict(k), sorted(v, key=lambda s: s.params[vary])) for k, v in fam.items()]
+
+
+# ---------------------------------------------------------------- number texts
+
+def fmt_kn(k):
+    """2e5-style text of a stiffness."""
+    m, e = f"{k:.3e}".split("e")
+    return f"{m.rstrip('0').rstrip('.')}e{int(e)}"
+
+
+def _digits(e, base):
+    if not (isinstance(e, float) and math.isfinite(e) and e > 0):
+        return base
+    return min(max(base, 1 - math.floor(math.log10(e))), 8)
+
+
+def fmt_pm(m, e=NAN, base=3, n=None):
+    """'m ± e' (digits from e), 'm (1 seed)' without an error, '—' without a value."""
+    if not isinstance(m, (int, float)) or not math.isfinite(m):
+        return "—" if not isinstance(m, str) else m
+    e = NAN if e is None else e
+    d = _digits(e, base)
+    if math.isfinite(e):
+        return f"{m:.{d}f} ± {e:.{d}f}"
+    return f"{m:.{d}f}" + (" (1 seed)" if n == 1 else "")
+
