@@ -8,6 +8,7 @@ import json
 import pytest
 
 from mpdem import config
+from mpdem.analysis import report
 from mpdem.simulation import Run
 
 
@@ -26,3 +27,14 @@ def test_frictionless_pile_settles_to_z_near_6(tmp_path):
     assert 0.62 < bulk["phi"] < 0.66, bulk
     assert bulk["n_bulk"] > 500
     assert json.loads((tmp_path / "pile" / "summary.json").read_text())["converged"] is True
+    # mpdem analyze on the run directory: the same bulk, and the rest of physics.md 6
+    s, out = report.analyze(str(tmp_path / "pile"), log=lambda m: None)
+    assert out == str(tmp_path / "pile" / "analysis")
+    for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "z1", "z2"):
+        assert s[k] == bulk[k], k
+    assert s["zeta"] is None and s["zeta_note"].startswith("mu = 0")
+    # a frictionless pile near contact: g rises steeply (alpha > 0) and contacts per sphere near z
+    assert s["alpha"] > 0.2 and abs(s["gofr"]["near_contacts_per_ref"] - bulk["z"]) < 0.3
+    for name in ("summary.json", "profile.png", "coordination.png", "gofr.png", "gofr_near.png",
+                 "profile.csv", "coordination.csv", "gofr.csv", "gofr_near.csv"):
+        assert (tmp_path / "pile" / "analysis" / name).stat().st_size > 0, name
