@@ -57,6 +57,17 @@ def test_close_pairs_are_all_pairs_within_the_cutoff(L, n):
     assert set(map(tuple, got.tolist())) == want and len(got) == len(want)
 
 
+def test_a_sphere_far_above_keeps_the_grid_small_and_the_pairs_right():
+    rng = np.random.default_rng(2)
+    L, n = 6.0, 800
+    x = rng.random((n, 3)) * [L, L, 8.0]
+    x[-1, 2] = 1e7
+    order, start, dims, geo = pairdist.cell_grid(x, L, L, 1.0)
+    assert len(start) <= 2 * n + 2 * dims[0] * dims[1] * 5
+    want, _ = brute_pairs(x, L, L, 1.0)
+    assert set(map(tuple, pairdist.close_pairs(x, L, L, 1.0).tolist())) == want
+
+
 def test_pair_histograms_count_every_ordered_pair_once_for_any_thread_count():
     rng = np.random.default_rng(3)
     L, n = 7.0, 900

@@ -94,6 +94,9 @@ def _range(want, L_x, L_y, z1, z2, dr, name, warns):
     if want < cap:
         return want
     got = dr * math.floor((cap - 1e-9) / dr)
+    if got <= 1.0:
+        raise ValueError(f"the bulk slab [{z1:.3g}, {z2:.3g}] is too thin for g(r) beyond contact "
+                         f"(it needs more than 3 d); lower analysis.margin_bottom and analysis.margin_top")
     warns.append(f"analysis.{name} = {want:g} d cut to {got:g} d (half the box is {0.5 * min(L_x, L_y):g} d, "
                  f"a third of the bulk slab {(z2 - z1) / 3:.3g} d)")
     return got

@@ -1,10 +1,13 @@
 """Pair distances of a static packing: contact lists and g(r) histograms.
 
 The analysis kernels. Points are binned into cells at least ``r_max / 2``
-wide (periodic in x and y, open in z) by ``cell_grid``; every search then
-scans the 5 x 5 x 5 block of cells around a point, or the whole periodic
-row when the box has fewer than 5 cells across. Distances use the minimum
-image in x and y, so each partner is met once when r_max < L / 2.
+wide by ``cell_grid``; every search then scans the 5 x 5 x 5 block of cells
+around a point, or a whole row when an axis has fewer than 5 cells. Cells
+are periodic in x and y; in z the cell index is taken modulo a number of
+layers that keeps the grid O(N) (a sphere flown far away must not make a
+huge grid): a wrapped cell only adds candidates that the distance test
+rejects, as z is never periodic. Distances use the minimum image in x and
+y, so each partner is met once when r_max < L / 2.
 
 Histograms are integer counts, accumulated per chunk of reference points
 in parallel (numba threads) and summed: the result does not depend on the
@@ -39,7 +42,8 @@ def cell_grid(x, L_x, L_y, r_max):
     nx, ny = max(1, int(L_x // w)), max(1, int(L_y // w))
     z0 = float(x[:, 2].min()) if len(x) else 0.0
     z1 = float(x[:, 2].max()) if len(x) else 0.0
-    nz = int((z1 - z0) // w) + 1
+    # z layers, folded (modulo) beyond about two cells per point
+    nz = min(int((z1 - z0) // w) + 1, max(2 * REACH + 1, -(-2 * len(x) // (nx * ny))))
     dims = np.array([nx, ny, nz], np.int64)
     geo = np.array([L_x / nx, L_y / ny, w, z0])
     cell = np.empty(len(x), np.int64)
@@ -54,7 +58,7 @@ def cell_grid(x, L_x, L_y, r_max):
 def _cell_of(p, L_x, L_y, dims, geo):
     ix = min(int((p[0] % L_x) // geo[0]), dims[0] - 1)
     iy = min(int((p[1] % L_y) // geo[1]), dims[1] - 1)
-    iz = min(max(int((p[2] - geo[3]) // geo[2]), 0), dims[2] - 1)
+    iz = max(int((p[2] - geo[3]) // geo[2]), 0) % dims[2]
     return ix, iy, iz
 
 
@@ -68,7 +72,7 @@ def _cells(x, L_x, L_y, dims, geo, cell):
 
 @njit(cache=True)
 def _span(c, n):
-    """Cells to scan along a periodic axis: (first offset, count)."""
+    """Cells to scan along an axis of n cells taken modulo n: (first offset, count)."""
     if n < 2 * REACH + 1:
         return -c, n
     return -REACH, 2 * REACH + 1
@@ -119,7 +123,9 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
             ix, iy, iz = _cell_of(x[i], L_x, L_y, dims, geo)
             ox, nx = _span(ix, dims[0])
             oy, ny = _span(iy, dims[1])
-            for az in range(max(iz - REACH, 0), min(iz + REACH + 1, dims[2])):
+            oz, nz = _span(iz, dims[2])
+            for bz in range(nz):
+                az = (iz + oz + bz) % dims[2]
                 for by in range(ny):
                     cy = (iy + oy + by) % dims[1]
                     for bx in range(nx):
@@ -156,7 +162,9 @@ def _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, counts, out_i, ou
             oy, ny = _span(iy, dims[1])
             m = 0
             base = counts[i] if fill else 0
-            for az in range(max(iz - REACH, 0), min(iz + REACH + 1, dims[2])):
+            oz, nz = _span(iz, dims[2])
+            for bz in range(nz):
+                az = (iz + oz + bz) % dims[2]
                 for by in range(ny):
                     cy = (iy + oy + by) % dims[1]
                     for bx in range(nx):
