@@ -104,6 +104,12 @@ def test_fcc_has_twelve_contacts_and_its_packing_fraction():
     fixed = (x[:, 2] < a).astype(np.uint8)          # the two lowest layers are the bed
     s = bulk.bulk_summary(x, fixed, L, L, mu=0.5)
     assert s["n_bulk"] > 200
+    # surface: the top layer (phi there is half the plateau's); margins clamp(0.2 (h - z_bed), 3, 10)
+    top = x[:, 2].max()
+    assert s["z_bed"] == pytest.approx(0.75 * a) and abs(s["h"] - top) <= 0.5
+    assert s["margin_bottom"] == pytest.approx(min(max(0.2 * (s["h"] - s["z_bed"]), 3), 10))
+    assert s["z1"] == pytest.approx(s["z_bed"] + s["margin_bottom"]) and s["z2"] == pytest.approx(s["h"] - s["margin_top"])
+    assert s["n_bulk"] == int(((x[:, 2] >= s["z1"]) & (x[:, 2] <= s["z2"]) & (fixed == 0)).sum())
     assert s["z"] == 12.0 and s["z_no_rattlers"] == 12.0 and s["rattler_fraction"] == 0.0
     assert s["P_z"][12] == 1.0
     # a slab of whole periods (a/2 per layer) holds exactly the crystal's fraction
@@ -127,6 +133,21 @@ def test_simple_cubic_has_six_contacts_and_pi_over_six():
     # exactly touching spheres are not in contact (delta > 0 strictly)
     xt, Lt = simple_cubic(4, 4, 1.0)
     assert len(bulk.find_contacts(xt, Lt, Lt)[0]) == 0
+
+
+def test_paper_sized_pile_gets_ten_d_margins_and_short_ones_the_clamp():
+    for layers, want in ((60, 10.0), (20, None)):
+        x, L = simple_cubic(6, layers, SQUEEZE)
+        zm = x[:, 2]
+        reg = bulk.bulk_region(zm, 0.0, L, L)
+        if want is None:
+            want = min(max(0.2 * reg["h"], 3.0), 10.0)
+            assert want < 10
+        assert reg["margin_bottom"] == pytest.approx(want) and reg["margin_top"] == pytest.approx(want)
+        assert reg["z2"] - reg["z1"] == pytest.approx(reg["h"] - 2 * want)
+        # the halved-margin slab of 6.1.4 is wider by one margin
+        half = bulk.bulk_region(zm, 0.0, L, L, 0.5 * want, 0.5 * want)
+        assert half["z2"] - half["z1"] == pytest.approx(reg["z2"] - reg["z1"] + want)
 
 
 def test_slab_volume_is_the_exact_cap_volume():
@@ -184,6 +205,9 @@ def test_rattler_removal_cascades_on_a_hand_built_cluster():
     c = bulk.coordination(np.bincount(pairs.ravel(), minlength=7), k2, c2, removable)
     assert c["z"] == pytest.approx((4 + 2 + 2 + 1 + 2 + 0) / 6) and c["z_no_rattlers"] == pytest.approx(7 / 3)
     assert c["rattler_fraction"] == pytest.approx(0.5) and c["n_bulk"] == 6
+    # P(n) over the six: n = 4, 2, 2, 1, 2, 0; without rattlers 3, 2, 2
+    assert c["P_z"][:5] == pytest.approx([1 / 6, 1 / 6, 3 / 6, 0, 1 / 6]) and sum(c["P_z"]) == pytest.approx(1)
+    assert c["P_z_no_rattlers"][:4] == pytest.approx([0, 0, 2 / 3, 1 / 3])
 
 
 def test_rattlers_found_from_positions():
@@ -208,7 +232,8 @@ def test_force_ratios_histogram_and_mobilised_fraction():
     assert fr["count"].tolist() == [0, 1, 0, 0, 0, 1, 0, 0, 0, 2]
     assert fr["P_zeta"].max() == 1.0 and fr["mobilised_fraction"] == pytest.approx(0.5)
     big = forces.force_ratios(F_n, F_t * 10, 5.0, bins=10)      # mu >= 1: F_t / F_n as well
-    assert big["count_ratio"].tolist() == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0]
+    # F_t/F_n = 10 zeta mu = 0.5, 2.75, 5, 4.975: one on [0, 1), three beyond it (counted)
+    assert big["count_ratio"].tolist() == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0] and big["n_ratio_above_one"] == 3
 
 
 def test_bulk_contacts_select_by_midpoint():
@@ -249,6 +274,19 @@ def test_eq7_fit_recovers_the_paper_like_parameters():
         assert abs(f[name] - want) < 4 * f[f"{name}_err"], (name, f)
     assert f["a_tilde"] == pytest.approx(0.134 * 2e5 ** 0.498, rel=0.3)
     assert f["weighted"] and f["dof"] == k.size - 3
+
+
+def test_eq7_fit_weights_by_the_standard_errors():
+    # the stiffest point is far off but has a large error: a weighted fit discounts it
+    k = np.array([2e5, 6e5, 2e6, 6e6, 2e7, 6e7, 2e8, 2e9])
+    sigma = np.full(k.size, 1e-4)
+    sigma[-1] = 0.2
+    z = fits.eq7(k, 6.01, 0.134, 0.498)
+    z[-1] += 0.3
+    w = fits.fit_eq7(k, z, sigma)
+    u = fits.fit_eq7(k, z)
+    assert w["z_inf"] == pytest.approx(6.01, abs=1e-3) and w["alpha_n"] == pytest.approx(0.498, abs=2e-3)
+    assert abs(u["z_inf"] - 6.01) > 0.02 and not u["weighted"]
 
 
 def test_eq9_fit_recovers_the_paper_parameters():
@@ -329,6 +367,33 @@ def test_analyze_settings_and_errors(tmp_path):
         report.analyze(str(tmp_path), plots=False, log=lambda m: None)
     with pytest.raises(report.AnalysisError, match="no such file"):
         report.locate(str(tmp_path / "missing.h5"))
+
+
+def test_analyze_without_contact_forces_or_room_for_g_of_r(tmp_path):
+    x, L = simple_cubic(6, 12, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    path = tmp_path / "thin.h5"
+    write_crystal(path, x, fixed, L)
+    # a checkpoint-like file: the contact list removed
+    arrays, attrs = checkpoint.read_state(str(path), pairs=True)
+    for k in checkpoint.PAIR_FIELDS:
+        arrays.pop(k)
+    attrs["kind"] = "checkpoint"
+    checkpoint.write(str(tmp_path / "ckpt.h5"), arrays, attrs)
+    s, out = report.analyze(str(tmp_path / "ckpt.h5"), sets=["analysis.margin_bottom=3.5"], log=lambda m: None)
+    assert s["zeta"] is None and "no contact forces in a checkpoint" in s["zeta_note"]
+    # a 12 d pile with 3.5 d margins leaves a ~4 d slab: g(r) cut to a third of it
+    third = (s["z2"] - s["z1"]) / 3
+    assert 1 < third < 1.5 and s["gofr"]["r_max"] == pytest.approx(math.floor(third / 0.01) * 0.01)
+    assert s["gofr"]["near_r_max"] == s["gofr"]["r_max"] and s["z"] == 6.0
+    s, out = report.analyze(str(path), out=str(tmp_path / "thin"), sets=["analysis.margin_bottom=4.5"],
+                            log=lambda m: None)
+    # a 2 d slab: z and phi, but no g(r), said so
+    assert s["z"] == 6.0 and s["gofr"] is None and math.isnan(s["alpha"])
+    assert any("too thin for g(r)" in w for w in s["warnings"])
+    saved = json.loads((tmp_path / "thin" / "summary.json").read_text())
+    assert saved["alpha"] is None and saved["z"] == 6.0
+    assert (tmp_path / "thin" / "profile.png").exists() and not (tmp_path / "thin" / "gofr.csv").exists()
 
 
 def test_analyze_cli_on_a_run_directory(tmp_path):

@@ -81,10 +81,11 @@ SCHEMA = (
     _k("output", "checkpoint_seconds", 1800.0, "wall-clock seconds between checkpoints; 0 = none on a clock schedule"),
     _k("output", "checkpoint_keep", 3, "newest checkpoints kept; older ones are deleted", int),
     _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int),
-    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = clamp(0.2 (h - z_bed), 3, 10)"),
+    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 (h - z_bed), 3, 10)"),
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
     _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
     _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]"),
+    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (physics.md 6.1)"),
     _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]"),
     _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box"),
     _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)"),
@@ -357,6 +358,7 @@ def resolve(raw):
         need(key, vals[key] == -1 or vals[key] >= 0, "-1 (automatic) or a margin >= 0")
     need("analysis.n_min", vals["analysis.n_min"] == -1 or vals["analysis.n_min"] >= 0, "-1 (automatic) or n_min >= 0")
     need("analysis.profile_bin", vals["analysis.profile_bin"] > 0, "profile_bin > 0")
+    need("analysis.tall_pile", vals["analysis.tall_pile"] > 0, "tall_pile > 0")
     need("analysis.g_r_max", vals["analysis.g_r_max"] > 1, "g_r_max > 1 (and below half the box)")
     need("analysis.g_dr", 0 < vals["analysis.g_dr"] < vals["analysis.g_r_max"], "0 < g_dr < g_r_max")
     need("analysis.near_r_max", vals["analysis.near_r_max"] > 1, "near_r_max > 1 (and below half the box)")

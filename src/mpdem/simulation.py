@@ -479,7 +479,7 @@ class Run:
         try:
             a = cfg.analysis
             bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], st.L_x, st.L_y, cfg.contact.mu,
-                                         a.margin_bottom, a.margin_top, a.n_min, a.profile_bin)
+                                         a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile)
             summary["bulk"] = bulk
             log(f"bulk: z = {bulk['z']:.3f} (without rattlers {bulk['z_no_rattlers']:.3f}, "
                 f"rattlers {100 * bulk['rattler_fraction']:.1f}%), phi = {bulk['phi']:.4f}, "

@@ -95,20 +95,23 @@ def remove_rattlers(n_rows, pairs, removable, n_min):
         kept &= ~drop
 
 
-def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5):
+def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5, tall_pile=40.0):
     """The bulk slab [z1, z2] of a pile (physics.md 6.1).
 
     Parameters
     ----------
     zm : (n_mobile,) centre heights of the mobile spheres [d]
     z_bed : float top of the bed (highest bed centre) [d]
-    margin_bottom, margin_top : float bulk margins [d]; -1 = automatic
+    margin_bottom, margin_top : float bulk margins [d]; -1 = automatic: 10 d
+        for a pile at least ``tall_pile`` high (h - z_bed, the paper's ~45 d),
+        else clamp(0.2 (h - z_bed), 3, 10)
     profile_bin : float bin width of phi(z) [d]
 
     Returns
     -------
-    dict with z1, z2, h, z_bed, margin_bottom, margin_top, phi_plateau and the
-    profile (``edges`` (nb + 1,), ``phi_z`` (nb,) arrays).
+    dict with z1, z2, h, z_bed, margin_bottom, margin_top, phi_plateau, the
+    plateau window ``plateau_lo``, ``plateau_hi`` [d] and the profile
+    (``edges`` (nb + 1,), ``phi_z`` (nb,) arrays).
     """
     top = float(zm.max()) + 1.0
     edges, phi = phi_profile(zm, L_x, L_y, z_bed, top, profile_bin)
@@ -120,7 +123,7 @@ def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profil
     plateau = float(np.median(phi[win])) if win.any() else float(phi.max())
     above = np.flatnonzero(phi >= 0.5 * plateau)
     h = float(centres[above[-1]]) if above.size else top
-    auto = min(max(0.2 * (h - z_bed), 3.0), 10.0)
+    auto = 10.0 if h - z_bed >= tall_pile else min(max(0.2 * (h - z_bed), 3.0), 10.0)
     mb = auto if margin_bottom < 0 else margin_bottom
     mt = mb if margin_top < 0 else margin_top
     z1, z2 = z_bed + mb, h - mt
@@ -128,7 +131,7 @@ def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profil
         raise ValueError(f"pile too short for a bulk region: z_bed = {z_bed:.3g}, h = {h:.3g}, "
                          f"margins {mb:.3g} and {mt:.3g}")
     return {"z1": z1, "z2": z2, "h": h, "z_bed": z_bed, "margin_bottom": mb, "margin_top": mt,
-            "phi_plateau": plateau, "edges": edges, "phi_z": phi}
+            "phi_plateau": plateau, "plateau_lo": lo, "plateau_hi": hi, "edges": edges, "phi_z": phi}
 
 
 def packing_fraction(zm, L_x, L_y, z1, z2):
@@ -203,14 +206,14 @@ class Packing:
         out["overlap_max"] = float(overl.max()) if overl.size else 0.0
         return out
 
-    def region(self, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5):
+    def region(self, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5, tall_pile=40.0):
         """``bulk_region`` of this packing."""
         return bulk_region(self.x[self.mobile, 2], self.z_bed, self.L_x, self.L_y,
-                           margin_bottom, margin_top, profile_bin)
+                           margin_bottom, margin_top, profile_bin, tall_pile)
 
 
 def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_min=-1,
-                 profile_bin=0.5, packing=None):
+                 profile_bin=0.5, tall_pile=40.0, packing=None):
     """Bulk z, z without rattlers, rattler fraction and phi_f of a packing.
 
     Parameters
@@ -228,7 +231,7 @@ def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_
     median and maximum bulk overlap.
     """
     pk = packing or Packing(x, fixed, L_x, L_y, mu, n_min)
-    reg = pk.region(margin_bottom, margin_top, profile_bin)
+    reg = pk.region(margin_bottom, margin_top, profile_bin, tall_pile)
     out = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     out["n_min"] = pk.n_min
     out.update(pk.measure(reg["z1"], reg["z2"]))

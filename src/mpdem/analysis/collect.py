@@ -15,7 +15,8 @@ tables; the figures are drawn by ``figures``, the comparison with the paper
 and README.md by ``comparison`` (``Run``, ``Set`` and families: ``runs``).
 
 A parameter set is every run parameter of ``report.PARAMS`` except the seed,
-compared exactly. Error bars are the standard error of the mean over the
+compared exactly, and every other physics key of the run's config (the
+summary's ``physics``) equal as well. Error bars are the standard error of the mean over the
 runs (seeds) of a set; a set with one seed has none (empty in the tables).
 Empty CSV cells mean "not available".
 """
@@ -174,9 +175,11 @@ def group(runs):
     """
     by_key, skipped = {}, []
     for r in runs:
-        by_key.setdefault(set_key(r.params), []).append(r)
+        # PARAMS name the set; every other physics key of the config must agree as well
+        other = tuple(sorted((r.s.get("physics") or {}).items()))
+        by_key.setdefault((set_key(r.params), other), []).append(r)
     sets = []
-    for key in sorted(by_key, key=lambda k: _set_order(dict(k))):
+    for key in sorted(by_key, key=lambda k: (_set_order(dict(k[0])), repr(k[1]))):
         kept = {}
         for r in by_key[key]:
             seed = r.params["run.seed"]
@@ -185,7 +188,7 @@ def group(runs):
                                                           f"{kept[seed].path} (the same sample)"})
             else:
                 kept[seed] = r
-        sets.append(Set("", dict(key), [kept[k] for k in sorted(kept, key=_order)]))
+        sets.append(Set("", dict(key[0]), [kept[k] for k in sorted(kept, key=_order)]))
     width = max(2, len(str(len(sets))))
     for i, s in enumerate(sets, 1):
         s.id = f"S{i:0{width}d}"

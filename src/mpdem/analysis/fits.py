@@ -73,24 +73,25 @@ def _fit(model, x, y, sigma, p0, names):
     out.update({f"{n}_err": float(e) for n, e in zip(names, err)})
     out.update(n_points=int(len(x)), weighted=bool(weighted), chi2=float(res @ res),
                dof=int(len(x) - len(p)))
-    return out
+    return out, cov
 
 
 def fit_eq7(k_n, z, sigma=None):
     """Weighted fit of eq. 7 to z(k_n); returns z_inf, a, alpha_n with errors.
 
     ``a_tilde``, the paper's prefactor of (k_n d / m g)^(-alpha_n), is
-    a K_REF^alpha_n; its error follows from the covariance-free propagation of
-    a and alpha_n.
+    a K_REF^alpha_n; its error is propagated with the covariance of a and
+    alpha_n.
     """
     k_n, z = np.asarray(k_n, float), np.asarray(z, float)
     lo = int(np.argmin(k_n))
     z0 = float(z.min()) - 0.01
     p0 = [z0, max(float(z[lo]) - z0, 1e-3), 0.5]
-    out = _fit(eq7, k_n, z, sigma, p0, ("z_inf", "a", "alpha_n"))
+    out, cov = _fit(eq7, k_n, z, sigma, p0, ("z_inf", "a", "alpha_n"))
     out["a_tilde"] = out["a"] * K_REF ** out["alpha_n"]
-    out["a_tilde_err"] = out["a_tilde"] * math.hypot(out["a_err"] / out["a"] if out["a"] else 0.0,
-                                                     math.log(K_REF) * out["alpha_n_err"])
+    # a_tilde = a K^alpha_n: gradient (K^alpha_n, a_tilde ln K) in (a, alpha_n), with their covariance
+    grad = np.array([K_REF ** out["alpha_n"], out["a_tilde"] * math.log(K_REF)])
+    out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) if np.all(np.isfinite(cov)) else math.nan
     return out
 
 
@@ -98,4 +99,4 @@ def fit_eq9(phi_i, phi_f, sigma=None):
     """Weighted fit of eq. 9 to phi_f(phi_i); returns A, B, C with errors."""
     phi_i, phi_f = np.asarray(phi_i, float), np.asarray(phi_f, float)
     p0 = [float(phi_f.min()) - 0.01, float(phi_f.max() - phi_f.min()) + 0.01, 4.0]
-    return _fit(eq9, phi_i, phi_f, sigma, p0, ("A", "B", "C"))
+    return _fit(eq9, phi_i, phi_f, sigma, p0, ("A", "B", "C"))[0]

@@ -34,7 +34,7 @@ def force_ratios(F_n, F_t, mu, bins=50, mobilised=0.99):
     left out), ``mobilised_fraction`` (zeta > mobilised), ``n_above_one`` (zeta > 1
     beyond rounding: the Coulomb limit broken), ``zeta_mean``,
     ``zeta_max``, and for mu >= 1 ``P_ratio`` / ``count_ratio`` of F_t/F_n on
-    the same bins.
+    the same bins with ``n_ratio_above_one``, the contacts beyond them.
     """
     ft = np.sqrt(np.einsum("ij,ij->i", F_t, F_t)) if len(F_t) else np.zeros(0)
     ok = F_n > 0
@@ -54,4 +54,5 @@ def force_ratios(F_n, F_t, mu, bins=50, mobilised=0.99):
         cr = np.bincount(np.minimum((ratio * bins).astype(np.int64), bins)[ratio < 1.0],
                          minlength=bins)[:bins]
         out["count_ratio"], out["P_ratio"] = cr, cr / max(cr.max(), 1)
+        out["n_ratio_above_one"] = int((ratio >= 1.0).sum())
     return out

@@ -32,7 +32,8 @@ def radial_distribution(xm, L_x, L_y, z1, z2, r_max, dr=0.01, xi_min=1e-6, per_d
     -------
     dict with
       ``r_lo, r_hi, count, g`` (n_lin,) linear bins [d], ordered pair counts, g;
-      ``xi_lo, xi_hi, count_xi, g_xi`` (n_log,) logarithmic bins in xi;
+      ``xi_lo, xi_hi, count_xi, g_xi`` (n_log,) logarithmic bins in xi
+      (g_xi is nan in bins reaching beyond r_max);
       ``n_ref`` reference spheres, ``rho`` [1/d^3], ``r_max``,
       ``n_overlap`` ordered pairs with r < d (contacts, outside the xi bins).
     """
@@ -56,6 +57,8 @@ def radial_distribution(xm, L_x, L_y, z1, z2, r_max, dr=0.01, xi_min=1e-6, per_d
     norm = refs.size * rho
     g = lin / (norm * _shell(r_lo, r_hi))
     g_xi = lg / (norm * _shell(1.0 + xi_lo, 1.0 + xi_hi))
+    # bins reaching past r_max were not (fully) counted: unknown, not zero
+    g_xi[1.0 + xi_hi > r_max] = np.nan
     return {"r_lo": r_lo, "r_hi": r_hi, "count": lin, "g": g,
             "xi_lo": xi_lo, "xi_hi": xi_hi, "count_xi": lg, "g_xi": g_xi,
             "n_ref": int(refs.size), "rho": rho, "r_max": float(r_max), "n_overlap": int(n_over)}

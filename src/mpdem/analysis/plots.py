@@ -97,6 +97,7 @@ def run_plots(out, s, t):
     """All plots of one analysis into ``out``."""
     plot_profile(out, s, t)
     plot_coordination(out, s)
-    plot_gofr(out, s, t)
+    if "gofr" in t:
+        plot_gofr(out, s, t)
     if "zeta" in t:
         plot_zeta(out, s, t)

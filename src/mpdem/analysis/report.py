@@ -33,6 +33,9 @@ SUMMARY = "summary.json"
 PARAMS = ("contact.mu", "contact.epsilon", "contact.k_n", "contact.k_t", "contact.gamma_n",
           "contact.gamma_t", "contact.model", "pour.phi_i", "pour.N", "pour.K0", "run.seed",
           "box.L_x", "box.L_y", "integration.dt")
+# config keys that cannot change a run's result (design.md 2.1) or are not the run's physics
+NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "output.", "decomp.", "checks.", "analysis.",
+               "integration.skin", "integration.contact_slots")
 
 
 class AnalysisError(ValueError):
@@ -95,8 +98,9 @@ def _range(want, L_x, L_y, z1, z2, dr, name, warns):
         return want
     got = dr * math.floor((cap - 1e-9) / dr)
     if got <= 1.0:
-        raise ValueError(f"the bulk slab [{z1:.3g}, {z2:.3g}] is too thin for g(r) beyond contact "
-                         f"(it needs more than 3 d); lower analysis.margin_bottom and analysis.margin_top")
+        warns.append(f"no g(r): the bulk slab [{z1:.3g}, {z2:.3g}] is too thin for g(r) beyond contact "
+                     f"(it needs more than 3 d); lower analysis.margin_bottom and analysis.margin_top")
+        return None
     warns.append(f"analysis.{name} = {want:g} d cut to {got:g} d (half the box is {0.5 * min(L_x, L_y):g} d, "
                  f"a third of the bulk slab {(z2 - z1) / 3:.3g} d)")
     return got
@@ -156,7 +160,7 @@ def measure(arrays, attrs, cfg):
     L_x, L_y = float(attrs["L_x"]), float(attrs["L_y"])
     warns = []
     pk = bulk.Packing(arrays["x"], arrays["fixed"], L_x, L_y, c.mu, a.n_min)
-    reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin)
+    reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin, a.tall_pile)
     z1, z2 = reg["z1"], reg["z2"]
     s = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     s["n_min"] = pk.n_min
@@ -164,29 +168,28 @@ def measure(arrays, attrs, cfg):
     # physics.md 6.1.4: the same with both margins halved
     half = bulk.bulk_region(pk.x[pk.mobile, 2], pk.z_bed, L_x, L_y, 0.5 * reg["margin_bottom"],
                             0.5 * reg["margin_top"], a.profile_bin)
-    h = pk.measure(half["z1"], half["z2"])
-    s["halved_margins"] = {k: h[k] for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk")}
-    s["halved_margins"].update(z1=half["z1"], z2=half["z2"])
+    s["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])
 
-    xm = pk.x[pk.mobile]
+    tables = {"profile": reg, "z_profile": _profile(pk, reg)}
+    s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, gofr=None)
     r_full = _range(a.g_r_max, L_x, L_y, z1, z2, a.g_dr, "g_r_max", warns)
     r_near = _range(a.near_r_max, L_x, L_y, z1, z2, a.g_dr, "near_r_max", warns)
-    g = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_full, a.g_dr, a.xi_min, a.xi_per_decade)
-    near = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_near, a.g_dr, a.xi_min, a.xi_per_decade)
-    xi_c = np.sqrt(near["xi_lo"] * near["xi_hi"])
-    lo, hi = fits.fit_window(c.k_n, s["overlap_median"], a.fit_xi_hi, a.fit_xi_lo)
-    if not lo < hi:
-        warns.append(f"fit window empty: xi_lo = {lo:.3g} (20 x median overlap) >= xi_hi = {hi:.3g}")
-    pl = fits.power_law(xi_c, near["g_xi"], lo, hi)
-    if not math.isfinite(pl["alpha"]):
-        warns.append(f"power law not fitted: {pl['n_bins']} populated bins in [{lo:.3g}, {hi:.3g}]")
-    s.update(alpha=pl["alpha"], alpha_err=pl["alpha_err"], alpha_fit=pl)
-    s["gofr"] = {"r_max": g["r_max"], "n_ref": g["n_ref"], "rho": g["rho"],
-                 "near_r_max": near["r_max"], "near_n_ref": near["n_ref"],
-                 "near_contacts_per_ref": near["n_overlap"] / near["n_ref"]}
-
-    tables = {"profile": reg, "gofr": g, "near": near, "xi_c": xi_c, "fit": pl}
-    tables["z_profile"] = _profile(pk, reg)
+    if r_full is not None and r_near is not None:
+        xm = pk.x[pk.mobile]
+        g = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_full, a.g_dr, a.xi_min, a.xi_per_decade)
+        near = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_near, a.g_dr, a.xi_min, a.xi_per_decade)
+        xi_c = np.sqrt(near["xi_lo"] * near["xi_hi"])
+        lo, hi = fits.fit_window(c.k_n, s["overlap_median"], a.fit_xi_hi, a.fit_xi_lo)
+        if not lo < hi:
+            warns.append(f"fit window empty: xi_lo = {lo:.3g} (20 x median overlap) >= xi_hi = {hi:.3g}")
+        pl = fits.power_law(xi_c, near["g_xi"], lo, hi)
+        if not math.isfinite(pl["alpha"]):
+            warns.append(f"power law not fitted: {pl['n_bins']} populated bins in [{lo:.3g}, {hi:.3g}]")
+        s.update(alpha=pl["alpha"], alpha_err=pl["alpha_err"], alpha_fit=pl)
+        s["gofr"] = {"r_max": g["r_max"], "n_ref": g["n_ref"], "rho": g["rho"],
+                     "near_r_max": near["r_max"], "near_n_ref": near["n_ref"],
+                     "near_contacts_per_ref": near["n_overlap"] / near["n_ref"]}
+        tables.update(gofr=g, near=near, xi_c=xi_c, fit=pl)
     s["zeta"] = None
     if c.mu == 0:
         s["zeta_note"] = "mu = 0: no tangential forces"
@@ -196,7 +199,7 @@ def measure(arrays, attrs, cfg):
         sel = forces.bulk_contacts(arrays, arrays["id"], pk.x[:, 2], z1, z2)
         fr = forces.force_ratios(arrays["F_n"][sel], arrays["F_t"][sel], c.mu, a.zeta_bins, a.mobilised)
         s["zeta"] = {k: fr[k] for k in ("n_contacts", "n_tensile", "n_above_one", "mobilised_fraction",
-                                        "zeta_mean", "zeta_max")}
+                                        "zeta_mean", "zeta_max", "n_ratio_above_one") if k in fr}
         tables["zeta"] = fr
     s["warnings"] = warns
     return s, tables
@@ -210,11 +213,6 @@ def write_tables(out, s, t):
          [reg["edges"][:-1], reg["edges"][1:], reg["phi_z"], n_all, z_all, z_nr])
     n = np.arange(len(s["P_z"]))
     _csv(os.path.join(out, "coordination.csv"), ["n", "P", "P_no_rattlers"], [n, s["P_z"], s["P_z_no_rattlers"]])
-    g = t["gofr"]
-    _csv(os.path.join(out, "gofr.csv"), ["r_lo", "r_hi", "count", "g"], [g["r_lo"], g["r_hi"], g["count"], g["g"]])
-    nr = t["near"]
-    _csv(os.path.join(out, "gofr_near.csv"), ["xi_lo", "xi_hi", "xi", "count", "g"],
-         [nr["xi_lo"], nr["xi_hi"], t["xi_c"], nr["count_xi"], nr["g_xi"]])
     if "zeta" in t:
         z = t["zeta"]
         cols, head = [z["edges"][:-1], z["edges"][1:], z["count"], z["P_zeta"]], ["zeta_lo", "zeta_hi", "count", "P"]
@@ -222,6 +220,13 @@ def write_tables(out, s, t):
             cols += [z["count_ratio"], z["P_ratio"]]
             head += ["count_ratio", "P_ratio"]
         _csv(os.path.join(out, "zeta.csv"), head, cols)
+    if "gofr" not in t:
+        return
+    g = t["gofr"]
+    _csv(os.path.join(out, "gofr.csv"), ["r_lo", "r_hi", "count", "g"], [g["r_lo"], g["r_hi"], g["count"], g["g"]])
+    nr = t["near"]
+    _csv(os.path.join(out, "gofr_near.csv"), ["xi_lo", "xi_hi", "xi", "count", "g"],
+         [nr["xi_lo"], nr["xi_hi"], t["xi_c"], nr["count_xi"], nr["g_xi"]])
 
 
 def analyze(target, out=None, sets=(), plots=True, log=print):
@@ -239,7 +244,9 @@ def analyze(target, out=None, sets=(), plots=True, log=print):
     s = {"source": os.path.abspath(path), "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
          "time": float(attrs.get("time", 0.0)), "converged": bool(attrs.get("converged", False)),
          "written_by_ranks": int(attrs.get("ranks", 1)), "n": int(len(arrays["id"])),
-         "params": {k: cfg.values[k] for k in PARAMS}, **s}
+         "params": {k: cfg.values[k] for k in PARAMS},
+         "physics": {k: v for k, v in cfg.values.items() if not k.startswith(NOT_PHYSICS)},
+         "settings": {k: v for k, v in cfg.values.items() if k.startswith("analysis.")}, **s}
     os.makedirs(out, exist_ok=True)
     write_tables(out, s, tables)
     if plots:
@@ -258,7 +265,7 @@ def describe(s):
     """A few lines of the main numbers."""
     al = (f"alpha = {s['alpha']:.3f} +- {s['alpha_err']:.3f} (xi in [{s['alpha_fit']['xi_lo']:.2g}, "
           f"{s['alpha_fit']['xi_hi']:.2g}], {s['alpha_fit']['n_bins']} bins)"
-          if s["alpha"] is not None and math.isfinite(s["alpha"]) else "alpha: not fitted")
+          if math.isfinite(s["alpha"]) else "alpha: not fitted")
     zt = (f"; P(zeta): {s['zeta']['n_contacts']} bulk contacts, {100 * s['zeta']['mobilised_fraction']:.1f}% fully mobilised"
           if s.get("zeta") else "")
     return (f"bulk z in [{s['z1']:.2f}, {s['z2']:.2f}] ({s['n_bulk']} particles): z = {s['z']:.3f}, "
