@@ -303,7 +303,7 @@ def test_eq9_fit_recovers_the_paper_parameters():
 
 # ---- mpdem analyze end to end --------------------------------------------------
 
-def write_crystal(path, x, fixed, L, sets=()):
+def write_crystal(path, x, fixed, L, sets=(), converged=False):
     """A state file of a hand-built packing, as a run would write it."""
     n = len(x)
     cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}",
@@ -319,7 +319,7 @@ def write_crystal(path, x, fixed, L, sets=()):
     a.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=1 - r, F_n=F_n, F_t=F_t, ds_i=np.zeros((len(r), 3)))
     checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
                                     "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
-                                    "config": cfg.to_toml()})
+                                    "converged": converged, "config": cfg.to_toml()})
 
 
 def test_analyze_a_crystal_file_writes_summary_tables_and_plots(tmp_path):

@@ -299,3 +299,22 @@ def test_sweep_tables_pass_the_sweep_helper(tmp_path):
     assert all(sorted(k) == KN and all(len(s) >= 2 for s in k.values()) for k in fam.values())
     assert all(v["run.max_steps"] >= 3e6 for v in cfgs["fig7.tsv"])
     assert {v["pour.phi_i"] for v in cfgs["fig9.tsv"]} == set(PHI_I)
+
+
+def test_a_run_analysed_again_keeps_its_analysis_settings(tmp_path):
+    from test_analysis import SQUEEZE, simple_cubic, write_crystal
+    run = tmp_path / "runs" / "sc"
+    run.mkdir(parents=True)
+    x, L = simple_cubic(6, 24, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    write_crystal(run / "final.h5", x, fixed, L, ["contact.mu=0"], converged=True)
+    report.analyze(str(run), sets=["analysis.margin_bottom=4"], plots=False, log=lambda m: None)
+    summ = run / "analysis" / "summary.json"
+    t = os.path.getmtime(summ)
+    os.utime(run / "final.h5", (t + 10, t + 10))          # a restart wrote a newer final state
+    lines = []
+    co.collect([str(tmp_path / "runs")], str(tmp_path / "out"), log=lines.append)
+    assert any("newer" in ln for ln in lines)
+    again = json.loads(summ.read_text())
+    assert os.path.getmtime(summ) > t and again["margin_bottom"] == 4.0
+    assert again["settings"]["analysis.margin_bottom"] == 4.0

@@ -106,12 +106,17 @@ def find_runs(targets):
     return found, skipped
 
 
-def _analyse(path, why, log):
-    """``mpdem analyze`` of a run (no plots); None, or the reason it failed."""
+def _analyse(path, why, log, settings=None):
+    """``mpdem analyze`` of a run (no plots); None, or the reason it failed.
+
+    ``settings``: the ``analysis.*`` values of an earlier analysis, kept.
+    """
     from . import report
     log(f"collect: analysing {path} ({why})")
+    sets = [f"{k}={v!r}" for k, v in (settings or {}).items()]
     try:
-        report.analyze(path, plots=False, log=lambda m: [log(f"  {ln}") for ln in str(m).splitlines()])
+        report.analyze(path, sets=sets, plots=False,
+                       log=lambda m: [log(f"  {ln}") for ln in str(m).splitlines()])
     except Exception as e:  # one bad run must not stop the others: it is reported as skipped
         return f"analysis failed: {type(e).__name__}: {e}"
     return None
@@ -138,7 +143,12 @@ def load_run(path, analyze_missing=True, log=print):
             return None, err
     elif os.path.exists(final) and os.path.getmtime(final) > os.path.getmtime(summ):
         if analyze_missing:
-            err = _analyse(path, "final.h5 is newer than analysis/summary.json", log)
+            try:
+                with open(summ) as fh:
+                    settings = json.load(fh).get("settings")
+            except (OSError, ValueError, AttributeError):
+                settings = None
+            err = _analyse(path, "final.h5 is newer than analysis/summary.json", log, settings)
             if err:
                 return None, err
         else:
