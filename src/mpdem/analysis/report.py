@@ -106,7 +106,7 @@ def _range(want, L_x, L_y, z1, z2, dr, name, warns):
     return got
 
 
-def _profile(pk, reg, width=1.0):
+def _profile(pk, reg):
     """Per-height-bin z with and without rattlers (mobile spheres) on the phi(z) grid."""
     edges = reg["edges"]
     zc = pk.x[:, 2]
