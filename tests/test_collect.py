@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpdem import config
+from mpdem import config, rundir
 from mpdem.analysis import collect as co
 from mpdem.analysis import fits, report
 from mpdem.analysis.report import AnalysisError
@@ -41,10 +41,8 @@ def params(**kw):
 
 
 def write_csv(path, head, cols):
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(head)
-        w.writerows(zip(*cols))
+    """Columns as ``mpdem analyze`` writes its tables."""
+    rundir.write_csv(path, head, zip(*cols))
 
 
 def make_run(run, p, z, phi, alpha, rng, converged=True):

@@ -190,6 +190,7 @@ def tiled_pile(a, L, N, mu, k_n, seed=0):
     nx, ny : tiles along x and y
     """
     from .analysis.bulk import find_contacts
+    from .kernels.pairdist import separations
     n_mob = int((a["fixed"] == 0).sum())
     tiles = -(-N // n_mob)
     # the most nearly square nx x ny = tiles
@@ -209,9 +210,7 @@ def tiled_pile(a, L, N, mu, k_n, seed=0):
     pairs, r = find_contacts(x, nx * L, ny * L)
     rng = np.random.default_rng(seed)
     delta = 1.0 - r
-    d = x[pairs[:, 0]] - x[pairs[:, 1]]
-    d[:, 0] -= nx * L * np.round(d[:, 0] / (nx * L))
-    d[:, 1] -= ny * L * np.round(d[:, 1] / (ny * L))
+    d = separations(x, pairs[:, 0], pairs[:, 1], nx * L, ny * L)
     nrm = d / r[:, None]
     t = np.cross(nrm, rng.standard_normal((len(r), 3)))
     t /= np.linalg.norm(t, axis=1)[:, None]

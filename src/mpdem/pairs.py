@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels.forces import INV_I, R
+from .kernels.pairdist import separations
 
 
 def contact_pairs(state, phys):
@@ -45,9 +46,7 @@ def contact_pairs(state, phys):
     vh, wh = s.v[:m].copy(), s.omega[:m].copy()
     vh[:n] -= 0.5 * phys.dt * s.f[:n]
     wh[:n] -= 0.5 * phys.dt * INV_I * s.torque[:n]
-    d = s.x[i] - s.x[j]
-    for a, L in ((0, s.L_x), (1, s.L_y)):
-        d[:, a] -= L * np.round(d[:, a] / L)
+    d = separations(s.x, i, j, s.L_x, s.L_y)
     r = np.sqrt((d * d).sum(axis=1))
     delta = 1.0 - r
     nrm = d / r[:, None]

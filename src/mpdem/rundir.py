@@ -14,10 +14,15 @@ same small files); collective reading is ``checkpoint``'s.
 """
 from __future__ import annotations
 
+import csv
 import glob
+import io
+import math
 import os
 import re
 import tomllib
+
+import numpy as np
 
 from . import config
 from .checkpoint import StateFileError
@@ -33,6 +38,28 @@ def write_atomic(path, chunks):
     with open(tmp, "w") as fh:
         fh.writelines([chunks] if isinstance(chunks, str) else chunks)
     os.replace(tmp, path)
+
+
+def _cell(v):
+    """One CSV cell: full precision, empty for nan or None (not available)."""
+    if v is None:
+        return ""
+    if isinstance(v, (bool, np.bool_)):
+        return "true" if v else "false"
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v)) if math.isfinite(v) else ""
+    if isinstance(v, np.integer):
+        return str(int(v))
+    return str(v)
+
+
+def write_csv(path, header, rows):
+    """Rows as CSV with a header line, written atomically (``write_atomic``)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows([[_cell(v) for v in row] for row in rows])
+    write_atomic(path, buf.getvalue())
 
 
 def checkpoint_path(run, k):

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ..kernels.pairdist import close_pairs
+from ..kernels.pairdist import close_pairs, separations
 
 R = 0.5
 
@@ -62,11 +62,8 @@ def find_contacts(x, L_x, L_y):
     pairs : (M, 2) int64 row indices, i < j
     r : (M,) centre distances [d]
     """
-    x = np.ascontiguousarray(x, dtype=np.float64)
     pairs = close_pairs(x, L_x, L_y, 1.0)
-    d = x[pairs[:, 0]] - x[pairs[:, 1]]
-    d[:, 0] -= L_x * np.round(d[:, 0] / L_x)
-    d[:, 1] -= L_y * np.round(d[:, 1] / L_y)
+    d = separations(np.asarray(x, dtype=np.float64), pairs[:, 0], pairs[:, 1], L_x, L_y)
     return pairs, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 

@@ -22,8 +22,6 @@ Empty CSV cells mean "not available".
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
@@ -275,25 +273,6 @@ def make_fits(sets):
 
 # ---------------------------------------------------------------- tables
 
-def _cell(v):
-    if v is None:
-        return ""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else ""
-    return str(v)
-
-
-def write_csv(path, header, rows):
-    """Rows as CSV (empty cell = not available), written atomically."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    w.writerows([[_cell(v) for v in row] for row in rows])
-    rundir.write_atomic(path, buf.getvalue())
-
-
 RUN_COLUMNS = ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "alpha", "alpha_err",
                "mobilised_fraction", "z_halved", "phi_halved", "overlap_median", "overlap_max", "step")
 
@@ -303,7 +282,7 @@ def write_runs_csv(path, sets):
     head = ["set", "path"] + [SHORT[k] for k in PARAMS] + ["converged", *RUN_COLUMNS, "n_warnings"]
     rows = [[s.id, r.path] + [r.params[k] for k in PARAMS] + [True] + [r.q[c] for c in RUN_COLUMNS]
             + [len(r.s.get("warnings") or [])] for s in sets for r in s.runs]
-    write_csv(path, head, rows)
+    rundir.write_csv(path, head, rows)
 
 
 def write_sets_csv(path, sets):
@@ -318,7 +297,7 @@ def write_sets_csv(path, sets):
             m, e, n = s.stat(q)
             row += [m, e] + ([n] if q in ("alpha", "mobilised_fraction") else [])
         rows.append(row)
-    write_csv(path, head, rows)
+    rundir.write_csv(path, head, rows)
 
 
 def _json_safe(o):

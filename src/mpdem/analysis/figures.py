@@ -203,6 +203,12 @@ class Figures:
         fam, members = self.per_mu
         return fam, members, self.plt.cm.viridis(np.linspace(0, 0.9, max(len(members), 1)))
 
+    def _mu_curves(self, name, ycol, bins, keep=lambda s: True):
+        """(family, [(set, colour, ``mean_curve``)]) of the mu sets kept whose runs have the column."""
+        fam, members, colors = self._mu_sets()
+        got = [(s, c, self.mean_curve(s, name, ycol, bins)) for s, c in zip(members, colors) if keep(s)]
+        return fam, [g for g in got if g[2] is not None]
+
     def fig4(self):
         """P(z) per mu at epsilon 0.88 (when present)."""
         if self.per_mu is None:
@@ -237,21 +243,15 @@ class Figures:
         """g(r) per mu, mean over seeds of g per bin, curves shifted by 1."""
         if self.per_mu is None:
             return "no parameter sets"
-        fam, members, colors = self._mu_sets()
+        fam, curves = self._mu_curves("gofr", "g", ("r_lo", "r_hi"))
+        if not curves:
+            return "no gofr.csv in the runs"
         fig, ax = self.plt.subplots(figsize=(6, 5))
-        drawn, top = 0, 1.0
-        for s, c in zip(members, colors):
-            got = self.mean_curve(s, "gofr", "g", ("r_lo", "r_hi"))
-            if got is None:
-                continue
-            r_lo, r_hi, g, _, n = got
+        top = 1.0
+        for drawn, (s, c, (r_lo, r_hi, g, _, n)) in enumerate(curves):
             r = 0.5 * (r_lo + r_hi)
             ax.plot(r, g + drawn, color=c, lw=0.8, label=f"μ = {s.p('mu'):g} ({_seeds(n)}) + {drawn}")
             top = max(top, float(np.nanmax(g[r > 1.05], initial=1.0)) + drawn)
-            drawn += 1
-        if not drawn:
-            self.plt.close(fig)
-            return "no gofr.csv in the runs"
         ax.set(xlabel="r / d", ylabel="g(r) + shift", xlim=(0.8, None), ylim=(0, top * 1.15),
                title=f"Fig. 5: g(r), ε = {fam['epsilon']:g}, mean over seeds (first peak cut)")
         self._legend(ax)
@@ -261,14 +261,12 @@ class Figures:
         """Near-contact g against xi = r/d - 1, log-log, with the paper's slope -0.52."""
         if self.per_mu is None:
             return "no parameter sets"
-        fam, members, colors = self._mu_sets()
+        fam, curves = self._mu_curves("gofr_near", "g", ("xi_lo", "xi_hi"))
+        if not curves:
+            return "no gofr_near.csv in the runs"
         fig, ax = self.plt.subplots(figsize=(5.5, 4.5))
         anchor, window = [], []
-        for s, c in zip(members, colors):
-            got = self.mean_curve(s, "gofr_near", "g", ("xi_lo", "xi_hi"))
-            if got is None:
-                continue
-            xi_lo, xi_hi, g, _, n = got
+        for s, c, (xi_lo, xi_hi, g, _, n) in curves:
             xi = np.sqrt(xi_lo * xi_hi)
             ok = g > 0
             a, ae, na = s.stat("alpha")
@@ -280,9 +278,6 @@ class Figures:
                 w = ok & (xi >= lo) & (xi <= hi)
                 anchor += list(np.log(g[w]) + paper.ALPHA * np.log(xi[w]))
                 window += [lo, hi]
-        if not ax.lines:
-            self.plt.close(fig)
-            return "no gofr_near.csv in the runs"
         if anchor:
             xs = np.array([min(window), max(window)])
             ax.loglog(xs, np.exp(np.mean(anchor)) * xs ** -paper.ALPHA, "k--", lw=1.5,
@@ -295,14 +290,11 @@ class Figures:
         """P(zeta) per frictional mu (and F_t/F_n for mu >= 1 when present)."""
         if self.per_mu is None:
             return "no parameter sets"
-        fam, members, colors = self._mu_sets()
         zb = ("zeta_lo", "zeta_hi")
-        got = [(s, c, self.mean_curve(s, "zeta", "P", zb)) for s, c in zip(members, colors) if s.p("mu") > 0]
-        got = [g for g in got if g[2] is not None]
+        fam, got = self._mu_curves("zeta", "P", zb, keep=lambda s: s.p("mu") > 0)
         if not got:
             return "no zeta.csv in the runs (mu = 0 has none)"
-        ratio = [(s, c, self.mean_curve(s, "zeta", "P_ratio", zb)) for s, c, _ in got if s.p("mu") >= 1]
-        ratio = [g for g in ratio if g[2] is not None]
+        _, ratio = self._mu_curves("zeta", "P_ratio", zb, keep=lambda s: s.p("mu") >= 1)
         fig, axes = self.plt.subplots(1, 2 if ratio else 1, figsize=(11 if ratio else 6, 4.2), squeeze=False)
         for s, c, (lo, hi, P, e, n) in got:
             x = 0.5 * (lo + hi)

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ..kernels.pairdist import cell_grid, pair_histograms
+from ..kernels.pairdist import cell_grid, pair_histograms, wrap
 
 
 def _shell(ra, rb):
@@ -39,7 +39,7 @@ def radial_distribution(xm, L_x, L_y, z1, z2, r_max, dr=0.01, xi_min=1e-6, per_d
     """
     if not r_max < 0.5 * min(L_x, L_y):
         raise ValueError(f"g(r) range r_max = {r_max:g} d must be below half the box ({0.5 * min(L_x, L_y):g} d)")
-    xm = np.ascontiguousarray(xm, dtype=np.float64)
+    xm = wrap(xm, L_x, L_y)
     z = xm[:, 2]
     rho = float(((z >= z1) & (z <= z2)).sum()) / (L_x * L_y * (z2 - z1))
     refs = np.flatnonzero((z >= z1 + r_max) & (z <= z2 - r_max)).astype(np.int64)

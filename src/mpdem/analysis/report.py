@@ -122,12 +122,9 @@ def _profile(pk, reg):
         return n_all, z_all / n_all, z_nr / n_nr
 
 
-def _csv(path, header, cols, fmt="%.10g"):
-    """Columns as a CSV file, written atomically."""
-    lines = [",".join(header) + "\n"]
-    for row in zip(*cols):
-        lines.append(",".join(str(int(v)) if isinstance(v, (int, np.integer)) else (fmt % v) for v in row) + "\n")
-    rundir.write_atomic(path, lines)
+def _csv(path, header, cols):
+    """Columns (equal lengths) as a CSV file (``rundir.write_csv``)."""
+    rundir.write_csv(path, header, zip(*cols))
 
 
 def _finite(obj):

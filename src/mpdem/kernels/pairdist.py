@@ -6,8 +6,9 @@ around a point, or a whole row when an axis has fewer than 5 cells. Cells
 are periodic in x and y; in z the cell index is taken modulo a number of
 layers that keeps the grid O(N) (a sphere flown far away must not make a
 huge grid): a wrapped cell only adds candidates that the distance test
-rejects, as z is never periodic. Distances use the minimum image in x and
-y, so each partner is met once when r_max < L / 2.
+rejects, as z is never periodic. Points come wrapped into [0, L) in x and
+y (``wrap``), so the kernels take the minimum image with the simulation's
+``geometry.min_image``, and each partner is met once when r_max < L / 2.
 
 Histograms are integer counts, accumulated per chunk of reference points
 in parallel (numba threads) and summed: the result does not depend on the
@@ -18,8 +19,26 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .geometry import min_image
+
 REACH = 2          # cells scanned either side of a point's own cell
 N_CHUNKS = 64      # work units of the parallel loops (integer results, any thread count)
+
+
+def wrap(x, L_x, L_y):
+    """(n, 3) contiguous float64 copy of positions with x and y wrapped into [0, L) [d]."""
+    w = np.array(x, dtype=np.float64, order="C")
+    w[:, 0] %= L_x
+    w[:, 1] %= L_y
+    return w
+
+
+def separations(x, i, j, L_x, L_y):
+    """(M, 3) x[i] - x[j], minimum image in x and y, for positions in any image [d]."""
+    d = x[i] - x[j]
+    d[:, 0] -= L_x * np.round(d[:, 0] / L_x)
+    d[:, 1] -= L_y * np.round(d[:, 1] / L_y)
+    return d
 
 
 def cell_grid(x, L_x, L_y, r_max):
@@ -27,7 +46,7 @@ def cell_grid(x, L_x, L_y, r_max):
 
     Parameters
     ----------
-    x : (n, 3) float64 positions [d]
+    x : (n, 3) float64 positions [d], wrapped (``wrap``)
     L_x, L_y : float box lengths [d]
     r_max : float largest distance searched [d]
 
@@ -79,12 +98,28 @@ def _span(c, n):
 
 
 @njit(cache=True)
+def _cells_around(p, L_x, L_y, dims, geo, out):
+    """The cells that can hold points within r_max of p: fills ``out``, returns how many (<= 125)."""
+    ix, iy, iz = _cell_of(p, L_x, L_y, dims, geo)
+    ox, nx = _span(ix, dims[0])
+    oy, ny = _span(iy, dims[1])
+    oz, nz = _span(iz, dims[2])
+    k = 0
+    for bz in range(nz):
+        az = (iz + oz + bz) % dims[2]
+        for by in range(ny):
+            cy = (iy + oy + by) % dims[1]
+            for bx in range(nx):
+                out[k] = (az * dims[1] + cy) * dims[0] + (ix + ox + bx) % dims[0]
+                k += 1
+    return k
+
+
+@njit(cache=True)
 def _dist2(x, i, j, L_x, L_y):
-    dx = x[i, 0] - x[j, 0]
-    dy = x[i, 1] - x[j, 1]
+    dx = min_image(x[i, 0] - x[j, 0], L_x, 0.5 * L_x)
+    dy = min_image(x[i, 1] - x[j, 1], L_y, 0.5 * L_y)
     dz = x[i, 2] - x[j, 2]
-    dx -= L_x * np.rint(dx / L_x)
-    dy -= L_y * np.rint(dy / L_y)
     return dx * dx + dy * dy + dz * dz
 
 
@@ -95,7 +130,7 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
 
     Parameters
     ----------
-    x : (n, 3) float64 positions [d] (the partners: all of them)
+    x : (n, 3) float64 positions [d], wrapped (``wrap``); the partners: all of them
     refs : (n_ref,) int64 indices of the reference points in ``x``
     L_x, L_y : float box lengths [d]
     r_max : float counted distances are r < r_max [d]
@@ -118,36 +153,27 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
     r2max = r_max * r_max
     lx0 = math.log10(xi_min)
     for c in prange(N_CHUNKS):
+        cells = np.empty((2 * REACH + 1) ** 3, np.int64)
         for k in range(c * n_ref // N_CHUNKS, (c + 1) * n_ref // N_CHUNKS):
             i = refs[k]
-            ix, iy, iz = _cell_of(x[i], L_x, L_y, dims, geo)
-            ox, nx = _span(ix, dims[0])
-            oy, ny = _span(iy, dims[1])
-            oz, nz = _span(iz, dims[2])
-            for bz in range(nz):
-                az = (iz + oz + bz) % dims[2]
-                for by in range(ny):
-                    cy = (iy + oy + by) % dims[1]
-                    for bx in range(nx):
-                        cx = (ix + ox + bx) % dims[0]
-                        cell = (az * dims[1] + cy) * dims[0] + cx
-                        for s in range(start[cell], start[cell + 1]):
-                            j = order[s]
-                            if j == i:
-                                continue
-                            d2 = _dist2(x, i, j, L_x, L_y)
-                            if d2 >= r2max:
-                                continue
-                            r = math.sqrt(d2)
-                            b = int(r / dr)
-                            if b < n_lin:
-                                lin[c, b] += 1
-                            if r < 1.0:
-                                over[c] += 1
-                            elif r > 1.0 and n_log > 0:
-                                q = int(math.floor((math.log10(r - 1.0) - lx0) * per_decade))
-                                if 0 <= q < n_log:
-                                    lg[c, q] += 1
+            for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
+                for s in range(start[cells[q]], start[cells[q] + 1]):
+                    j = order[s]
+                    if j == i:
+                        continue
+                    d2 = _dist2(x, i, j, L_x, L_y)
+                    if d2 >= r2max:
+                        continue
+                    r = math.sqrt(d2)
+                    b = int(r / dr)
+                    if b < n_lin:
+                        lin[c, b] += 1
+                    if r < 1.0:
+                        over[c] += 1
+                    elif r > 1.0 and n_log > 0:
+                        t = int(math.floor((math.log10(r - 1.0) - lx0) * per_decade))
+                        if 0 <= t < n_log:
+                            lg[c, t] += 1
     return lin.sum(axis=0), lg.sum(axis=0), over.sum()
 
 
@@ -156,27 +182,18 @@ def _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, counts, out_i, ou
     n = x.shape[0]
     r2c = r_c * r_c
     for c in prange(N_CHUNKS):
+        cells = np.empty((2 * REACH + 1) ** 3, np.int64)
         for i in range(c * n // N_CHUNKS, (c + 1) * n // N_CHUNKS):
-            ix, iy, iz = _cell_of(x[i], L_x, L_y, dims, geo)
-            ox, nx = _span(ix, dims[0])
-            oy, ny = _span(iy, dims[1])
             m = 0
             base = counts[i] if fill else 0
-            oz, nz = _span(iz, dims[2])
-            for bz in range(nz):
-                az = (iz + oz + bz) % dims[2]
-                for by in range(ny):
-                    cy = (iy + oy + by) % dims[1]
-                    for bx in range(nx):
-                        cx = (ix + ox + bx) % dims[0]
-                        cell = (az * dims[1] + cy) * dims[0] + cx
-                        for s in range(start[cell], start[cell + 1]):
-                            j = order[s]
-                            if j > i and _dist2(x, i, j, L_x, L_y) < r2c:
-                                if fill:
-                                    out_i[base + m] = i
-                                    out_j[base + m] = j
-                                m += 1
+            for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
+                for s in range(start[cells[q]], start[cells[q] + 1]):
+                    j = order[s]
+                    if j > i and _dist2(x, i, j, L_x, L_y) < r2c:
+                        if fill:
+                            out_i[base + m] = i
+                            out_j[base + m] = j
+                        m += 1
             if not fill:
                 counts[i] = m
 
@@ -186,14 +203,14 @@ def close_pairs(x, L_x, L_y, r_c=1.0):
 
     Parameters
     ----------
-    x : (n, 3) float64 positions [d]
+    x : (n, 3) float64 positions [d], in any image
     r_c : float [d]; needs r_c < L / 2
 
     Returns
     -------
     pairs : (M, 2) int64, sorted by i then by the cell scan order of j
     """
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    x = wrap(x, L_x, L_y)
     n = len(x)
     if n == 0:
         return np.zeros((0, 2), np.int64)
