@@ -1,0 +1,44 @@
+"""Threads within a rank: numba's parallel loops (``--threads T``).
+
+Results do not depend on the thread count: threads split the particles,
+never a sum (design.md, invariant 1), and reductions are max or integer sums.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+
+class ThreadsError(ValueError):
+    """A thread count that cannot be used."""
+
+
+def configure(n):
+    """Use ``n`` numba threads in this process (call before the first step).
+
+    Parameters
+    ----------
+    n : int
+        Threads, >= 1. Above the cores numba sees, numba's pool is enlarged
+        when numba is not imported yet; otherwise the count is refused.
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ThreadsError(f"--threads {n!r}: accepted an integer >= 1")
+    if "numba" not in sys.modules:
+        # numba sizes its pool at import: make room for n threads
+        have = int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0)
+        if n > max(have, os.cpu_count() or 1):
+            os.environ["NUMBA_NUM_THREADS"] = str(n)
+    import numba
+    top = numba.config.NUMBA_NUM_THREADS
+    if n > top:
+        raise ThreadsError(f"--threads {n}: accepted 1 to {top} (numba's pool; set NUMBA_NUM_THREADS "
+                           f"before starting to allow more)")
+    numba.set_num_threads(n)
+    return n
+
+
+def count():
+    """Threads numba uses now."""
+    import numba
+    return numba.get_num_threads()
