@@ -63,8 +63,8 @@ def test_particles_and_contacts_are_conserved(comm):
     assert len(np.unique(ids)) == len(ids) == n_total
     # every contact slot has its mirror on the partner's owner, exactly negated
     slots = {}
-    for part in comm.allgather([(int(st.ids[i]), int(st.slot_id[i, k]), st.slot_ds[i, k].copy())
-                                for i in range(st.n_own) for k in range(st.slot_n[i])]):
+    for part in comm.allgather([(int(st.ids[i]), int(jid), ds.copy())
+                                for i in range(st.n_own) for jid, ds in zip(*st.slots_of(i))]):
         for a, b, ds in part:
             slots[(a, b)] = ds
     fixed_ids = set(np.concatenate(comm.allgather(st.ids[:st.n_own][st.fixed[:st.n_own] == 1])).tolist())

@@ -136,7 +136,7 @@ def test_glancing_frictional_collision_bookkeeping():
     steps_in_contact = 0
     for _ in range(3000):
         eng.step()
-        if st.slot_n[0]:
+        if len(st.slots_of(0)[0]):
             steps_in_contact += 1
             d = st.x[0] - st.x[1]
             r = np.linalg.norm(d)
@@ -149,7 +149,7 @@ def test_glancing_frictional_collision_bookkeeping():
             residual += -(1 - r) * np.cross(n, ft) * eng.phys.dt
             # equal and opposite contact forces
             assert np.array_equal(st.f[0], -st.f[1])
-            assert np.array_equal(st.slot_ds[0, 0], -st.slot_ds[1, 0])
+            assert np.array_equal(st.slots_of(0)[1], -st.slots_of(1)[1])
     assert steps_in_contact > 20
     assert np.abs(momentum() - p0).max() < 1e-13
     dL = angmom() - L0

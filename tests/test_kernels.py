@@ -27,10 +27,10 @@ def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
     ids = g.permutation(n).astype(np.int64) * 3 + 11
     rc = 1.2
     start = np.zeros(n + 1, np.int64)
-    lst = np.zeros(10, np.int64)
-    need = build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst)
-    lst = np.zeros(need, np.int64)
-    assert build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst) == need
+    lst = np.zeros(10, np.int32)
+    need = build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst, 3)
+    lst = np.zeros(need, np.int32)
+    assert build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst, 5) == need
     ref = brute_pairs(x, L_x, L_y, rc)
     for i in range(n):
         got = lst[start[i]:start[i + 1]]

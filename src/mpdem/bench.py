@@ -104,10 +104,7 @@ def run_bench(args, comm):
     if rank != 0:
         return ns
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    arrays = sum(getattr(st, f).nbytes for f in ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref",
-                                                  "slot_n", "slot_id", "slot_ds", "slot_n_new",
-                                                  "slot_id_new", "slot_ds_new"))
-    arrays += sum(b.nbytes for b in (eng.nbr_list, eng.rev, eng.pair_on, eng.pair_val, eng.nbr_start))
+    arrays = eng.memory_bytes()
     print(f"bench: N = {N} mobile + {len(a['id']) - N} bed, mu = {cfg.contact.mu:g}, k_n = {cfg.contact.k_n:g}, "
           f"dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}, ranks = {dom.size}, landed pile {path}")
     print(f"bench: {args.steps} steps in {wall:.2f} s: {ns:.1f} ns per particle-step "

@@ -27,8 +27,6 @@ import numpy as np
 
 from .state import select_contacts
 
-SLOT_FIELDS = ("slot_n", "slot_id", "slot_ds")
-MOVE_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref")
 
 
 class Domain:
@@ -127,7 +125,7 @@ class Domain:
         """Mask of the rows this rank owns among heights z."""
         return self.owner_of(z) == self.rank
 
-    def scatter(self, a, L_x, L_y, slots=16):
+    def scatter(self, a, L_x, L_y):
         """This rank's State from the whole particle set ``a`` held on every rank.
 
         ``a`` has ``id, x, v, omega, fixed`` and, for a state that carries
@@ -135,9 +133,9 @@ class Domain:
         Sets the bounds at the quantiles of the mobile heights first.
         """
         self.set_bounds(a["x"][a["fixed"] == 0, 2])
-        return _local_state(a, np.flatnonzero(self.select(a["x"][:, 2])), L_x, L_y, slots)
+        return _local_state(a, np.flatnonzero(self.select(a["x"][:, 2])), L_x, L_y)
 
-    def distribute(self, a, L_x, L_y, slots=16):
+    def distribute(self, a, L_x, L_y):
         """This rank's State from a share of the particles read by each rank.
 
         ``a`` holds some rows (``id, x, v, omega, f, torque, fixed, count,
@@ -151,7 +149,7 @@ class Domain:
             owner = self.owner_of(a["x"][:, 2])
             parts = [_subset(a, np.flatnonzero(owner == r)) for r in range(self.size)]
             a = merge_sorted(self._alltoall(parts))
-        return _local_state(a, np.arange(len(a["id"])), L_x, L_y, slots)
+        return _local_state(a, np.arange(len(a["id"])), L_x, L_y)
 
     # -- particle movement --
     def rebuild(self, state):
@@ -180,15 +178,12 @@ class Domain:
         out = []
         for r in range(self.size):
             sel = np.flatnonzero(owner == r) if r != self.rank else np.zeros(0, np.int64)
-            out.append(_pack(state, sel) if len(sel) else None)
+            out.append(state.take(sel) if len(sel) else None)
         got = self._alltoall(out)
         keep = np.flatnonzero(~leave)
         if len(keep) != n:
-            _compact(state, keep)
-        for part in got:
-            if part is not None:
-                _append(state, part)
-                self.n_migrated += len(part["ids"])
+            state.keep(keep)
+        self.n_migrated += state.append(got)
 
     def _halo(self, state):
         """Send every rank the owned rows within r_list of its slab; append ghosts."""
@@ -288,11 +283,11 @@ def _subset(a, rows):
     return out
 
 
-def _local_state(a, rows, L_x, L_y, slots):
+def _local_state(a, rows, L_x, L_y):
     """A State of the given rows of a state-array dict (forces and slots if present)."""
     from .state import State
     st = State(a["id"][rows], a["x"][rows], a["v"][rows], a["omega"][rows], a["fixed"][rows],
-               L_x, L_y, slots=slots, capacity=int(1.5 * len(rows)) + 64)
+               L_x, L_y, capacity=int(1.1 * len(rows)) + 64)
     for k in ("f", "torque"):
         if k in a:
             getattr(st, k)[:len(rows)] = a[k][rows]
@@ -309,36 +304,3 @@ def _set_xvw(state, rows, a):
     state.x[rows] = a[:, 0:3]
     state.v[rows] = a[:, 3:6]
     state.omega[rows] = a[:, 6:9]
-
-
-def _pack(state, rows):
-    part = {f: getattr(state, f)[rows].copy() for f in MOVE_FIELDS}
-    cnt = state.slot_n[rows]
-    part["slot_n"] = cnt
-    c = int(cnt.max(initial=0))
-    part["slot_id"] = state.slot_id[rows, :c].copy()
-    part["slot_ds"] = state.slot_ds[rows, :c].copy()
-    return part
-
-
-def _compact(state, keep):
-    k = len(keep)
-    for f in MOVE_FIELDS + SLOT_FIELDS:
-        a = getattr(state, f)
-        a[:k] = a[keep]
-    state.n_own = state.n_rows = k
-
-
-def _append(state, part):
-    m = len(part["ids"])
-    n = state.n_own
-    c = part["slot_id"].shape[1] if part["slot_id"].ndim == 2 else 0
-    if n + m > state.capacity or c > state.n_slots:
-        state.grow(rows=int((n + m) * 1.2) + 16, slots=c)
-    for f in MOVE_FIELDS:
-        getattr(state, f)[n:n + m] = part[f]
-    state.slot_n[n:n + m] = part["slot_n"]
-    state.slot_id[n:n + m] = -1
-    state.slot_id[n:n + m, :c] = part["slot_id"]
-    state.slot_ds[n:n + m, :c] = part["slot_ds"]
-    state.n_own = state.n_rows = n + m

@@ -7,14 +7,16 @@ settle and by the verification tests.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, contact_forces, floor_forces
-from .kernels.integrate import kick, kick_drift, kinetic_energy
-from .kernels.neighbours import build_neighbours, mirror_entries
+from .kernels import history
 from .kernels.exactsum import new_accumulator, to_float
+from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces
+from .kernels.integrate import kick, kick_drift, kinetic_energy
+from .kernels.neighbours import build_neighbours
 
 
 @dataclass(frozen=True)
@@ -56,56 +58,116 @@ class StepInfo:
 class Engine:
     """Advance a State with a Physics over a Domain.
 
+    Between rebuilds the contact history lives with the neighbour list
+    (``hist``, ``touch``, one entry per list entry) and is updated in place;
+    ``sync_slots`` packs it into the state's compact slots, which a rebuild,
+    a migration and a checkpoint use.
+
     Parameters
     ----------
     state : State
     physics : Physics
     domain : Domain
-    reuse_pairs : bool
-        Compute a pair of owned mobile particles once and give the second
-        partner the exact negation (same bits as computing both views).
+
+    Attributes
+    ----------
+    timers : dict of float
+        Seconds spent in "forces", "lists" (rebuilds, communication excluded)
+        and "integration"; communication is ``domain.comm_seconds``.
     """
 
-    def __init__(self, state, physics, domain, reuse_pairs=True):
+    def __init__(self, state, physics, domain):
+        from . import threads
         self.state, self.phys, self.domain = state, physics, domain
-        self.reuse_pairs = reuse_pairs
-        self.model = MODEL_HERTZ if physics.model == "hertz" else MODEL_HOOKE
+        p = physics
+        self.law = Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu),
+                       float(p.gravity), float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE,
+                       bool(p.limit_damping), bool(p.rescale_history))
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
-        self._alloc_lists(max(64, 16 * state.capacity))
+        self.nbr_list = np.zeros(0, np.int32)
+        self.hist = np.zeros((0, 3))
+        self.touch = np.zeros(0, np.uint8)
+        self.has_lists = False
+        state.packer = self.sync_slots
+        self.set_chunks(4 * threads.apply())
+        self._reduce = np.zeros(4)
         self.n_rebuilds = 0
         self.sort_every = 20
         self.info = StepInfo()
+        self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
         self._overlap = 0.0      # this rank's largest overlap of the last force evaluation
         self._contacts = 0       # this rank's contacts of the last force evaluation
         # the driver's per-rank flags (signal, wall time), agreed by max in each step's allreduce
         self.flags = []
 
-    def _alloc_lists(self, size):
-        self.nbr_list = np.zeros(size, np.int64)
-        self.rev = np.full(size, -1, np.int64)
-        self.pair_on = np.zeros(size, np.uint8)
-        self.pair_val = np.zeros((size, 9))
+    def set_chunks(self, nchunk):
+        """Split the rows into ``nchunk`` chunks for the threads (more than threads
+        balances the load); any count gives the same bits."""
+        self.nchunk = int(nchunk)
+        self._chunk_max = np.zeros(self.nchunk)
+        self._chunk_count = np.zeros(self.nchunk, np.int64)
+        self._drift = np.zeros((self.nchunk, 3))
+
+    # -- contact history: list entries <-> compact slots --
+    def sync_slots(self):
+        """Pack the history of the last force evaluation into the state's compact slots."""
+        s = self.state
+        if s.slots_current:
+            return
+        n = s.n_own
+        total = history.count_contacts(n, self.nbr_start, self.touch, s.slot_n, self.nchunk)
+        start = np.zeros(n + 1, np.int64)
+        np.cumsum(s.slot_n[:n], out=start[1:])
+        slot_id = np.empty(total, np.int64)
+        slot_ds = np.empty((total, 3))
+        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.hist, self.touch,
+                                 start, slot_id, slot_ds, self.nchunk)
+        s.slot_id, s.slot_ds = slot_id, slot_ds
+        s.slots_current = True
+
+    def _unpack_slots(self):
+        s = self.state
+        n = s.n_own
+        start = np.zeros(n + 1, np.int64)
+        np.cumsum(s.slot_n[:n], out=start[1:])
+        history.slots_to_entries(n, s.ids, self.nbr_start, self.nbr_list, start, s.slot_id, s.slot_ds,
+                                 self.hist, self.touch, self.nchunk)
+        if self.law.mu == 0.0:
+            # frictionless: Delta s is 0 (physics.md 2.6), whatever an initial file held
+            self.hist[:len(self.touch)] = 0.0
+        s.drop_slots()
 
     # -- neighbour lists --
     def rebuild(self):
         """Migrate/halo (domain), then cell and neighbour lists; reset x_ref."""
+        t = time.perf_counter()
+        c0 = self.domain.comm_seconds
         s = self.state
+        if self.has_lists:
+            self.sync_slots()
         if self.n_rebuilds % self.sort_every == 0:
             self._sort_rows()
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        while True:
-            need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
-                                    self.r_list, self.nbr_start, self.nbr_list)
-            if need <= len(self.nbr_list):
-                break
-            self._alloc_lists(int(need * 1.25) + 64)
-        if self.reuse_pairs:
-            mirror_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.rev)
+        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
+                                self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
+        if need > len(self.nbr_list):
+            self._alloc_lists(int(need * 1.1) + 64)
+            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
+                             self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
+        self._unpack_slots()
+        self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
         self.n_rebuilds += 1
+        self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
+
+    def _alloc_lists(self, size):
+        # the history moved to the slots before the lists were rebuilt: nothing to keep
+        self.nbr_list = np.zeros(size, np.int32)
+        self.hist = np.zeros((size, 3))
+        self.touch = np.zeros(size, np.uint8)
 
     def _sort_rows(self):
         """Order owned rows by cell so neighbours are near in memory.
@@ -124,21 +186,16 @@ class Engine:
 
     # -- forces --
     def forces(self, increment=True):
-        """Contact forces on owned rows; grows contact slots on overflow."""
+        """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
+        t = time.perf_counter()
         s, p = self.state, self.phys
-        while True:
-            max_ov, n_c, needed = contact_forces(
-                s.n_own, s.x, s.v, s.omega, s.fixed, s.ids, self.nbr_start, self.nbr_list,
-                        self.rev, self.pair_on, self.pair_val, s.slot_n, s.slot_id, s.slot_ds,
-                s.slot_n_new, s.slot_id_new, s.slot_ds_new,
-                s.f, s.torque, s.L_x, s.L_y, p.gravity, p.k_n, p.k_t, p.gamma_n, p.gamma_t,
-                p.mu, self.model, p.limit_damping, p.rescale_history, p.dt, increment)
-            if needed <= s.n_slots:
-                break
-            s.grow(slots=needed + 4)
+        max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
+                                     self.hist, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
+                                     increment, self._chunk_max, self._chunk_count)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
-        s.swap_slots()
+        s.slots_current = False
+        self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c
 
     def setup(self):
@@ -156,9 +213,9 @@ class Engine:
         and the next step is bit for bit the one the straight run takes.
         """
         s = self.state
+        self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
         self.rebuild()
         self._overlap = max_overlap
-        self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
         self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
         return self.info
 
@@ -170,17 +227,24 @@ class Engine:
         decides the rebuild. ``info.n_contacts`` is updated by ``contacts()``.
         """
         s, p, dom = self.state, self.phys, self.domain
+        t = time.perf_counter()
         d2, z_min, z_max = kick_drift(s.n_own, s.x, s.v, s.omega, s.f, s.torque, s.fixed,
-                                      s.x_ref, p.dt, s.L_x, s.L_y)
+                                      s.x_ref, p.dt, s.L_x, s.L_y, self._drift)
+        self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
-        d2, overlap, neg_z_min, z_max, *flags = dom.max_many([d2, self._overlap, -z_min, z_max] + self.flags)
+        red = self._reduce
+        red[0], red[1], red[2], red[3] = d2, self._overlap, -z_min, z_max
+        d2, overlap, neg_z_min, z_max, *flags = dom.max_many(red if not self.flags else
+                                                             [d2, self._overlap, -z_min, z_max] + self.flags)
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
         else:
             dom.refresh(s)
         self._overlap, self._contacts = self.forces(increment=True)
+        t = time.perf_counter()
         kick(s.n_own, s.v, s.omega, s.f, s.torque, s.fixed, p.dt)
+        self.timers["integration"] += time.perf_counter() - t
         s.step += 1
         s.time = s.step * p.dt
         info = self.info
@@ -208,6 +272,11 @@ class Engine:
         """Global (translational, rotational) kinetic energy sums [m g d], exact."""
         s = self.state
         acc = new_accumulator(2)
-        kinetic_energy(s.n_own, s.v, s.omega, s.fixed, acc[0], acc[1])
+        kinetic_energy(s.n_own, s.v, s.omega, s.fixed, acc, self.nchunk)
         acc = self.domain.sum_int(acc)
         return to_float(acc[0]), to_float(acc[1])
+
+    def memory_bytes(self):
+        """Bytes held by the particle arrays and the lists with their history."""
+        return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.hist,
+                                                             self.touch))

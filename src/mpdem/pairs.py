@@ -31,12 +31,9 @@ def contact_pairs(state, phys):
     tangential force on i [m g], ``ds_i`` (P, 3) Delta s of i [d].
     """
     s, n, m = state, state.n_own, state.n_rows
+    counts, jid, ds, order_own = s.contacts_flat()
     ids = s.ids[:m]
-    cnt = s.slot_n[:n].astype(np.int64)
-    mask = np.arange(s.n_slots)[None, :] < cnt[:, None]
-    i = np.repeat(np.arange(n), cnt)
-    jid = s.slot_id[:n][mask]
-    ds = s.slot_ds[:n][mask]
+    i = np.repeat(order_own, counts)
     order = np.argsort(ids, kind="stable")
     j = order[np.searchsorted(ids[order], jid)]
     fixed = s.fixed[:m]

@@ -197,7 +197,7 @@ class Run:
         whole = {"id": ids, "x": x, "v": v, "omega": omega, "fixed": fixed}
         if slots is not None:
             whole.update(zip(("count", "partner", "ds"), slots))
-        self.state = self.domain.scatter(whole, L_x, L_y, slots=cfg.integration.contact_slots)
+        self.state = self.domain.scatter(whole, L_x, L_y)
         self._describe()
 
     def _describe(self):
@@ -254,8 +254,7 @@ class Run:
         self.cont["segments"] += 1
         self.n_mobile, self.n_bed = int(attrs["n_mobile"]), int(attrs["n_bed"])
         self.z_bed, self.z_bed_mean, self.h_insert = rs["z_bed"], rs["z_bed_mean"], rs["h_insert"]
-        st = self.state = self.domain.distribute(local, float(attrs["L_x"]), float(attrs["L_y"]),
-                                                 slots=cfg.integration.contact_slots)
+        st = self.state = self.domain.distribute(local, float(attrs["L_x"]), float(attrs["L_y"]))
         st.step, st.time = int(attrs["step"]), float(attrs["time"])
         if self.rank == 0:
             rundir.write_atomic(os.path.join(self.out, "config.toml"), cfg.to_toml())

@@ -1,23 +1,44 @@
-"""Particle arrays: owned rows first, then ghost rows; contact slots per row.
+"""Particle arrays: owned rows first, then ghost rows; compact contact slots.
 
 Rows ``0..n_own-1`` belong to this rank; rows ``n_own..n_rows-1`` are
 read-only ghost copies (filled by ``decomp``). Arrays have a capacity larger
 than ``n_rows`` so ghosts and arriving particles fit without reallocation;
-``grow`` enlarges them. Contact slots of a row hold its partners' ids in
-ascending order and the tangential displacement Delta s of each contact
-(design.md, invariant 2); ``slots`` and ``slots_new`` alternate each step.
+``grow`` enlarges them.
+
+Contact history (design.md, invariant 2) has two homes. Between neighbour
+list rebuilds it lives in the engine, aligned with the list entries and
+updated in place. At a rebuild, a migration and a checkpoint it is here, as
+compact slots of the owned rows in row order: ``slot_n[i]`` partners of row
+i, their ids ascending in ``slot_id`` and their tangential displacements in
+``slot_ds`` (flat, CSR by ``slot_n``). ``slots_current`` says whether the
+slots hold the history of the last force evaluation; when they do not, a
+reader of the slots has the engine pack them first (``packer``, set to
+``Engine.sync_slots``).
 """
 from __future__ import annotations
 
 import numpy as np
 
 ROW_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref")
+# what travels with a particle that changes rank (x_ref is reset at the rebuild)
+MOVE_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed")
 
 
 def select_contacts(counts, partner, ds, rows):
     """The flat contact slots (per-row counts, partners, Delta s) of some rows.
 
-    Returns counts[rows] and the matching segments of ``partner`` and ``ds``.
+    Parameters
+    ----------
+    counts : (n,) int
+        Slots per row.
+    partner : (M,) int64, ds : (M, 3) float64
+        Flat slots of all rows, in row order.
+    rows : (m,) int
+        Rows wanted, in the order wanted.
+
+    Returns
+    -------
+    counts[rows] (m,) int64, and the matching segments of ``partner`` and ``ds``.
     """
     counts = np.asarray(counts, np.int64)
     rows = np.asarray(rows, np.int64)
@@ -25,7 +46,7 @@ def select_contacts(counts, partner, ds, rows):
     c = counts[rows]
     # segment k of the output starts at sum(c[:k]) and reads from starts[rows[k]]
     take = np.arange(c.sum()) + np.repeat(starts[rows] - (np.cumsum(c) - c), c)
-    return c, partner[take], np.asarray(ds).reshape(-1, 3)[take]
+    return c, np.asarray(partner)[take], np.asarray(ds).reshape(-1, 3)[take]
 
 
 class State:
@@ -39,16 +60,19 @@ class State:
         position at the last neighbour-list build.
     fixed : (cap,) uint8
         1 for bed particles.
-    slot_n : (cap,) int64, slot_id : (cap, C) int64, slot_ds : (cap, C, 3)
-        Contact slots (count, partner ids ascending, Delta s [d]).
+    slot_n : (cap,) int32
+        Contacts of each owned row; like the slots, valid when ``slots_current``
+        (``slots_of`` brings them up to date).
+    slot_id : (M,) int64, slot_ds : (M, 3) float64
+        Compact contact slots of the owned rows in row order (partner ids
+        ascending per row, Delta s [d]); valid when ``slots_current``.
     n_own, n_rows : int
     L_x, L_y : float
         Periodic box [d].
     step : int, time : float
     """
 
-    def __init__(self, ids, x, v=None, omega=None, fixed=None, L_x=20.0, L_y=20.0,
-                 slots=16, capacity=None):
+    def __init__(self, ids, x, v=None, omega=None, fixed=None, L_x=20.0, L_y=20.0, capacity=None):
         n = len(ids)
         cap = max(capacity or 0, n, 1)
         self.L_x, self.L_y = float(L_x), float(L_y)
@@ -66,83 +90,50 @@ class State:
             self.omega[:n] = omega
         if fixed is not None:
             self.fixed[:n] = fixed
-        self.slot_n = np.zeros(cap, np.int64)
-        self.slot_id = np.full((cap, slots), -1, np.int64)
-        self.slot_ds = np.zeros((cap, slots, 3))
-        self.slot_n_new = np.zeros_like(self.slot_n)
-        self.slot_id_new = np.full_like(self.slot_id, -1)
-        self.slot_ds_new = np.zeros_like(self.slot_ds)
+        self.slot_n = np.zeros(cap, np.int32)
+        self.slot_id = np.zeros(0, np.int64)
+        self.slot_ds = np.zeros((0, 3))
+        self.slots_current = True
+        # set by the engine that holds the history between rebuilds: packs it into the slots
+        self.packer = None
 
     @property
     def capacity(self):
         return len(self.ids)
 
-    @property
-    def n_slots(self):
-        return self.slot_id.shape[1]
-
-    def grow(self, rows=None, slots=None):
-        """Enlarge row capacity and/or slot capacity, keeping the contents."""
-        rows = max(rows or 0, self.capacity)
-        slots = max(slots or 0, self.n_slots)
-        if rows == self.capacity and slots == self.n_slots:
+    def grow(self, rows):
+        """Enlarge the row capacity to at least ``rows``, keeping the contents."""
+        if rows <= self.capacity:
             return
-        for name in ROW_FIELDS:
+        for name in ROW_FIELDS + ("slot_n",):
             a = getattr(self, name)
             b = np.full((rows,) + a.shape[1:], -1 if name == "ids" else 0, a.dtype)
             b[:len(a)] = a
             setattr(self, name, b)
-        for pre in ("slot_n", "slot_n_new"):
-            a = getattr(self, pre)
-            b = np.zeros(rows, np.int64)
-            b[:len(a)] = a
-            setattr(self, pre, b)
-        for pre in ("slot_id", "slot_id_new"):
-            a = getattr(self, pre)
-            b = np.full((rows, slots), -1, np.int64)
-            b[:a.shape[0], :a.shape[1]] = a
-            setattr(self, pre, b)
-        for pre in ("slot_ds", "slot_ds_new"):
-            a = getattr(self, pre)
-            b = np.zeros((rows, slots, 3))
-            b[:a.shape[0], :a.shape[1]] = a
-            setattr(self, pre, b)
 
-    def swap_slots(self):
-        """Make the slots written this step the current ones."""
-        self.slot_n, self.slot_n_new = self.slot_n_new, self.slot_n
-        self.slot_id, self.slot_id_new = self.slot_id_new, self.slot_id
-        self.slot_ds, self.slot_ds_new = self.slot_ds_new, self.slot_ds
-
-    @property
-    def mobile(self):
-        """Boolean mask of owned mobile rows, shape (n_own,)."""
-        return self.fixed[:self.n_own] == 0
-
-    def owned(self, name):
-        """View of an owned-rows array."""
-        return getattr(self, name)[:self.n_own]
-
-    def permute(self, order):
-        """Reorder the owned rows (ghosts are dropped); arithmetic is unaffected."""
-        n = self.n_own
-        for name in ROW_FIELDS + ("slot_n", "slot_id", "slot_ds"):
-            a = getattr(self, name)
-            a[:n] = a[:n][order]
-        self.n_rows = n
-
+    # -- contact slots --
     def set_contacts(self, counts, partner, ds):
-        """Load contact slots given in row order (counts per row, flat partners, Delta s)."""
+        """Load the owned rows' slots (counts per row, flat partners, Delta s) in row order."""
         n = self.n_own
-        counts = np.asarray(counts, np.int64)
+        counts = np.asarray(counts)
         if len(counts) != n:
             raise ValueError(f"contact counts for {len(counts)} rows, state has {n}")
-        self.grow(slots=int(counts.max(initial=0)))
         self.slot_n[:n] = counts
-        # a row-major mask of the used slots takes the flat slots in order
-        mask = np.arange(self.n_slots)[None, :] < counts[:, None]
-        self.slot_id[:n][mask] = partner
-        self.slot_ds[:n][mask] = np.asarray(ds).reshape(-1, 3)
+        self.slot_id = np.ascontiguousarray(partner, np.int64)
+        self.slot_ds = np.ascontiguousarray(np.asarray(ds, np.float64).reshape(-1, 3))
+        self.slots_current = True
+
+    def drop_slots(self):
+        """Free the compact slots (the engine holds the history between rebuilds)."""
+        self.slot_id = np.zeros(0, np.int64)
+        self.slot_ds = np.zeros((0, 3))
+        self.slots_current = False
+
+    def _check_slots(self):
+        if not self.slots_current:
+            if self.packer is None:
+                raise RuntimeError("contact slots are stale and no engine holds the history")
+            self.packer()
 
     def contacts_flat(self):
         """Owned contact slots as flat arrays sorted by particle id.
@@ -154,10 +145,73 @@ class State:
         ds : (M, 3) float64
         order : (n_own,) int64, the row order by id
         """
+        self._check_slots()
         n = self.n_own
         order = np.argsort(self.ids[:n], kind="stable")
-        counts = self.slot_n[:n][order]
-        mask = np.arange(self.n_slots)[None, :] < counts[:, None]
-        partner = self.slot_id[:n][order][mask]
-        ds = self.slot_ds[:n][order][mask]
+        counts, partner, ds = select_contacts(self.slot_n[:n], self.slot_id, self.slot_ds, order)
         return counts, partner, ds, order
+
+    def slots_of(self, i):
+        """Partner ids (m,) int64 and Delta s (m, 3) [d] of owned row i."""
+        self._check_slots()
+        start = int(self.slot_n[:i].sum())
+        m = int(self.slot_n[i])
+        return self.slot_id[start:start + m], self.slot_ds[start:start + m]
+
+    # -- moving rows --
+    def permute(self, order):
+        """Reorder the owned rows (ghosts are dropped); arithmetic is unaffected."""
+        self._check_slots()
+        n = self.n_own
+        c, self.slot_id, self.slot_ds = select_contacts(self.slot_n[:n], self.slot_id, self.slot_ds, order)
+        for name in ROW_FIELDS:
+            a = getattr(self, name)
+            a[:n] = a[:n][order]
+        self.slot_n[:n] = c
+        self.n_rows = n
+
+    def take(self, rows):
+        """Copies of some owned rows with their slots: MOVE_FIELDS and ``slot_n, slot_id, slot_ds``."""
+        self._check_slots()
+        part = {f: getattr(self, f)[rows] for f in MOVE_FIELDS}
+        part["slot_n"], part["slot_id"], part["slot_ds"] = select_contacts(
+            self.slot_n[:self.n_own], self.slot_id, self.slot_ds, rows)
+        return part
+
+    def keep(self, rows):
+        """Keep only these owned rows (ascending), with their slots; ghosts are dropped."""
+        self._check_slots()
+        k = len(rows)
+        c, self.slot_id, self.slot_ds = select_contacts(self.slot_n[:self.n_own], self.slot_id,
+                                                        self.slot_ds, rows)
+        for f in MOVE_FIELDS:
+            a = getattr(self, f)
+            a[:k] = a[rows]
+        self.slot_n[:k] = c
+        self.n_own = self.n_rows = k
+
+    def append(self, parts):
+        """Append owned rows given as ``take`` dicts (ghosts are dropped)."""
+        self._check_slots()
+        parts = [p for p in parts if p is not None and len(p["ids"])]
+        if not parts:
+            return 0
+        n = self.n_own
+        m = sum(len(p["ids"]) for p in parts)
+        if n + m > self.capacity:
+            self.grow(int((n + m) * 1.2) + 16)
+        k = n
+        for p in parts:
+            q = len(p["ids"])
+            for f in MOVE_FIELDS:
+                getattr(self, f)[k:k + q] = p[f]
+            self.slot_n[k:k + q] = p["slot_n"]
+            k += q
+        self.slot_id = np.concatenate([self.slot_id] + [p["slot_id"] for p in parts])
+        self.slot_ds = np.concatenate([self.slot_ds] + [np.asarray(p["slot_ds"]).reshape(-1, 3) for p in parts])
+        self.n_own = self.n_rows = n + m
+        return m
+
+    def nbytes(self):
+        """Bytes held by the particle arrays and slots."""
+        return sum(getattr(self, f).nbytes for f in ROW_FIELDS + ("slot_n", "slot_id", "slot_ds"))

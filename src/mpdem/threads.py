@@ -13,6 +13,10 @@ class ThreadsError(ValueError):
     """A thread count that cannot be used."""
 
 
+# threads of the time-step kernels: one per rank unless asked (numba's own default is every core)
+_requested = 1
+
+
 def configure(n):
     """Use ``n`` numba threads in this process (call before the first step).
 
@@ -35,10 +39,13 @@ def configure(n):
         raise ThreadsError(f"--threads {n}: accepted 1 to {top} (numba's pool; set NUMBA_NUM_THREADS "
                            f"before starting to allow more)")
     numba.set_num_threads(n)
+    global _requested
+    _requested = n
     return n
 
 
-def count():
-    """Threads numba uses now."""
+def apply():
+    """Set numba to the requested count (1 unless ``configure`` asked for more); returns it."""
     import numba
+    numba.set_num_threads(min(_requested, numba.config.NUMBA_NUM_THREADS))
     return numba.get_num_threads()

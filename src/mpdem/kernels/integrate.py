@@ -1,11 +1,12 @@
 """Velocity Verlet for translation and rotation (physics.md section 4.1)."""
 import math
 
-from numba import njit
+import numpy as np
+from numba import njit, prange
 
 from .geometry import min_image
 
-from .exactsum import add_exact
+from .exactsum import NLIMBS, add_exact
 from .forces import INV_I
 
 
@@ -17,8 +18,8 @@ def _half_kick(i, v, omega, f, torque, h):
         omega[i, a] += h * INV_I * torque[i, a]
 
 
-@njit(cache=True)
-def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
+@njit(cache=True, parallel=True)
+def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, scratch):
     """First half-kick and drift of owned mobile rows; wrap x and y.
 
     Parameters
@@ -29,6 +30,8 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
         Positions at the last neighbour-list build.
     dt : float
         Time step [tau].
+    scratch : (C, 3) float64
+        One row per chunk of rows for the threads (any C >= 1, same result).
 
     Returns
     -------
@@ -38,6 +41,32 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
     z_min, z_max : float
         Lowest and highest mobile centre [d] (inf / -inf if none).
     """
+    nchunk = scratch.shape[0]
+    for c in prange(nchunk):
+        d2, zlo, zhi = _kick_drift_rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega,
+                                        f, torque, fixed, x_ref, dt, L_x, L_y)
+        scratch[c, 0] = d2
+        scratch[c, 1] = zlo
+        scratch[c, 2] = zhi
+    max_d2 = 0.0
+    z_min = math.inf
+    z_max = -math.inf
+    bad = False
+    for c in range(nchunk):
+        if math.isnan(scratch[c, 0]):
+            bad = True
+        elif scratch[c, 0] > max_d2:
+            max_d2 = scratch[c, 0]
+        z_min = min(z_min, scratch[c, 1])
+        z_max = max(z_max, scratch[c, 2])
+    if bad:
+        max_d2 = math.nan
+    return max_d2, z_min, z_max
+
+
+@njit(cache=True)
+def _kick_drift_rows(lo, hi, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
+    """Rows lo..hi-1 of ``kick_drift``; returns (max d^2 or NaN, z_min, z_max)."""
     h = 0.5 * dt
     hx = 0.5 * L_x
     hy = 0.5 * L_y
@@ -45,7 +74,7 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
     z_min = math.inf
     z_max = -math.inf
     bad = False
-    for i in range(n_own):
+    for i in range(lo, hi):
         if fixed[i]:
             continue
         _half_kick(i, v, omega, f, torque, h)
@@ -82,28 +111,39 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
     return max_d2, z_min, z_max
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def kick(n_own, v, omega, f, torque, fixed, dt):
     """Second half-kick of owned mobile rows (m = 1, I = 0.1)."""
     h = 0.5 * dt
-    for i in range(n_own):
+    for i in prange(n_own):
         if not fixed[i]:
             _half_kick(i, v, omega, f, torque, h)
 
 
-@njit(cache=True)
-def kinetic_energy(n_own, v, omega, fixed, acc_trans, acc_rot):
-    """Add the kinetic energies of owned mobile rows to exact accumulators.
+@njit(cache=True, parallel=True)
+def kinetic_energy(n_own, v, omega, fixed, acc, nchunk):
+    """Kinetic energies of owned mobile rows as exact fixed-point sums.
 
-    ``acc_trans`` gets sum(1/2 m v^2) and ``acc_rot`` sum(1/2 I omega^2), each
-    as an exact fixed-point integer sum (see ``exactsum``), so the total is
-    independent of how particles are split over ranks.
+    Parameters
+    ----------
+    acc : (2, NLIMBS) int64, out
+        ``acc[0]`` gets sum(1/2 m v^2) and ``acc[1]`` sum(1/2 I omega^2), each
+        an exact integer sum (see ``exactsum``), so the totals do not depend
+        on how particles are split over ranks or threads.
+    nchunk : int
+        Chunks of rows for the threads.
     """
-    for i in range(n_own):
-        if fixed[i]:
-            continue
-        et = 0.5 * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
-        er = 0.05 * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
-                     + omega[i, 2] * omega[i, 2])
-        add_exact(acc_trans, et)
-        add_exact(acc_rot, er)
+    part = np.zeros((nchunk, 2, NLIMBS), np.int64)
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            if fixed[i]:
+                continue
+            et = 0.5 * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
+            er = 0.05 * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
+                         + omega[i, 2] * omega[i, 2])
+            add_exact(part[c, 0], et)
+            add_exact(part[c, 1], er)
+    for c in range(nchunk):
+        for a in range(2):
+            for k in range(NLIMBS):
+                acc[a, k] += part[c, a, k]

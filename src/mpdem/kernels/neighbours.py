@@ -4,9 +4,13 @@ Positions are wrapped into [0, L_x) x [0, L_y); z is open. Cells are at
 least ``r_list`` wide. In z the cell index is hashed modulo ``nz`` when the
 pile is very tall or a particle flies far away, so memory stays O(N); a hashed
 cell only adds candidates that the distance test rejects.
+
+Lists are built in two passes over the rows (count, then fill), each split
+over threads by rows; a row's list depends only on the positions, so the
+lists are the same for any thread count.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .geometry import min_image
 
@@ -18,8 +22,92 @@ def _cell_axis(length, r_list):
 
 
 @njit(cache=True)
-def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list,
-                     nbr_start, nbr_list):
+def _bin(x, n_rows, L_x, L_y, r_list):
+    """Counting sort of rows into cells: (nx, ny, nz, cell start (ncell + 1,), rows by cell)."""
+    nx = _cell_axis(L_x, r_list)
+    ny = _cell_axis(L_y, r_list)
+    cx = L_x / nx
+    cy = L_y / ny
+    zmin = np.inf
+    zmax = -np.inf
+    for i in range(n_rows):
+        z = x[i, 2]
+        if z < zmin:
+            zmin = z
+        if z > zmax:
+            zmax = z
+    nz_true = int((zmax - zmin) / r_list) + 1 if n_rows > 0 else 1
+    # bound the grid to O(rows): hash z cells beyond that (see module doc)
+    nz_cap = max(3, 4 * (n_rows // (nx * ny)) + 8)
+    nz = min(nz_true, nz_cap)
+    ncell = nx * ny * nz
+    cell = np.empty(n_rows, np.int32)
+    count = np.zeros(ncell + 1, np.int32)
+    for i in range(n_rows):
+        ix = min(int(x[i, 0] / cx), nx - 1)
+        iy = min(int(x[i, 1] / cy), ny - 1)
+        iz = int((x[i, 2] - zmin) / r_list) % nz
+        c = (iz * ny + iy) * nx + ix
+        cell[i] = c
+        count[c + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    order = np.empty(n_rows, np.int32)
+    fill = count[:-1].copy()
+    for i in range(n_rows):
+        c = cell[i]
+        order[fill[c]] = i
+        fill[c] += 1
+    return nx, ny, nz, cell, count, order
+
+
+@njit(cache=True)
+def _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
+              nbr_list, first, write):
+    """Partners of row i within the list cutoff; written from ``first`` (sorted by id) if ``write``.
+
+    Returns the number of partners.
+    """
+    hx = 0.5 * L_x
+    hy = 0.5 * L_y
+    c = cell[i]
+    ix = c % nx
+    iy = (c // nx) % ny
+    iz = c // (nx * ny)
+    # distinct neighbouring cells along each axis (all cells if fewer than 3)
+    ox = 3 if nx >= 3 else nx
+    oy = 3 if ny >= 3 else ny
+    oz = 3 if nz >= 3 else nz
+    total = first
+    for a in range(oz):
+        jz = (iz + a - 1) % nz if nz >= 3 else a
+        for b in range(oy):
+            jy = (iy + b - 1) % ny if ny >= 3 else b
+            for e in range(ox):
+                jx = (ix + e - 1) % nx if nx >= 3 else e
+                cc = (jz * ny + jy) * nx + jx
+                for kk in range(count[cc], count[cc + 1]):
+                    j = order[kk]
+                    if j == i:
+                        continue
+                    dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
+                    dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
+                    dz = x[i, 2] - x[j, 2]
+                    if dx * dx + dy * dy + dz * dz < r2:
+                        if write:
+                            # insertion sort by partner id keeps the list ordered
+                            p = total
+                            jid = ids[j]
+                            while p > first and ids[nbr_list[p - 1]] > jid:
+                                nbr_list[p] = nbr_list[p - 1]
+                                p -= 1
+                            nbr_list[p] = j
+                        total += 1
+    return total - first
+
+
+@njit(cache=True, parallel=True)
+def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, nbr_list, nchunk):
     """Full neighbour lists of the owned mobile rows, each sorted by partner id.
 
     Parameters
@@ -39,122 +127,35 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list,
         List cutoff, contact distance plus skin [d].
     nbr_start : (n_own + 1,) int64, out
         CSR offsets into ``nbr_list``.
-    nbr_list : (cap,) int64, out
+    nbr_list : (cap,) int32, out
         Partner rows.
+    nchunk : int
+        Chunks of rows for the threads (any value gives the same lists).
 
     Returns
     -------
     int
-        Entries needed. If larger than ``len(nbr_list)``, nothing useful was
-        written past the capacity: grow ``nbr_list`` and call again.
+        Entries needed. If larger than ``len(nbr_list)``, only ``nbr_start``
+        was written: grow ``nbr_list`` and call again.
     """
-    cap = nbr_list.shape[0]
-    nx = _cell_axis(L_x, r_list)
-    ny = _cell_axis(L_y, r_list)
-    cx = L_x / nx
-    cy = L_y / ny
-    zmin = np.inf
-    zmax = -np.inf
-    for i in range(n_rows):
-        z = x[i, 2]
-        if z < zmin:
-            zmin = z
-        if z > zmax:
-            zmax = z
-    nz_true = int((zmax - zmin) / r_list) + 1 if n_rows > 0 else 1
-    # bound the grid to O(rows): hash z cells beyond that (see module doc)
-    nz_cap = max(3, 4 * (n_rows // (nx * ny)) + 8)
-    nz = min(nz_true, nz_cap)
-    ncell = nx * ny * nz
-    cell = np.empty(n_rows, np.int64)
-    count = np.zeros(ncell + 1, np.int64)
-    for i in range(n_rows):
-        ix = min(int(x[i, 0] / cx), nx - 1)
-        iy = min(int(x[i, 1] / cy), ny - 1)
-        iz = int((x[i, 2] - zmin) / r_list) % nz
-        c = (iz * ny + iy) * nx + ix
-        cell[i] = c
-        count[c + 1] += 1
-    for c in range(ncell):
-        count[c + 1] += count[c]
-    order = np.empty(n_rows, np.int64)
-    fill = count[:-1].copy()
-    for i in range(n_rows):
-        c = cell[i]
-        order[fill[c]] = i
-        fill[c] += 1
-
-    # distinct neighbouring cells along each axis (all cells if fewer than 3)
-    ox = 3 if nx >= 3 else nx
-    oy = 3 if ny >= 3 else ny
-    oz = 3 if nz >= 3 else nz
+    nx, ny, nz, cell, count, order = _bin(x, n_rows, L_x, L_y, r_list)
     r2 = r_list * r_list
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
-    total = 0
+    nbr_start[0] = 0
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            m = 0
+            if not fixed[i]:
+                m = _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
+                              nbr_list, 0, False)
+            nbr_start[i + 1] = m
     for i in range(n_own):
-        nbr_start[i] = total
-        if fixed[i]:
-            continue
-        c = cell[i]
-        ix = c % nx
-        iy = (c // nx) % ny
-        iz = c // (nx * ny)
-        first = total
-        for a in range(oz):
-            jz = (iz + a - 1) % nz if nz >= 3 else a
-            for b in range(oy):
-                jy = (iy + b - 1) % ny if ny >= 3 else b
-                for e in range(ox):
-                    jx = (ix + e - 1) % nx if nx >= 3 else e
-                    cc = (jz * ny + jy) * nx + jx
-                    for k in range(count[cc], count[cc + 1]):
-                        j = order[k]
-                        if j == i:
-                            continue
-                        dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
-                        dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
-                        dz = x[i, 2] - x[j, 2]
-                        if dx * dx + dy * dy + dz * dz < r2:
-                            if total < cap:
-                                # insertion sort by partner id keeps the list ordered
-                                p = total
-                                jid = ids[j]
-                                while p > first and ids[nbr_list[p - 1]] > jid:
-                                    nbr_list[p] = nbr_list[p - 1]
-                                    p -= 1
-                                nbr_list[p] = j
-                            total += 1
-    nbr_start[n_own] = total
+        nbr_start[i + 1] += nbr_start[i]
+    total = nbr_start[n_own]
+    if total > len(nbr_list):
+        return total
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            if not fixed[i]:
+                _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
+                          nbr_list, nbr_start[i], True)
     return total
-
-
-@njit(cache=True)
-def mirror_entries(n_own, fixed, ids, nbr_start, nbr_list, rev):
-    """For each list entry i -> j with j an owned mobile row, the entry j -> i.
-
-    Lists are symmetric (the distance test is exactly mirror-symmetric) and
-    sorted by id, so the mirror entry is found by bisection. ``rev`` gets -1
-    where the partner is a ghost or a bed particle.
-
-    Parameters
-    ----------
-    rev : (len(nbr_list),) int64, out
-    """
-    for i in range(n_own):
-        idi = ids[i]
-        for k in range(nbr_start[i], nbr_start[i + 1]):
-            j = nbr_list[k]
-            if j >= n_own or fixed[j]:
-                rev[k] = -1
-                continue
-            lo = nbr_start[j]
-            hi = nbr_start[j + 1]
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if ids[nbr_list[mid]] < idi:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            rev[k] = lo
-

@@ -1,0 +1,92 @@
+"""Contact history between its two homes: list entries and compact slots.
+
+Between rebuilds the history of row i's contact with partner j is at the
+neighbour-list entry k of that pair (``hist[k]``, ``touch[k]``). At a rebuild,
+a migration or a checkpoint it is in compact per-row slots (partner ids
+ascending, Delta s), which travel with the particle (design.md, invariant 2).
+Both are sorted by partner id, so each direction is one merge per row.
+"""
+from numba import njit, prange
+
+
+@njit(cache=True, parallel=True)
+def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
+    """slot_n[i] = entries of row i in contact, for the owned rows.
+
+    Parameters
+    ----------
+    nbr_start : (n_own + 1,) int64; touch : (E,) uint8
+    slot_n : (n_own,) int32, out
+    nchunk : int
+        Chunks of rows for the threads.
+
+    Returns
+    -------
+    int : total contacts.
+    """
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            m = 0
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                m += touch[k]
+            slot_n[i] = m
+    total = 0
+    for i in range(n_own):
+        total += slot_n[i]
+    return total
+
+
+@njit(cache=True, parallel=True)
+def entries_to_slots(n_own, ids, nbr_start, nbr_list, hist, touch, slot_start, slot_id, slot_ds,
+                     nchunk):
+    """Pack the entries in contact into compact slots.
+
+    Parameters
+    ----------
+    ids : (n_rows,) int64
+    nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32
+    hist : (E, 3) float64, touch : (E,) uint8
+    slot_start : (n_own + 1,) int64
+        Offsets of each row's slots (prefix sum of ``count_contacts``).
+    slot_id : (M,) int64, slot_ds : (M, 3) float64, out
+    """
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            p = slot_start[i]
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                if touch[k]:
+                    slot_id[p] = ids[nbr_list[k]]
+                    for a in range(3):
+                        slot_ds[p, a] = hist[k, a]
+                    p += 1
+
+
+@njit(cache=True, parallel=True)
+def slots_to_entries(n_own, ids, nbr_start, nbr_list, slot_start, slot_id, slot_ds, hist, touch,
+                     nchunk):
+    """Unpack compact slots onto the entries of new neighbour lists.
+
+    A slot whose partner is not in the new list is dropped: the pair is
+    beyond the list cutoff, so not in contact. Zeros are stored as +0.0.
+
+    Parameters
+    ----------
+    slot_start : (n_own + 1,) int64, slot_id : (M,) int64, slot_ds : (M, 3) float64
+    hist : (E, 3) float64, touch : (E,) uint8, out
+    """
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            p = slot_start[i]
+            pe = slot_start[i + 1]
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                jid = ids[nbr_list[k]]
+                while p < pe and slot_id[p] < jid:
+                    p += 1
+                if p < pe and slot_id[p] == jid:
+                    touch[k] = 1
+                    for a in range(3):
+                        hist[k, a] = slot_ds[p, a] + 0.0
+                else:
+                    touch[k] = 0
+                    for a in range(3):
+                        hist[k, a] = 0.0
