@@ -120,6 +120,46 @@ def test_pile_too_small_for_the_ranks(comm):
         assert s["digest"] == ref
 
 
+def write_stack(path, layers=8, n=5, L=6.0, gap=0.001, jitter=0.0002, seed=3):
+    """A loose body-centred stack of n x n layers on an n x n bed in an L x L box.
+
+    Each sphere sits over a hollow of the layer below, ``gap`` [d] above
+    contact, shifted by up to ``jitter`` [d] in x and y; it closes under
+    gravity in a few hundred steps. Ids: mobile spheres first, then the bed.
+    """
+    a = L / n
+    grid = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * a
+    h = np.sqrt(1.0 - a * a / 2) + gap
+    mob = np.concatenate([np.column_stack([(grid + a / 2 * (k % 2 == 0)) % L, np.full(n * n, 0.5 + (k + 1) * h)])
+                          for k in range(layers)])
+    mob[:, :2] = (mob[:, :2] + jitter * np.random.default_rng(seed).uniform(-1, 1, (len(mob), 2))) % L
+    x = np.concatenate([mob, np.column_stack([grid, np.full(n * n, 0.5)])])
+    fixed = np.r_[np.zeros(len(mob), np.uint8), np.ones(n * n, np.uint8)]
+    build.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_frictionless_pile_matches_one_rank(comm, mu):
+    """mu = 0 with gamma_t > 0: the stored Delta s are exact zeros (or, if
+    physics.md 2.4 is run with mu = 0, -m_eff gamma_t v_t / k_t); a zero must
+    be +0.0 whichever partner computed the pair, else its sign, hence the
+    digest, depends on the ranks. mu = 0.5 is the control: the same stack
+    with friction."""
+    base = shared_dir(comm)
+    p = os.path.join(base, "stack.txt")
+    if comm.Get_rank() == 0:
+        write_stack(p)
+    comm.Barrier()
+    cfg = config.load(None, ["run.max_steps=1500", "box.L_x=6.0", "box.L_y=6.0", f'run.initial_file="{p}"',
+                             "output.progress_every=100000", f"contact.mu={mu}", "contact.gamma_t=25.7"])
+    r, s = run(cfg, os.path.join(base, "fp"), comm)
+    n_contacts = r.engine.contacts()
+    ref = serial_digest(cfg, os.path.join(base, "fs"), comm)
+    assert n_contacts > 2 * r.n_mobile        # the stack has closed: contacts all the way up
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref
+
+
 def test_a_rank_that_owns_nothing(comm):
     """Bounds pushed so that rank 0 owns nothing for a while: same digest."""
     cfg = config.load(None, PILE + ["run.max_steps=3000", "decomp.balance_tolerance=100.0"])
