@@ -28,8 +28,10 @@ test-mpi:
 	  done; \
 	else echo "== no mpi_tests yet"; fi
 
+# The LAMMPS side-by-side case from a particle table: make bench TABLE=path/to/landed20k.txt.gz
 bench: setup
-	$(PY) -m mpdem bench
+	@test -n "$(TABLE)" || { echo "make bench TABLE=path/to/landed20k.txt.gz: bench needs a particle table"; exit 2; }
+	$(PY) -m mpdem bench --table "$(TABLE)"
 
 clean:
 	rm -rf runs .pytest_cache

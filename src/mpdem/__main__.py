@@ -1,12 +1,13 @@
 """Command line: ``python -m mpdem run|restart|analyze|collect|info|export|bench``.
 
-    python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS]
-    python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS]
+    python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS] [--threads T]
+    python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...]
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem info FILE [--digest]
     python -m mpdem export FILE --format lammps-dump|xyz [--out PATH]
-    python -m mpdem bench [--steps N] [--set ...]
+    python -m mpdem bench --table FILE [--steps S] [--threads T] [--tile NXxNY] [--set ...]
+    python -m mpdem bench --io|--analysis [--N 1000000]
 
 Exit status: 0 finished (converged), 3 finished at run.max_steps without
 converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
@@ -45,6 +46,30 @@ def walltime(text):
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--walltime {text!r}: accepted [D-]HH:MM:SS, MM:SS or seconds, greater than 0") from None
+
+
+def positive_int(flag):
+    """argparse type: an integer >= 1, refused with a message naming ``flag``."""
+    def parse(text):
+        try:
+            n = int(text)
+            if n >= 1:
+                return n
+        except ValueError:
+            pass
+        raise argparse.ArgumentTypeError(f"{flag} {text!r}: accepted an integer >= 1")
+    return parse
+
+
+def tile(text):
+    """``NXxNY`` -> (NX, NY), both >= 1 (argparse type of --tile)."""
+    try:
+        nx, ny = (int(t) for t in text.lower().split("x"))
+        if nx >= 1 and ny >= 1:
+            return nx, ny
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(f"--tile {text!r}: accepted NXxNY with integers NX, NY >= 1 (e.g. 2x2)")
 
 
 def start_mpi():
@@ -226,11 +251,29 @@ def _quiet(quiet):
 
 
 def cmd_bench(args, comm):
-    from .bench import run_analysis_bench, run_bench, run_io_bench
-    if args.io and args.analysis:
-        raise NotImplementedError("bench: choose one of --io and --analysis")
-    (run_io_bench if args.io else run_analysis_bench if args.analysis else run_bench)(args, comm)
+    from .bench import run_analysis_bench, run_io_bench, run_table_bench
+    (run_io_bench if args.io else run_analysis_bench if args.analysis else run_table_bench)(args, comm)
     return EXIT_OK
+
+
+def check_bench_mode(p, args):
+    """Exactly one bench mode: --table FILE (the default bench), --io or --analysis (usage error otherwise)."""
+    modes = [flag for flag, on in (("--table", args.table is not None), ("--io", args.io),
+                                   ("--analysis", args.analysis)) if on]
+    if not modes:
+        p.error("bench needs --table FILE: a particle table (id x y z [vx vy vz] [fixed], plain or gzip), "
+                "e.g. --table path/to/landed20k.txt.gz; or --io or --analysis")
+    if len(modes) > 1:
+        p.error(f"bench: choose one of {', '.join(modes)}")
+
+
+def threads_wanted(args):
+    """numba threads the command asks for: --threads, else 1 for run, restart and the table
+    bench; None (numba's default) for the other commands and bench --io/--analysis."""
+    n = getattr(args, "threads", None)
+    if n is None and (args.cmd in ("run", "restart") or (args.cmd == "bench" and args.table is not None)):
+        n = 1
+    return n
 
 
 def parser():
@@ -249,6 +292,8 @@ def parser():
                     help="change run.max_steps, stop.*, checks.*, decomp.*, output.* or analysis.*")
     rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
     for q in (r, rs):
+        q.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
+                       help="numba threads per rank (default 1)")
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
                        help="write a checkpoint and exit (status 75) before this much wall time")
         q.add_argument("--walltime-margin", type=margin, default=None, metavar="SECONDS",
@@ -258,13 +303,21 @@ def parser():
     e.add_argument("file")
     e.add_argument("--format", required=True, choices=("lammps-dump", "xyz"))
     e.add_argument("--out", help="output path (default: FILE with .dump or .xyz)")
-    b = sub.add_parser("bench", help="benchmark: ns per particle-step on a landed pile")
-    b.add_argument("--steps", type=int, default=2000, help="timed steps (default 2000)")
-    b.add_argument("--N", type=int, default=20000, help="mobile spheres (default 20000)")
-    b.add_argument("--mu", type=float, default=0.5)
+    b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
+                                      "or checkpoint IO (--io), or analysis (--analysis)")
+    b.add_argument("--table", metavar="FILE",
+                   help="particle table to time (id x y z [vx vy vz] [fixed], plain or gzip), "
+                        "e.g. path/to/landed20k.txt.gz; LAMMPS's settings of lammps_table.in")
+    b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
+    b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",
+                   help="numba threads per rank (default 1 with --table; numba's default otherwise)")
+    b.add_argument("--tile", type=tile, default=(1, 1), metavar="NXxNY",
+                   help="time NX x NY copies of the table side by side in x and y (e.g. 2x2)")
+    b.add_argument("--N", type=int, default=20000, help="spheres of --io and --analysis (default 20000)")
+    b.add_argument("--mu", type=float, default=0.5, help="friction of the --analysis pile (default 0.5)")
     b.add_argument("--cache", default=None, help="directory for the landed pile (default ~/.cache/mpdem/bench)")
     b.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override a value of the timed part (e.g. integration.skin=0.3)")
+                   help="override a value of the --table bench (e.g. box.L_x=10 integration.skin=0.3)")
     b.add_argument("--io", action="store_true",
                    help="time a checkpoint write and read of N synthetic particles instead "
                         "(the file goes to --cache, default the system temp directory)")
@@ -296,16 +349,31 @@ def main(argv=None):
     import signal
     old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
            for s in (signal.SIGTERM, signal.SIGUSR1)}
+    # an in-process caller (tests) gets its numba thread count back
+    old_threads = sys.modules["numba"].get_num_threads() if "numba" in sys.modules else None
     try:
         return _main(argv)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        if old_threads is not None:
+            sys.modules["numba"].set_num_threads(old_threads)
 
 
 def _main(argv):
-    args = parser().parse_args(argv)
+    p = parser()
+    args = p.parse_args(argv)
+    if args.cmd == "bench":
+        check_bench_mode(p, args)
     comm = start_mpi()
+    # before anything imports the numba kernels (numba sizes its pool at import)
+    from .threads import ThreadsError, configure
+    n_threads = threads_wanted(args)
+    try:
+        if n_threads is not None:
+            configure(n_threads)
+    except ThreadsError as e:
+        _fail(comm, f"mpdem: error: {e}")
     from .build import InputError
     from .checkpoint import StateFileError
     from .config import ConfigError

@@ -1,19 +1,26 @@
-"""``python -m mpdem bench``: nanoseconds per particle-step on a landed pile.
+"""``python -m mpdem bench``: nanoseconds per atom-step, beside LAMMPS.
 
-The case (fixed, so figures compare across versions and with LAMMPS):
-N = 20 000 mobile spheres on the rough bed of a 20 d x 20 d box, Hookean,
-k_n = 2e5, epsilon = 0.88, gamma_t = 0, mu = 0.5, dt = 1e-4, skin 0.2 d.
-The landed pile is made once per machine and cached (about 8 minutes on
-one core): poured at phi_i = 0.3 with the benchmark's own physics and run
-for 25 tau (250 000 steps), by which time it has landed (E_k/N ~ 1e-3,
-about 4.5 contacts per particle). The timed part continues it for
-``--steps`` steps (default 2000) after 200 untimed steps (kernels compiled,
-lists built). It prints ns
-per particle-step, the share in neighbour-list rebuilds, and the peak
-memory per particle.
+``bench --table FILE`` (the default bench) starts from a particle table
+(``build.read_table``: plain or gzip; e.g. ../shared/bench/landed20k.txt.gz)
+and times ``--steps`` steps (default 2000) of the physics.md model with the
+settings of ../shared/bench/lammps_table.in: Hooke, k_n = 2e5, epsilon =
+0.88, gamma_t = gamma_n / 2, mu = 0.5, dt = 1e-4, skin 0.2 d, box 20 d x 20 d
+(``--set`` overrides any of them), ``--tile NXxNY`` copies of the table side
+by side. Untimed first: the kernels on a tiny pile (then the memory
+baseline), the set-up force evaluation and 50 steps. It prints the case,
+rebuilds and contacts, each phase's share of the loop (forces, lists,
+integration from the engine's ``timers`` when it keeps them; communication
+from the Domain; glue the rest), memory per atom, and last
+``ns_per_atom_step=X`` with every atom (bed included) counted, as LAMMPS
+counts them (../shared/bench/side_by_side.sh reads that line).
+
+``bench --io`` times checkpoint writes and reads; ``bench --analysis`` times
+``mpdem analyze`` of copies of a landed pile (``landed_pile``, made once and
+cached).
 """
 from __future__ import annotations
 
+import gc
 import os
 import resource
 import time
@@ -66,56 +73,206 @@ def landed_pile(cfg, cache, log=print):
     return a, path
 
 
-def run_bench(args, comm):
-    """Time the benchmark case; print figures (rank 0)."""
-    cfg = bench_config(args.N, args.mu)
-    if args.set:
-        cfg = config.load(None, ["run.max_steps=1"] + list(args.set),
-                          base={k: v for k, v in cfg.values.items() if k not in cfg.derived})
-    cache = args.cache or os.path.join(os.path.expanduser("~"), ".cache", "mpdem", "bench")
-    rank = comm.Get_rank() if comm is not None else 0
-    a, path = landed_pile(cfg, cache) if rank == 0 else (None, None)
-    if comm is not None and comm.Get_size() > 1:
-        a, path = comm.bcast((a, path), root=0)
-    dom = Domain(comm, r_list=1.0 + cfg.integration.skin, tolerance=cfg.decomp.balance_tolerance,
-                 damping=cfg.decomp.balance_damping)
-    N = int((a["fixed"] == 0).sum())
-    st = dom.scatter(a, cfg.box.L_x, cfg.box.L_y)
-    eng = Engine(st, Physics.from_config(cfg), dom)
+# LAMMPS's settings of ../shared/bench/lammps_table.in (gamma_t = gamma_n / 2 is set after resolving)
+TABLE_SETTINGS = ("contact.model=hooke", "contact.k_n=2e5", "contact.epsilon=0.88", "contact.mu=0.5",
+                  "integration.dt=1e-4", "integration.skin=0.2", "box.L_x=20.0", "box.L_y=20.0")
+WARMUP_STEPS = 50
+PHASES = ("forces", "lists", "integration")
+
+
+def table_config(sets=()):
+    """The table bench's Config: LAMMPS's settings, then ``--set`` items.
+
+    gamma_t is gamma_n / 2 (25.713732817929117 at epsilon 0.88, k_n 2e5, as
+    lammps_table.in) unless ``contact.gamma_t`` is among ``sets``.
+    """
+    cfg = config.load(None, ["run.max_steps=1", *TABLE_SETTINGS, *sets])
+    if any(config.parse_set(item)[0] == "contact.gamma_t" for item in sets):
+        return cfg
+    return cfg.replace(**{"contact.gamma_t": cfg.contact.gamma_n / 2})
+
+
+def rss_now():
+    """Resident set size of this process now [bytes] (/proc/self/status VmRSS; 0 if unknown)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def rss_peak():
+    """Peak resident set size of this process so far [bytes] (ru_maxrss, KiB on Linux)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def warm_up_kernels(phys, L_x, L_y):
+    """Compile (or load) the step's kernels on a tiny pile, so no timing or baseline includes it.
+
+    A 3 x 3 bed with five mobile spheres resting on it, touching each other
+    and the bed (overlaps 0.005 d), stepped ``WARMUP_STEPS`` times with the
+    bench's physics on this rank alone.
+    """
+    g = np.arange(3.0)
+    bed = np.array([[1.0 + i, 1.0 + j, 0.0] for j in g for i in g])
+    mob = np.array([[1.5, 1.5, 0.7], [2.5, 1.5, 0.7], [1.5, 2.495, 0.7], [2.5, 2.5, 0.7], [2.0, 2.0, 1.4]])
+    x = np.concatenate([mob, bed])
+    fixed = np.concatenate([np.zeros(len(mob), np.uint8), np.ones(len(bed), np.uint8)])
+    eng = Engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None))
     eng.setup()
-    eng.run(200)
-    r0 = eng.n_rebuilds
-    c0 = dom.comm_seconds
+    eng.run(WARMUP_STEPS)
+    eng.kinetic()
+    eng.contacts()
+
+
+def load_table(path, cfg, tile=(1, 1), say=print):
+    """The bench's whole particle set from a table, checked, then tiled.
+
+    Parameters
+    ----------
+    path : str
+        ``build.read_table`` file (plain or gzip).
+    cfg : Config
+        Box (``box.L_x``, ``box.L_y``) and ``checks.overlap_warn``.
+    tile : (int, int)
+        Copies along x and y (``build.tile_table``).
+    say : callable
+        Takes the overlap warning line.
+
+    Returns
+    -------
+    whole : dict of ``Domain.scatter``'s arrays id (N,), x (N, 3) [d],
+        v (N, 3), omega (N, 3) (zero), fixed (N,) uint8
+    L_x, L_y : the (tiled) box [d]
+    """
+    if not os.path.isfile(path):
+        raise build.InputError(f"--table {path}: no such file")
+    t = build.read_table(path)
+    L_x, L_y = cfg.box.L_x, cfg.box.L_y
+    fixed = t["fixed"]
+    z_floor = float(t["x"][fixed == 1, 2].mean()) if fixed.any() else -np.inf
+    build.check_initial(t["ids"], t["x"], fixed, L_x, L_y, z_floor,
+                        overlap_warn=cfg.checks.overlap_warn, warn=say)
+    nx, ny = tile
+    if (nx, ny) != (1, 1):
+        t = build.tile_table(t, L_x, L_y, nx, ny)
+    whole = {"id": t["ids"], "x": t["x"], "v": t["v"], "omega": np.zeros_like(t["x"]), "fixed": t["fixed"]}
+    return whole, nx * L_x, ny * L_y
+
+
+def phase_clock(eng, dom):
+    """Accumulated seconds per phase now: the engine's ``timers`` (if it keeps them) and communication."""
+    timers = getattr(eng, "timers", None) or {}
+    out = {k: float(timers[k]) for k in PHASES if k in timers}
+    out["communication"] = dom.comm_seconds
+    return out
+
+
+def phase_lines(before, after, wall):
+    """``bench:`` lines of each phase's seconds and share of the loop's wall time [s].
+
+    glue = wall - the phases measured; phases the engine does not time are
+    named as unavailable (and then glue is not computed).
+    """
+    spent = {k: after[k] - before[k] for k in after}
+    lines = [f"bench: phase {k:<13s} {spent[k]:8.3f} s {100 * spent[k] / wall:5.1f}%"
+             for k in PHASES + ("communication",) if k in spent]
+    missing = [k for k in PHASES if k not in spent]
+    if missing:
+        lines.append(f"bench: phase {', '.join(missing)}, glue: unavailable (this engine keeps no "
+                     f"timers for them)")
+    else:
+        glue = wall - sum(spent.values())
+        lines.append(f"bench: phase {'glue':<13s} {glue:8.3f} s {100 * glue / wall:5.1f}%")
+    return lines
+
+
+def timed_loop(eng, dom, steps):
+    """Run ``steps`` steps; wall seconds, rebuilds and phase clocks before and after."""
+    r0, before = eng.n_rebuilds, phase_clock(eng, dom)
     t0 = time.perf_counter()
-    for _ in range(args.steps):
+    for _ in range(steps):
         eng.step()
     wall = time.perf_counter() - t0
-    comm_share = (dom.comm_seconds - c0) / wall
+    return wall, eng.n_rebuilds - r0, before, phase_clock(eng, dom)
+
+
+def run_table_bench(args, comm):
+    """Time ``args.steps`` steps from a particle table; print figures on rank 0.
+
+    The last line rank 0 prints is ``ns_per_atom_step=X``: loop wall seconds
+    (the slowest rank's) x 1e9 / (steps x all atoms, bed included), as LAMMPS
+    counts them. Returns X.
+    """
+    cfg = table_config(args.set)
+    rank = comm.Get_rank() if comm is not None else 0
+    say = print if rank == 0 else (lambda msg: None)
+    phys = Physics.from_config(cfg)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y)
+    gc.collect()
+    baseline = rss_now()
+    # every rank reads the same table, so a bad table stops every rank alike
+    whole, L_x, L_y = load_table(args.table, cfg, args.tile, say=lambda msg: say(f"bench: warning: {msg}"))
+    n_atoms, n_mobile = len(whole["id"]), int((whole["fixed"] == 0).sum())
+    dom = Domain(comm, r_list=1.0 + phys.skin, tolerance=cfg.decomp.balance_tolerance,
+                 damping=cfg.decomp.balance_damping)
+    st = dom.scatter(whole, L_x, L_y)
+    del whole
+    eng = Engine(st, phys, dom)
+    eng.setup()
+    eng.run(WARMUP_STEPS)
+    wall, rebuilds, before, after = timed_loop(eng, dom, args.steps)
+    fig = dict(table=args.table, tile=tuple(args.tile), n_atoms=n_atoms, n_mobile=n_mobile, L_x=L_x, L_y=L_y,
+               cfg=cfg, ranks=dom.size, steps=args.steps, wall=wall, wall_max=dom.max(wall), rebuilds=rebuilds,
+               phases=(before, after), **after_loop(eng, dom, st, baseline))
+    for line in report_lines(fig):
+        say(line)
+    return fig["ns"]
+
+
+def after_loop(eng, dom, st, baseline):
+    """Figures taken after the timed loop (collectives: every rank calls this).
+
+    Returns contacts (global, both partners counted), E_k [m g d], imbalance,
+    grown (peak RSS - baseline summed over ranks [bytes]), peak (largest
+    process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed,
+    or None when the engine does not offer it), threads.
+    """
+    from .threads import count
     et, er = eng.kinetic()
-    contacts = eng.contacts()
-    imbalance = dom.imbalance(st)
-    # rebuild share: time as many rebuilds again, separately (the state is not used after)
-    nreb = eng.n_rebuilds - r0
-    tr = time.perf_counter()
-    for _ in range(nreb):
-        eng.rebuild()
-    t_rebuild = time.perf_counter() - tr
-    ns = 1e9 * wall / (args.steps * N)
-    if rank != 0:
-        return ns
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    arrays = eng.memory_bytes()
-    print(f"bench: N = {N} mobile + {len(a['id']) - N} bed, mu = {cfg.contact.mu:g}, k_n = {cfg.contact.k_n:g}, "
-          f"dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}, ranks = {dom.size}, landed pile {path}")
-    print(f"bench: {args.steps} steps in {wall:.2f} s: {ns:.1f} ns per particle-step "
-          f"({args.steps / wall:.0f} steps/s), {nreb} list rebuilds ({100 * t_rebuild / wall:.0f}% of the time), "
-          f"contacts per particle {contacts / N:.2f}, E_k/N {(et + er) / N:.2e}")
-    if dom.parallel:
-        print(f"bench: {dom.size} ranks: communication {100 * comm_share:.0f}% of rank 0's time, "
-              f"imbalance (max/mean owned) {imbalance:.2f}")
-    print(f"bench: peak memory {peak / N:.0f} bytes per particle (process RSS {peak / 2**20:.0f} MiB); "
-          f"particle and list arrays {arrays / N:.0f} bytes per particle")
-    return ns
+    return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st),
+                grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
+                engine_bytes=(int(dom.sum_int(np.array([eng.memory_bytes()]))[0])
+                              if hasattr(eng, "memory_bytes") else None),
+                threads=count())
+
+
+def report_lines(fig):
+    """The table bench's lines, ``ns_per_atom_step=X`` last; sets ``fig['ns']``."""
+    cfg, n, n_mob, par = fig["cfg"], fig["n_atoms"], max(fig["n_mobile"], 1), fig["ranks"] > 1
+    c = cfg.contact
+    fig["ns"] = 1e9 * fig["wall_max"] / (fig["steps"] * n)
+    tiled = "" if fig["tile"] == (1, 1) else " tiled {}x{}".format(*fig["tile"])
+    lines = [
+        f"bench: case {os.path.basename(fig['table'])}{tiled}: {n} atoms = {fig['n_mobile']} mobile + "
+        f"{n - fig['n_mobile']} bed, box {fig['L_x']:g} x {fig['L_y']:g}; {c.model} k_n = {c.k_n:g}, "
+        f"gamma_t = {c.gamma_t:.6g}, mu = {c.mu:g}, dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}",
+        f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s), {fig['steps']} steps in "
+        f"{fig['wall_max']:.2f} s (after {WARMUP_STEPS} untimed), {fig['rebuilds']} list rebuilds, contacts per "
+        f"mobile particle {fig['contacts'] / n_mob:.2f}, E_k/N {fig['ek'] / n_mob:.2e}"
+        + (f", imbalance (max/mean owned) {fig['imbalance']:.2f}" if par else ""),
+        "bench: the loop by phase" + (" (rank 0's loop)" if par else "") + ":",
+        *phase_lines(*fig["phases"], fig["wall"]),
+        f"bench: memory {fig['grown'] / n:.0f} bytes per atom (peak RSS minus the import baseline"
+        + (", summed over ranks" if par else "") + ")"
+        + (f", engine arrays {fig['engine_bytes'] / n:.0f} bytes per atom" if fig["engine_bytes"] is not None else "")
+        + f"; process peak RSS {fig['peak'] / 1e6:.0f} MB" + (" (largest rank)" if par else ""),
+        f"ns_per_atom_step={fig['ns']:.6g}",
+    ]
+    return lines
 
 
 def synthetic_share(N, rank, size, slots=6, seed=0):

@@ -5,7 +5,9 @@ streams keyed by (seed, purpose) that do not depend on the rank count.
 """
 from __future__ import annotations
 
+import gzip
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,6 +129,13 @@ def make_bed(cfg, progress=None):
     return Bed(bed, note=f"settled {n} spheres for {b.settle_time:g} tau (E_k/N = {sum(ek) / n:.2e})")
 
 
+def _open_text(path):
+    """A text file handle of ``path``, decompressing gzip (magic bytes 1f 8b)."""
+    with open(path, "rb") as fh:
+        magic = fh.read(2)
+    return gzip.open(path, "rt") if magic == b"\x1f\x8b" else open(path)
+
+
 def read_table(path):
     """Read a text table of particles.
 
@@ -134,12 +143,18 @@ def read_table(path):
     A first line naming the columns (``#`` optional) sets their order;
     without it, 4, 5, 7 or 8 columns are read as id x y z [vx vy vz] [fixed].
 
+    A gzip-compressed table (any name; recognised by its magic bytes) is
+    read the same way.
+
     Returns
     -------
     dict with ids (N,) int64, x (N, 3), v (N, 3), fixed (N,) uint8.
     """
-    with open(path) as fh:
-        lines = [ln for ln in fh if ln.strip()]
+    try:
+        with _open_text(path) as fh:
+            lines = [ln for ln in fh if ln.strip()]
+    except (OSError, EOFError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: cannot read the particle table: {e}") from None
     if not lines:
         raise InputError(f"{path}: empty particle table")
     first = lines[0].lstrip("#").split()
@@ -199,13 +214,64 @@ def write_table(path, ids, x, v=None, fixed=None):
             fh.write(f"{int(ids[k])} " + " ".join(map(repr, row)) + f" {int(fixed[k])}\n")
 
 
-def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False):
+def tile_table(table, L_x, L_y, nx, ny):
+    """Copies of an x-y periodic particle table side by side: nx along x, ny along y.
+
+    Parameters
+    ----------
+    table : dict
+        ``read_table``'s arrays: ids (N,) int64, x (N, 3) [d], v (N, 3)
+        [sqrt(g d)], fixed (N,) uint8, in a box periodic in [0, L_x) x [0, L_y).
+    L_x, L_y : float
+        The table's box [d].
+    nx, ny : int
+        Copies along x and y, >= 1.
+
+    Returns
+    -------
+    dict like ``table`` with nx * ny * N rows in a box nx L_x by ny L_y:
+    copy k = j nx + i is shifted by (i L_x, j L_y, 0) and its ids by
+    k (max id + 1), so copy 0 keeps the table's ids and all ids are unique.
+    """
+    if nx < 1 or ny < 1:
+        raise InputError(f"tiling {nx} x {ny}: accepted at least one copy along x and y")
+    x0 = table["x"].copy()
+    x0[:, 0] %= L_x
+    x0[:, 1] %= L_y
+    k = np.arange(nx * ny)
+    shift = np.stack([(k % nx) * L_x, (k // nx) * L_y, np.zeros(nx * ny)], axis=1)   # (K, 3)
+    span = int(table["ids"].max(initial=-1)) + 1
+    return {"ids": (table["ids"][None, :] + span * k[:, None]).reshape(-1),
+            "x": (x0[None, :, :] + shift[:, None, :]).reshape(-1, 3),
+            "v": np.tile(table["v"], (nx * ny, 1)),
+            "fixed": np.tile(table["fixed"], nx * ny)}
+
+
+def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap_warn=0.0, warn=None):
     """physics.md section 8, initial-state checks; raises InputError naming the problem.
 
-    ``z_floor`` is the lowest allowed mobile centre: z_bed + d/2 for a poured
-    pile, the mean bed height for a given file (a settled pile rests in the
-    bed's hollows). ``allow_overlap`` skips the overlap test, for mpdem
-    state files (a settled pile overlaps by design).
+    Parameters
+    ----------
+    ids : (N,) int64
+    x : (N, 3) float64
+        Centres [d].
+    fixed : (N,) uint8
+        1 for bed spheres (bed-bed pairs are not checked).
+    L_x, L_y : float
+        Periodic box [d]; mobile centres must lie in [0, L_x) x [0, L_y).
+    z_floor : float
+        The lowest allowed mobile centre [d]: z_bed + d/2 for a poured pile,
+        the mean bed height for a given file (a settled pile rests in the
+        bed's hollows).
+    allow_overlap : bool
+        Skip the overlap test, for mpdem state files (a settled pile
+        overlaps by design, and the file carries its contact histories).
+    overlap_warn : float
+        Overlaps delta = d - r up to this depth [d] are accepted with one
+        warning naming the largest (a settled table: ``checks.overlap_warn``);
+        a deeper one is an error naming the pair. 0 refuses any overlap.
+    warn : callable or None
+        Takes the warning line; default ``warnings.warn``.
     """
     if not np.all(np.isfinite(x)):
         raise InputError("initial state: non-finite positions")
@@ -222,25 +288,47 @@ def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False):
             k = np.flatnonzero(mob)[np.flatnonzero(low)[0]]
             raise InputError(f"initial state: particle {ids[k]} at z = {float(x[k, 2])!r} is not above "
                              f"{z_floor:g} (the bed)")
-    from scipy.spatial import cKDTree
     if len(x) < 2 or not mob.any() or allow_overlap:
         return
+    pairs, r = overlapping_pairs(x, fixed, L_x, L_y)
+    if not len(pairs):
+        return
+    k = int(np.argmin(r))
+    i, j = pairs[k]
+    depth = 1.0 - float(r[k])
+    worst = f"particles {ids[i]} and {ids[j]} overlap by {depth:.6g} d"
+    if depth > overlap_warn:
+        raise InputError(f"initial state: {worst} ({len(pairs)} overlapping pairs in all); accepted "
+                         f"overlaps up to checks.overlap_warn = {overlap_warn:g} d")
+    (warn or warnings.warn)(f"initial state: {len(pairs)} overlapping pairs accepted (each at most "
+                            f"checks.overlap_warn = {overlap_warn:g} d); the largest: {worst}")
+
+
+def overlapping_pairs(x, fixed, L_x, L_y):
+    """Pairs closer than d (bed-bed pairs left out), x and y periodic.
+
+    Parameters
+    ----------
+    x : (N, 3) float64 centres [d]; fixed : (N,) uint8, 1 for bed spheres
+    L_x, L_y : float, periodic box [d]
+
+    Returns
+    -------
+    pairs : (M, 2) int64 row indices, i < j
+    r : (M,) float64 centre distances [d], each < 1
+    """
+    from scipy.spatial import cKDTree
     span = x[:, 2].max() - x[:, 2].min() + 10.0
     pts = x.copy()
     pts[:, 0] %= L_x
     pts[:, 1] %= L_y
     pts[:, 2] -= pts[:, 2].min()
     tree = cKDTree(pts, boxsize=[L_x, L_y, 2 * span])
-    pairs = tree.query_pairs(1.0, output_type="ndarray")
-    if len(pairs):
-        keep = ~(fixed[pairs[:, 0]].astype(bool) & fixed[pairs[:, 1]].astype(bool))
-        pairs = pairs[keep]
-    if len(pairs):
-        i, j = pairs[0]
-        d = pts[i] - pts[j]
-        d[0] -= L_x * round(d[0] / L_x)
-        d[1] -= L_y * round(d[1] / L_y)
-        r = float(np.sqrt(d @ d))
-        if r < 1.0:
-            raise InputError(f"initial state: particles {ids[i]} and {ids[j]} overlap by "
-                             f"{1.0 - r:.6g} d ({len(pairs)} overlapping pairs in all)")
+    pairs = tree.query_pairs(1.0, output_type="ndarray").reshape(-1, 2)
+    pairs = pairs[~(fixed[pairs[:, 0]].astype(bool) & fixed[pairs[:, 1]].astype(bool))]
+    d = pts[pairs[:, 0]] - pts[pairs[:, 1]]
+    d[:, 0] -= L_x * np.round(d[:, 0] / L_x)
+    d[:, 1] -= L_y * np.round(d[:, 1] / L_y)
+    r = np.sqrt(np.einsum("ij,ij->i", d, d))
+    keep = r < 1.0
+    return pairs[keep].astype(np.int64), r[keep]

@@ -71,7 +71,7 @@ SCHEMA = (
     _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous")),
     _k("stop", "window", 1.0, "averaging window of the stop rule [tau]"),
     _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)"),
-    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]"),
+    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one warning (a settled pile), deeper ones refused"),
     _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]"),
     _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]"),
     _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this"),

@@ -188,7 +188,8 @@ class Run:
         self.z_bed, self.n_bed = z_bed, len(bed.x)
         self.z_bed_mean = bed.z_mean if self.n_bed else -math.inf
         z_floor = bed.z_mean if cfg.run.initial_file else z_bed + 0.5
-        build.check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=slots is not None)
+        build.check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=slots is not None,
+                            overlap_warn=cfg.checks.overlap_warn, warn=log.warn)
         if self.n_bed and self.rank == 0:
             build.write_table(os.path.join(self.out, "bed.txt"), ids[fixed == 1], x[fixed == 1],
                               fixed=fixed[fixed == 1])

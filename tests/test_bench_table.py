@@ -1,0 +1,85 @@
+"""bench --table: LAMMPS's settings, the phase report, the CLI's output, tiling and errors."""
+import argparse
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+
+from mpdem import bench
+
+from conftest import settled_table
+
+BOX = ["--set", "box.L_x=6.0", "--set", "box.L_y=6.0"]
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "mpdem", *args], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ))
+
+
+def test_table_config_has_lammps_settings():
+    cfg = bench.table_config()
+    assert cfg.contact.gamma_t == 25.713732817929117 == cfg.contact.gamma_n / 2
+    assert (cfg.contact.mu, cfg.contact.k_n, cfg.integration.dt, cfg.integration.skin) == (0.5, 2e5, 1e-4, 0.2)
+    assert bench.table_config(["contact.gamma_t=0"]).contact.gamma_t == 0.0
+    assert bench.table_config(["box.L_x=6"]).box.L_x == 6.0
+
+
+def test_phase_lines_with_and_without_engine_timers():
+    before = {"forces": 1.0, "lists": 0.5, "integration": 0.2, "communication": 0.0}
+    after = {"forces": 7.0, "lists": 1.5, "integration": 1.2, "communication": 0.5}
+    lines = bench.phase_lines(before, after, 10.0)
+    share = {ln.split()[2]: float(ln.split()[-1].rstrip("%")) for ln in lines}
+    assert share == {"forces": 60.0, "lists": 10.0, "integration": 10.0, "communication": 5.0, "glue": 15.0}
+    lines = bench.phase_lines({"communication": 0.0}, {"communication": 1.0}, 4.0)
+    assert "25.0%" in lines[0] and "forces, lists, integration, glue: unavailable" in lines[1]
+
+
+def test_cli_bench_table_output_and_tiling(tmp_path):
+    n_mob, n_bed = settled_table(tmp_path / "t.txt")
+    atoms = []
+    for extra in ([], ["--tile", "2x1"]):
+        p = cli("bench", "--table", str(tmp_path / "t.txt"), "--steps", "20", *BOX, *extra)
+        assert p.returncode == 0, p.stderr
+        out = p.stdout.strip().splitlines()
+        assert re.fullmatch(r"ns_per_atom_step=[0-9.eE+-]+", out[-1]) and float(out[-1].split("=")[1]) > 0
+        assert any(ln.startswith("bench: phase forces") for ln in out)
+        assert any(ln.startswith("bench: phase communication") for ln in out)
+        assert any("overlapping pairs accepted" in ln for ln in out)
+        assert any(ln.startswith("bench: memory") and "bytes per atom" in ln for ln in out)
+        atoms.append(int(re.search(r"(\d+) atoms = (\d+) mobile \+ (\d+) bed", p.stdout)[1]))
+    assert atoms == [n_mob + n_bed, 2 * (n_mob + n_bed)]
+
+
+@pytest.mark.parametrize("cmd", [["bench", "--table", "t.txt"], ["run"], ["restart", "somewhere"]])
+@pytest.mark.parametrize("bad", ["0", "two"])
+def test_cli_bad_threads_is_a_usage_error(cmd, bad):
+    p = cli(*cmd, "--threads", bad)
+    assert p.returncode == 2 and "--threads" in p.stderr and "integer >= 1" in p.stderr
+
+
+def test_cli_bench_needs_a_mode():
+    p = cli("bench")
+    assert p.returncode == 2 and "--table FILE" in p.stderr
+    p = cli("bench", "--table", "t.txt", "--analysis")
+    assert p.returncode == 2 and "one of --table, --analysis" in p.stderr
+    p = cli("bench", "--table", "t.txt", "--tile", "2")
+    assert p.returncode == 2 and "--tile '2'" in p.stderr
+
+
+def test_bench_reports_every_phase_of_the_loop(tmp_path, capsys):
+    """The engine's timers give forces, lists and integration; communication and glue complete the loop."""
+    settled_table(tmp_path / "t.txt")
+    args = argparse.Namespace(table=str(tmp_path / "t.txt"), steps=10, tile=(1, 1),
+                              set=["box.L_x=6.0", "box.L_y=6.0"])
+    ns = bench.run_table_bench(args, None)
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1] == f"ns_per_atom_step={ns:.6g}"
+    phases = [ln.split()[2] for ln in out if ln.startswith("bench: phase")]
+    assert phases == ["forces", "lists", "integration", "communication", "glue"]
+    shares = [float(ln.split()[-1].rstrip("%")) for ln in out if ln.startswith("bench: phase")]
+    # the phases are disjoint parts of the loop: they and the glue add up to it
+    assert abs(sum(shares) - 100) < 0.5 and shares[-1] >= 0 and shares[0] > 0
+    assert "engine arrays" in next(ln for ln in out if ln.startswith("bench: memory"))
