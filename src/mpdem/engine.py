@@ -105,6 +105,7 @@ class Engine:
         """Split the rows into ``nchunk`` chunks for the threads (more than threads
         balances the load); any count gives the same bits."""
         self.nchunk = int(nchunk)
+        self._found = np.zeros((self.nchunk, self._found.shape[1] if hasattr(self, "_found") else 64), np.int32)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
@@ -157,6 +158,9 @@ class Engine:
             self._alloc_lists(int(need * 1.1) + 64)
             build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
                              self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
+        longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
+        if longest > self._found.shape[1]:
+            self._found = np.zeros((self.nchunk, 2 * longest), np.int32)
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
@@ -191,7 +195,7 @@ class Engine:
         s, p = self.state, self.phys
         max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
                                      self.hist, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
-                                     increment, self._chunk_max, self._chunk_count)
+                                     increment, self._chunk_max, self._chunk_count, self._found)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
         s.slots_current = False

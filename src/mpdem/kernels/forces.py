@@ -19,6 +19,7 @@ which arithmetic path produced a zero.
 import math
 from typing import NamedTuple
 
+import numpy as np
 from numba import njit, prange
 
 from .geometry import min_image
@@ -52,7 +53,7 @@ class Law(NamedTuple):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torque,
-                   L_x, L_y, law, increment, chunk_max, chunk_count):
+                   L_x, L_y, law, increment, chunk_max, chunk_count, scratch):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
@@ -79,6 +80,8 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
         False on the set-up evaluation at t = 0 (no history increment).
     chunk_max : (C,) float64, chunk_count : (C,) int64
         Scratch, one slot per chunk of rows (C >= 1; any C gives the same result).
+    scratch : (C, W) int32
+        Scratch of each chunk, W >= the longest list of a row.
 
     Returns
     -------
@@ -90,7 +93,7 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed,
-                       nbr_start, nbr_list, hist, touch, f, torque, L_x, L_y, law, increment)
+                       nbr_start, nbr_list, hist, touch, f, torque, L_x, L_y, law, increment, scratch[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -103,8 +106,15 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
 
 @njit(cache=True, error_model="numpy")
 def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torque, L_x, L_y,
-          law, increment):
-    """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts)."""
+          law, increment, found):
+    """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
+
+    Two passes per row: the first screens every entry and records the
+    contacts in ``found`` without a branch on the outcome (about half the
+    entries are contacts, in no predictable order, so a branch there is
+    mispredicted often); the second applies the law to the contacts, in the
+    list's partner-id order.
+    """
     k_n, k_t, gamma_n, gamma_t, mu = law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
     friction = mu > 0.0
@@ -134,22 +144,30 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torqu
         tx = 0.0
         ty = 0.0
         tz = 0.0
+        m = 0
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr_list[k]
             dx = min_image(xi - x[j, 0], L_x, hx)
             dy = min_image(yi - x[j, 1], L_y, hy)
             dz = zi - x[j, 2]
+            on = np.uint8(dx * dx + dy * dy + dz * dz < 1.0)
+            found[m] = k
+            m += on
+            was = touch[k]
+            touch[k] = on
+            if was > on:
+                # the contact ended (rare): its history is deleted
+                hist[k, 0] = 0.0
+                hist[k, 1] = 0.0
+                hist[k, 2] = 0.0
+        n_contacts += m
+        for q in range(m):
+            k = found[q]
+            j = nbr_list[k]
+            dx = min_image(xi - x[j, 0], L_x, hx)
+            dy = min_image(yi - x[j, 1], L_y, hy)
+            dz = zi - x[j, 2]
             r2 = dx * dx + dy * dy + dz * dz
-            if not r2 < 1.0:
-                if touch[k]:
-                    # the contact ended: its history is deleted
-                    touch[k] = 0
-                    hist[k, 0] = 0.0
-                    hist[k, 1] = 0.0
-                    hist[k, 2] = 0.0
-                continue
-            touch[k] = 1
-            n_contacts += 1
             r = math.sqrt(r2)
             delta = 1.0 - r
             if delta > max_overlap:
