@@ -29,6 +29,8 @@ INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
 
 MODEL_HOOKE = 0
 MODEL_HERTZ = 1
+# |F_t|^2 < SURE_STICK bound^2 implies sqrt(|F_t|^2) <= bound in floating point
+SURE_STICK = 1.0 - 1e-9
 
 
 class Law(NamedTuple):
@@ -250,9 +252,12 @@ def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, scale, meff, fn_mag, k_t,
     ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
     fty = -scale * (k_t * sy + meff * gamma_t * vty)
     ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
-    ft_mag = math.sqrt(ftx * ftx + fty * fty + ftz * ftz)
+    ft2 = ftx * ftx + fty * fty + ftz * ftz
     bound = mu * fn_mag
-    if ft_mag > bound:
+    # |F_t|^2 well below bound^2 means sticking; only near or past the bound is the exact
+    # test sqrt(ft2) > bound needed (the margin covers the rounding of both sides, ~1e-16)
+    if ft2 >= SURE_STICK * (bound * bound) and math.sqrt(ft2) > bound:
+        ft_mag = math.sqrt(ft2)
         if sx == 0.0 and sy == 0.0 and sz == 0.0:
             ftx = 0.0
             fty = 0.0
