@@ -46,3 +46,23 @@ def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
                        capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "boom on rank 1" in p.stderr and "internal error on rank 1" in p.stderr
+
+
+def test_wrapper_unbinds_ranks_that_ask_for_threads():
+    """Open MPI binds each of 2 ranks to one core; the venv's mpiexec lifts that for --threads T > 1
+    (the threads of a rank need cores), and keeps it for one thread or a binding given by the user."""
+    import pytest
+    if os.cpu_count() < 2 or "mpiexec.openmpi" not in MPIEXEC.read_text():
+        pytest.skip("needs Open MPI (it binds ranks to cores) and 2 cores to see a binding")
+    probe = ["-c", "import os; print(len(os.sched_getaffinity(0)))"]
+
+    def cores(*args, mpi=()):
+        p = subprocess.run([str(MPIEXEC), *mpi, "-n", "2", sys.executable, *probe, *args],
+                           capture_output=True, text=True, timeout=120, env=ENV)
+        assert p.returncode == 0, p.stderr
+        return sorted(int(v) for v in p.stdout.split())
+
+    assert cores() == [1, 1]
+    assert cores("--threads", "2") == [os.cpu_count()] * 2
+    assert cores("--threads=2") == [os.cpu_count()] * 2
+    assert cores("--threads", "2", mpi=("--bind-to", "core")) == [1, 1]

@@ -77,7 +77,7 @@ fi
 mpi_version=$("$mpiexec_real" --version 2>&1 | head -n 1 | tr -c 'A-Za-z0-9.' '_')
 hdf5_version=$(pkg-config --modversion "$h5pc")
 key="py$("$python" -c 'import sys; print("%d%d" % sys.version_info[:2])')-$flavour-$mpi_version-hdf5_$hdf5_version"
-stamp_text="$key numpy=$NUMPY numba=$NUMBA scipy=$SCIPY pytest=$PYTEST mpi4py=$MPI4PY h5py=$H5PY matplotlib=$MATPLOTLIB"
+stamp_text="$key wrapper=2 numpy=$NUMPY numba=$NUMBA scipy=$SCIPY pytest=$PYTEST mpi4py=$MPI4PY h5py=$H5PY matplotlib=$MATPLOTLIB"
 
 # ---- 2. virtual environment ----------------------------------------------
 if [ -f "$venv/.mpdem-setup" ] && [ "$(cat "$venv/.mpdem-setup")" = "$stamp_text" ] \
@@ -120,6 +120,20 @@ cat > "$venv/bin/mpiexec" <<WRAP
 if [ "$flavour" = openmpi ]; then
   export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
   export OMPI_MCA_rmaps_base_oversubscribe=1
+  # Open MPI binds each rank to one core (<= 2 ranks): threads of a rank (mpdem --threads T,
+  # T > 1) would share it. Unbind then, unless the command names a binding or mapping itself.
+  threads=1; own=0; prev=
+  for a in "\$@"; do
+    case "\$prev" in --threads) threads=\$a ;; esac
+    case "\$a" in
+      --threads=*) threads=\${a#--threads=} ;;
+      --bind-to|--bind-to=*|--map-by|--map-by=*|--cpus-per-proc|--cpus-per-rank) own=1 ;;
+    esac
+    prev=\$a
+  done
+  if [ "\$own" = 0 ] && [ "\$threads" != 1 ] && [ -z "\${OMPI_MCA_hwloc_base_binding_policy:-}" ]; then
+    export OMPI_MCA_hwloc_base_binding_policy=none
+  fi
 fi
 exec $(command -v "$mpiexec_real") "\$@"
 WRAP
