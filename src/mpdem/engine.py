@@ -16,7 +16,7 @@ from .kernels import history
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces
 from .kernels.integrate import kick, kick_drift, kinetic_energy
-from .kernels.neighbours import build_neighbours
+from .kernels.neighbours import build_neighbours, link_entries
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,7 @@ class Engine:
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
+        self.link = np.zeros(0, np.int32)
         self.hist = np.zeros((0, 3))
         self.touch = np.zeros(0, np.uint8)
         self.has_lists = False
@@ -104,11 +105,22 @@ class Engine:
     def set_chunks(self, nchunk):
         """Split the rows into ``nchunk`` chunks for the threads (more than threads
         balances the load); any count gives the same bits."""
+        if self.has_lists:
+            self.sync_slots()      # the links of the old chunks say where the history is
         self.nchunk = int(nchunk)
-        self._found = np.zeros((self.nchunk, self._found.shape[1] if hasattr(self, "_found") else 64), np.int32)
+        self._scratch(getattr(self, "_width", 64))
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
+        if self.has_lists:
+            s = self.state
+            link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link)
+            self._unpack_slots()
+
+    def _scratch(self, width):
+        """Per-chunk scratch of the force kernel for rows of up to ``width`` entries."""
+        self._width = width
+        self._found = np.zeros((self.nchunk, width), np.int32)
 
     # -- contact history: list entries <-> compact slots --
     def sync_slots(self):
@@ -122,7 +134,7 @@ class Engine:
         np.cumsum(s.slot_n[:n], out=start[1:])
         slot_id = np.empty(total, np.int64)
         slot_ds = np.empty((total, 3))
-        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.hist, self.touch,
+        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self.hist, self.touch,
                                  start, slot_id, slot_ds, self.nchunk)
         s.slot_id, s.slot_ds = slot_id, slot_ds
         s.slots_current = True
@@ -159,8 +171,9 @@ class Engine:
             build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
                              self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
-        if longest > self._found.shape[1]:
-            self._found = np.zeros((self.nchunk, 2 * longest), np.int32)
+        if longest > self._width:
+            self._scratch(2 * longest)
+        link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link)
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
@@ -170,6 +183,7 @@ class Engine:
     def _alloc_lists(self, size):
         # the history moved to the slots before the lists were rebuilt: nothing to keep
         self.nbr_list = np.zeros(size, np.int32)
+        self.link = np.zeros(size, np.int32)
         self.hist = np.zeros((size, 3))
         self.touch = np.zeros(size, np.uint8)
 
@@ -194,7 +208,7 @@ class Engine:
         t = time.perf_counter()
         s, p = self.state, self.phys
         max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
-                                     self.hist, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
+                                     self.link, self.hist, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
                                      increment, self._chunk_max, self._chunk_count, self._found)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
@@ -282,5 +296,5 @@ class Engine:
 
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
-        return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.hist,
-                                                             self.touch))
+        return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
+                                                             self.hist, self.touch))

@@ -11,10 +11,14 @@ contact to the bit.
 Contact history lives with the neighbour list: entry k of the list (row i,
 partner j) owns ``hist[k]``, the tangential displacement Delta s of i
 relative to j, read and written in place each step, and ``touch[k]``, 1 while
-the pair is in contact. Rows write only their own entries and their own
-force, so rows can be split over threads with the same bits for any count.
-Stored zeros are +0.0 (``x + 0.0``), so the stored state does not depend on
-which arithmetic path produced a zero.
+the pair is in contact. Rows are split into chunks, one thread per chunk.
+Within a chunk, a pair of two owned rows is computed in full once, by the
+lower row, which gives the higher row its tangential force (exactly minus
+its own) in the higher row's ``hist`` slot; the higher row then computes
+only the normal part, which is as cheap as reading it back. That is the
+same arithmetic, bit for bit, as computing both views, so the result does
+not depend on the chunks or threads. Stored zeros are +0.0 (``x + 0.0``), so
+the stored state does not depend on which arithmetic path produced a zero.
 """
 import math
 from typing import NamedTuple
@@ -54,8 +58,8 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torque,
-                   L_x, L_y, law, increment, chunk_max, chunk_count, scratch):
+def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f, torque,
+                   L_x, L_y, law, increment, chunk_max, chunk_count, found):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
@@ -69,8 +73,12 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
         1 for bed particles (never moved; zero force and torque here).
     nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32
         Full neighbour lists in CSR form, each sorted by partner id.
+    link : (E,) int32
+        Mirror entry of a partner in the same chunk of rows (``link_entries``), else -1.
     hist : (E, 3) float64, in/out
-        Delta s [d] of each entry's pair, zero when not in contact.
+        Delta s [d] of each entry's pair, zero when not in contact; at an
+        entry whose linked partner is a lower row, the tangential force the
+        partner gave instead (its Delta s is then minus the partner's).
     touch : (E,) uint8, in/out
         1 if the entry's pair is in contact after this evaluation.
     f, torque : (n_rows, 3) float64, out
@@ -82,7 +90,7 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
         False on the set-up evaluation at t = 0 (no history increment).
     chunk_max : (C,) float64, chunk_count : (C,) int64
         Scratch, one slot per chunk of rows (C >= 1; any C gives the same result).
-    scratch : (C, W) int32
+    found : (C, W) int32
         Scratch of each chunk, W >= the longest list of a row.
 
     Returns
@@ -95,7 +103,8 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed,
-                       nbr_start, nbr_list, hist, touch, f, torque, L_x, L_y, law, increment, scratch[c])
+                       nbr_start, nbr_list, link, hist, touch, f, torque, L_x, L_y, law, increment,
+                       found[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -107,15 +116,16 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, 
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torque, L_x, L_y,
+def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f, torque, L_x, L_y,
           law, increment, found):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
-    Two passes per row: the first screens every entry and records the
-    contacts in ``found`` without a branch on the outcome (about half the
-    entries are contacts, in no predictable order, so a branch there is
-    mispredicted often); the second applies the law to the contacts, in the
-    list's partner-id order.
+    Per row: a screening pass records the contacts in ``found`` without a
+    branch on the outcome (about half the entries are contacts, in no
+    predictable order, so a branch there is mispredicted often); then the
+    law is applied to the contacts in partner-id order. A contact with a
+    linked lower row of the chunk (done earlier by this thread) takes the
+    tangential force that row computed; any other is computed in full.
     """
     k_n, k_t, gamma_n, gamma_t, mu = law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
@@ -140,12 +150,6 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torqu
         rwix = R * omega[i, 0]
         rwiy = R * omega[i, 1]
         rwiz = R * omega[i, 2]
-        fx = 0.0
-        fy = 0.0
-        fz = -law.gravity
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
         m = 0
         for k in range(nbr_start[i], nbr_start[i + 1]):
             j = nbr_list[k]
@@ -163,6 +167,12 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torqu
                 hist[k, 1] = 0.0
                 hist[k, 2] = 0.0
         n_contacts += m
+        fx = 0.0
+        fy = 0.0
+        fz = -law.gravity
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
         for q in range(m):
             k = found[q]
             j = nbr_list[k]
@@ -191,20 +201,31 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, hist, touch, f, torqu
             fcy = fn * ny
             fcz = fn * nz
             if friction:
-                # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
-                wx = rwix + R * omega[j, 0]
-                wy = rwiy + R * omega[j, 1]
-                wz = rwiz + R * omega[j, 2]
-                vtx = vrx - vn * nx - (wy * nz - wz * ny)
-                vty = vry - vn * ny - (wz * nx - wx * nz)
-                vtz = vrz - vn * nz - (wx * ny - wy * nx)
-                sx, sy, sz, ftx, fty, ftz = _tangential(
-                    hist[k, 0], hist[k, 1], hist[k, 2], vtx, vty, vtz, nx, ny, nz,
-                    scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
-                # + 0.0 stores a zero as +0.0 whichever way it was reached
-                hist[k, 0] = sx + 0.0
-                hist[k, 1] = sy + 0.0
-                hist[k, 2] = sz + 0.0
+                g = link[k]
+                if g < 0 or j > i:
+                    # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
+                    wx = rwix + R * omega[j, 0]
+                    wy = rwiy + R * omega[j, 1]
+                    wz = rwiz + R * omega[j, 2]
+                    vtx = vrx - vn * nx - (wy * nz - wz * ny)
+                    vty = vry - vn * ny - (wz * nx - wx * nz)
+                    vtz = vrz - vn * nz - (wx * ny - wy * nx)
+                    sx, sy, sz, ftx, fty, ftz = _tangential(
+                        hist[k, 0], hist[k, 1], hist[k, 2], vtx, vty, vtz, nx, ny, nz,
+                        scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
+                    # + 0.0 stores a zero as +0.0 whichever way it was reached
+                    hist[k, 0] = sx + 0.0
+                    hist[k, 1] = sy + 0.0
+                    hist[k, 2] = sz + 0.0
+                    if g >= 0:
+                        # the partner's view is the exact negative: give it F_t in its history slot
+                        hist[g, 0] = -ftx
+                        hist[g, 1] = -fty
+                        hist[g, 2] = -ftz
+                else:
+                    ftx = hist[k, 0]
+                    fty = hist[k, 1]
+                    ftz = hist[k, 2]
                 fcx += ftx
                 fcy += fty
                 fcz += ftz

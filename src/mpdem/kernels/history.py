@@ -37,14 +37,17 @@ def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
 
 
 @njit(cache=True, parallel=True)
-def entries_to_slots(n_own, ids, nbr_start, nbr_list, hist, touch, slot_start, slot_id, slot_ds,
+def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, touch, slot_start, slot_id, slot_ds,
                      nchunk):
     """Pack the entries in contact into compact slots.
+
+    An entry linked to a lower row (``link_entries``) holds the tangential
+    force that row gave it; its Delta s is minus the lower row's, +0.0 for zero.
 
     Parameters
     ----------
     ids : (n_rows,) int64
-    nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32
+    nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32, link : (E,) int32
     hist : (E, 3) float64, touch : (E,) uint8
     slot_start : (n_own + 1,) int64
         Offsets of each row's slots (prefix sum of ``count_contacts``).
@@ -55,9 +58,15 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, hist, touch, slot_start, s
             p = slot_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 if touch[k]:
-                    slot_id[p] = ids[nbr_list[k]]
-                    for a in range(3):
-                        slot_ds[p, a] = hist[k, a]
+                    j = nbr_list[k]
+                    slot_id[p] = ids[j]
+                    g = link[k]
+                    if g >= 0 and j < i:
+                        for a in range(3):
+                            slot_ds[p, a] = -hist[g, a] + 0.0
+                    else:
+                        for a in range(3):
+                            slot_ds[p, a] = hist[k, a]
                     p += 1
 
 

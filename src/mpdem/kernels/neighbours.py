@@ -159,3 +159,42 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
                 _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
                           nbr_list, nbr_start[i], True)
     return total
+
+
+@njit(cache=True, inline="always")
+def chunk_of(i, n, nchunk):
+    """The chunk of row i when rows 0..n-1 are split as [c n / C, (c + 1) n / C)."""
+    return ((i + 1) * nchunk - 1) // n
+
+
+@njit(cache=True, parallel=True)
+def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link):
+    """For an entry i -> j with j an owned mobile row of i's chunk: the entry j -> i.
+
+    Rows of a chunk are done in ascending order by one thread, so of such a
+    pair the lower row computes the pair once and the higher one takes its
+    tangential force (``contact_forces``). Lists are symmetric (the distance
+    test is mirror-exact) and sorted by id, so the mirror is found by
+    bisection. ``link`` gets -1 for ghost, bed and other-chunk partners.
+
+    Parameters
+    ----------
+    link : (len(nbr_list),) int32, out
+    """
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            idi = ids[i]
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                j = nbr_list[k]
+                if j >= n_own or fixed[j] or chunk_of(j, n_own, nchunk) != c:
+                    link[k] = -1
+                    continue
+                lo = nbr_start[j]
+                hi = nbr_start[j + 1]
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if ids[nbr_list[mid]] < idi:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                link[k] = lo
