@@ -66,7 +66,7 @@ SCHEMA = (
     _k("bed", "density_max", 1.3, "warn if the bed's areal density is above this [1/d^2]"),
     _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)"),
     _k("integration", "skin", 0.2, "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2"),
-    _k("integration", "contact_slots", 16, "initial contact slots per particle (grown automatically)", int),
+    _k("integration", "contact_slots", 16, "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints load)", int),
     _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)"),
     _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous")),
     _k("stop", "window", 1.0, "averaging window of the stop rule [tau]"),

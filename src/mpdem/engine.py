@@ -91,7 +91,9 @@ class Engine:
         self.touch = np.zeros(0, np.uint8)
         self.has_lists = False
         state.packer = self.sync_slots
-        self.set_chunks(4 * threads.apply())
+        t = threads.apply()
+        # one chunk per thread would do, more balance the load; pairs across a border are computed twice
+        self.set_chunks(1 if t == 1 else 4 * t)
         self._reduce = np.zeros(4)
         self.n_rebuilds = 0
         self.sort_every = 20
