@@ -193,8 +193,12 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
             vry = viy - v[j, 1]
             vrz = viz - v[j, 2]
             vn = vrx * nx + vry * ny + vrz * nz
-            scale = math.sqrt(delta) if hertz else 1.0
-            fn = scale * (k_n * delta - meff * gamma_n * vn)
+            # Hooke's scale is 1: 1.0 * y == y and -1.0 * y == -y, so it is left out
+            scale = 1.0
+            fn = k_n * delta - meff * gamma_n * vn
+            if hertz:
+                scale = math.sqrt(delta)
+                fn = scale * fn
             if law.limit_damping and fn < 0.0:
                 fn = 0.0
             fcx = fn * nx
@@ -212,7 +216,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
                     vtz = vrz - vn * nz - (wx * ny - wy * nx)
                     sx, sy, sz, ftx, fty, ftz = _tangential(
                         hist[k, 0], hist[k, 1], hist[k, 2], vtx, vty, vtz, nx, ny, nz,
-                        scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
+                        hertz, scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
                     # + 0.0 stores a zero as +0.0 whichever way it was reached
                     hist[k, 0] = sx + 0.0
                     hist[k, 1] = sy + 0.0
@@ -246,7 +250,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
 
 
 @njit(cache=True, inline="always")
-def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, scale, meff, fn_mag, k_t, gamma_t, mu, dt,
+def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, hertz, scale, meff, fn_mag, k_t, gamma_t, mu, dt,
                 increment, rescale_history):
     """History update, projection and Coulomb truncation of physics.md 2.4.
 
@@ -270,9 +274,15 @@ def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, scale, meff, fn_mag, k_t,
             sx *= q
             sy *= q
             sz *= q
-    ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
-    fty = -scale * (k_t * sy + meff * gamma_t * vty)
-    ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
+    if hertz:
+        ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
+        fty = -scale * (k_t * sy + meff * gamma_t * vty)
+        ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
+    else:
+        # Hooke's scale is 1: -1.0 * y == -y
+        ftx = -(k_t * sx + meff * gamma_t * vtx)
+        fty = -(k_t * sy + meff * gamma_t * vty)
+        ftz = -(k_t * sz + meff * gamma_t * vtz)
     ft2 = ftx * ftx + fty * fty + ftz * ftz
     bound = mu * fn_mag
     # |F_t|^2 well below bound^2 means sticking; only near or past the bound is the exact
