@@ -160,6 +160,34 @@ def test_frictionless_pile_matches_one_rank(comm, mu):
         assert s["digest"] == ref
 
 
+def test_ranks_times_threads_match_one_rank_one_thread(comm):
+    """2 ranks x 2 threads (rows split into chunks, pairs computed once within a
+    chunk) give the digest of one rank with one thread: a frictional stack with
+    tangential damping, closed into contacts all the way up. On 3 and 4 ranks
+    only rank 0 has 2 threads (a mixed split; all would oversubscribe the 2
+    cores of CI, where every parallel loop waits for a time slice)."""
+    from mpdem import threads
+    base = shared_dir(comm)
+    p = os.path.join(base, "stack.txt")
+    if comm.Get_rank() == 0:
+        write_stack(p)
+    comm.Barrier()
+    cfg = config.load(None, ["run.max_steps=1500", "box.L_x=6.0", "box.L_y=6.0", f'run.initial_file="{p}"',
+                             "output.progress_every=100000", "contact.mu=0.5", "contact.gamma_t=25.7"])
+    t = 2 if comm.Get_size() == 2 or comm.Get_rank() == 0 else 1
+    threads.configure(t)
+    try:
+        r, s = run(cfg, os.path.join(base, "tp"), comm)
+        assert r.engine.nchunk == (8 if t == 2 else 1)
+        n_contacts = r.engine.contacts()
+    finally:
+        threads.configure(1)
+    ref = serial_digest(cfg, os.path.join(base, "ts"), comm)
+    assert n_contacts > 2 * r.n_mobile
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref
+
+
 def test_a_rank_that_owns_nothing(comm):
     """Bounds pushed so that rank 0 owns nothing for a while: same digest."""
     cfg = config.load(None, PILE + ["run.max_steps=3000", "decomp.balance_tolerance=100.0"])

@@ -66,3 +66,15 @@ def test_wrapper_unbinds_ranks_that_ask_for_threads():
     assert cores("--threads", "2") == [os.cpu_count()] * 2
     assert cores("--threads=2") == [os.cpu_count()] * 2
     assert cores("--threads", "2", mpi=("--bind-to", "core")) == [1, 1]
+
+
+def test_threads_warnings_name_binding_and_oversubscription(monkeypatch):
+    from mpdem.__main__ import threads_warnings
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "2")
+    assert threads_warnings(2, 4) == []
+    bound = threads_warnings(2, 1)
+    assert len(bound) == 1 and "--bind-to none" in bound[0]
+    monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "4")
+    over = threads_warnings(2, 4)
+    assert len(over) == 1 and "4 rank(s) x 2 threads on this node's 4 cores" in over[0]

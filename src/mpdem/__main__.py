@@ -360,6 +360,20 @@ def main(argv=None):
             sys.modules["numba"].set_num_threads(old_threads)
 
 
+def threads_warnings(n, cores):
+    """Warnings for ``--threads n`` in a process that may use ``cores`` cores."""
+    out = []
+    if n > cores:
+        out.append(f"--threads {n}, but this process may run on {cores} core(s), so its threads share them "
+                   f"(under Open MPI's mpiexec: --bind-to none, or --map-by slot:PE={n})")
+    local = int(os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE") or os.environ.get("MPI_LOCALNRANKS") or 1)
+    node = os.cpu_count() or 1
+    if local * n > node:
+        out.append(f"{local} rank(s) x {n} threads on this node's {node} cores: every parallel loop then "
+                   f"waits for a time slice, far slower than fewer threads")
+    return out
+
+
 def _main(argv):
     p = parser()
     args = p.parse_args(argv)
@@ -367,13 +381,16 @@ def _main(argv):
         check_bench_mode(p, args)
     comm = start_mpi()
     # before anything imports the numba kernels (numba sizes its pool at import)
-    from .threads import ThreadsError, configure
+    from .threads import ThreadsError, configure, usable_cores
     n_threads = threads_wanted(args)
     try:
         if n_threads is not None:
             configure(n_threads)
     except ThreadsError as e:
         _fail(comm, f"mpdem: error: {e}")
+    if n_threads and comm.Get_rank() == 0:
+        for w in threads_warnings(n_threads, usable_cores()):
+            sys.stderr.write(f"mpdem: warning: {w}\n")
     from .build import InputError
     from .checkpoint import StateFileError
     from .config import ConfigError

@@ -150,7 +150,7 @@ class Engine:
                                  self.hist, self.touch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (physics.md 2.6), whatever an initial file held
-            self.hist[:len(self.touch)] = 0.0
+            self.hist[:] = 0.0
         s.drop_slots()
 
     # -- neighbour lists --

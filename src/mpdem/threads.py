@@ -29,9 +29,9 @@ def configure(n):
     if not isinstance(n, int) or n < 1:
         raise ThreadsError(f"--threads {n!r}: accepted an integer >= 1")
     if "numba" not in sys.modules:
-        # numba sizes its pool at import: make room for n threads
+        # numba sizes its pool at import, to the cores this process may use: make room for n threads
         have = int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0)
-        if n > max(have, os.cpu_count() or 1):
+        if n > max(have, usable_cores()):
             os.environ["NUMBA_NUM_THREADS"] = str(n)
     import numba
     top = numba.config.NUMBA_NUM_THREADS
@@ -49,6 +49,14 @@ def apply():
     import numba
     numba.set_num_threads(min(_requested, numba.config.NUMBA_NUM_THREADS))
     return numba.get_num_threads()
+
+
+def usable_cores():
+    """Cores this process may run on (its affinity: one under mpiexec's default binding)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
 
 
 def count():
