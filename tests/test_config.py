@@ -109,3 +109,14 @@ def test_readme_config_reference_is_current():
     from pathlib import Path
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     assert config.reference_markdown() in readme
+
+
+def test_sections_are_built_once_and_read_only():
+    c = cfg()
+    assert c.contact is c.contact and c.contact.k_n == 2e5
+    with pytest.raises(AttributeError, match="read-only"):
+        c.contact.k_n = 1.0
+    with pytest.raises(AttributeError):
+        c.no_such_section
+    assert c.replace(**{"contact.k_n": 3e5}).contact.k_n == 3e5 and c.contact.k_n == 2e5
+    assert c == cfg()

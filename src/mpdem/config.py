@@ -132,11 +132,15 @@ class Config:
     derived: frozenset = field(default_factory=frozenset)
 
     def __getattr__(self, section):
+        # called only when the section is not yet cached on the instance
         if section not in SECTIONS:
             raise AttributeError(section)
         vals = {k.split(".", 1)[1]: v for k, v in self.values.items()
                 if k.startswith(section + ".")}
-        return _Section(section, vals)
+        sec = _Section(section, vals)
+        # built once: later lookups find it in the instance dict (frozen, hence object.__setattr__)
+        object.__setattr__(self, section, sec)
+        return sec
 
     def replace(self, **updates):
         """A new Config with ``{'section.key': value}`` overrides, re-resolved."""
@@ -161,9 +165,16 @@ class Config:
 
 
 class _Section:
+    """The keys of one config section as read-only attributes (shared by every access)."""
+
     def __init__(self, name, vals):
-        self._name = name
+        self.__dict__["_name"] = name
         self.__dict__.update(vals)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"config section [{self._name}] is read-only")
+
+    __delattr__ = __setattr__
 
     def __repr__(self):
         return f"<{self._name} {self.__dict__}>"

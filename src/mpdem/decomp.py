@@ -9,10 +9,13 @@ At neighbour-list rebuilds (``rebuild``):
 2. rebalance: when max/mean owned mobile particles exceeds
    ``1 + tolerance``, the inner bounds move (damped) toward the quantiles of
    all mobile z, and particles migrate again;
-3. halo: every rank receives, from every rank, the particles within
-   ``r_list`` of its slab (so a slab thinner than the halo still gets its
-   ghosts right); the plan is kept and ``refresh`` re-sends x, v, omega of
-   the same rows on the other steps.
+3. halo: every rank receives the particles within ``r_list`` of its slab
+   from the ranks whose slabs reach that far (not only the next ones, so a
+   slab thinner than the halo still gets its ghosts right); the plan is kept
+   and ``refresh`` re-sends x, v, omega of the same rows on the other steps.
+
+Rows travel as contiguous numpy arrays through ``parallel.Channel``: counts
+first, then data only between ranks that have something to send.
 
 Nothing here changes arithmetic: forces depend only on ids and positions, so
 the state is bit-identical for any number of ranks. Reductions are exact
@@ -21,12 +24,16 @@ the state is bit-identical for any number of ranks. Reductions are exact
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
-from .state import select_contacts
+from .parallel import Channel
+from .state import MOVE_FIELDS, select_contacts
 
+# point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
+TAG_MIGRATE = 11
+TAG_HALO_COUNT = 21
+TAG_HALO_ROWS = 23
 
 
 class Domain:
@@ -45,11 +52,10 @@ class Domain:
 
     def __init__(self, comm=None, r_list=1.2, tolerance=0.1, damping=0.5):
         self.comm = comm
-        self.size = 1 if comm is None else comm.Get_size()
-        self.rank = 0 if comm is None else comm.Get_rank()
+        self.net = Channel(comm)
+        self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
         self.bounds = np.array([-math.inf] + [math.inf] * self.size)
-        self.comm_seconds = 0.0
         self.n_migrated = 0
         self.n_rebalances = 0
         self._plan = None
@@ -58,42 +64,36 @@ class Domain:
     def parallel(self):
         return self.size > 1
 
-    # -- exact reductions (order independent, so rank-count independent) --
-    def _allreduce(self, a, op):
-        if not self.parallel:
-            return a
-        from mpi4py import MPI
-        out = np.empty_like(a)
-        t = time.perf_counter()
-        self.comm.Allreduce(a, out, op=getattr(MPI, op))
-        self.comm_seconds += time.perf_counter() - t
-        return out
+    @property
+    def comm_seconds(self):
+        """Wall seconds spent communicating so far [s] (refresh and reductions included)."""
+        return self.net.seconds
 
+    @comm_seconds.setter
+    def comm_seconds(self, value):
+        self.net.seconds = value
+
+    # -- exact reductions (order independent, so rank-count independent) --
     def max_many(self, values):
-        """Element-wise global max of a float array; NaN becomes +inf first."""
-        a = np.asarray(values, float)
-        return self._allreduce(np.where(np.isnan(a), np.inf, a), "MAX")
+        """Element-wise global max of a float array; NaN becomes +inf first.
+
+        Returns a read-only (k,) float64 buffer that the next call of the same
+        length overwrites (``Channel.max_many``).
+        """
+        return self.net.max_many(values)
 
     def max(self, value):
-        return float(self.max_many([value])[0])
+        return float(self.net.max_many((value,))[0])
 
     def sum_int(self, arr):
-        """Exact global sum of an int64 array (fixed-point accumulators, counts)."""
-        return self._allreduce(np.ascontiguousarray(arr, np.int64), "SUM")
+        """Exact global sum of an int64 array (fixed-point accumulators, counts).
+
+        Returns a read-only buffer that the next call of the same shape overwrites.
+        """
+        return self.net.sum_int(arr)
 
     def allgather(self, obj):
-        if not self.parallel:
-            return [obj]
-        t = time.perf_counter()
-        out = self.comm.allgather(obj)
-        self.comm_seconds += time.perf_counter() - t
-        return out
-
-    def _alltoall(self, objs):
-        t = time.perf_counter()
-        out = self.comm.alltoall(objs)
-        self.comm_seconds += time.perf_counter() - t
-        return out
+        return self.net.allgather(obj)
 
     # -- bounds --
     def owner_of(self, z):
@@ -148,13 +148,16 @@ class Domain:
         if self.parallel:
             owner = self.owner_of(a["x"][:, 2])
             parts = [_subset(a, np.flatnonzero(owner == r)) for r in range(self.size)]
-            a = merge_sorted(self._alltoall(parts))
+            a = merge_sorted(self.net.alltoall(parts))
         return _local_state(a, np.arange(len(a["id"])), L_x, L_y)
 
     # -- particle movement --
     def rebuild(self, state):
         """Migrate, rebalance if uneven, then build the halo (ghost rows)."""
         state.n_rows = state.n_own
+        if self._plan is not None:
+            self._plan.free()
+            self._plan = None
         if not self.parallel:
             return
         self._migrate(state)
@@ -172,71 +175,93 @@ class Domain:
         self._halo(state)
 
     def _migrate(self, state):
+        """Send owned particles outside this slab, with their slots, to their owners.
+
+        A particle may jump several slabs when the bounds move, so every rank
+        learns from every rank how much comes (one Alltoall of counts); the
+        rows then travel only between ranks that exchange something.
+        """
         n = state.n_own
         owner = self.owner_of(state.x[:n, 2])
         leave = owner != self.rank
-        out = []
-        for r in range(self.size):
-            sel = np.flatnonzero(owner == r) if r != self.rank else np.zeros(0, np.int64)
-            out.append(state.take(sel) if len(sel) else None)
-        got = self._alltoall(out)
+        layout = _row_layout(state)
+        counts = np.zeros((self.size, 2), np.int64)
+        sends = {}
+        if leave.any():
+            rows = np.flatnonzero(leave)
+            for r in np.unique(owner[rows]):
+                part = state.take(rows[owner[rows] == r])
+                counts[r] = len(part["ids"]), len(part["slot_id"])
+                sends[int(r)] = list(_pack(part, layout))
+        got = self.net.alltoall_counts(counts)
+        recvs = {s: list(_empty_packed(m, slots, layout)) for s, (m, slots) in enumerate(got) if m}
+        self.net.exchange(sends, recvs, TAG_MIGRATE)
         keep = np.flatnonzero(~leave)
         if len(keep) != n:
             state.keep(keep)
-        self.n_migrated += state.append(got)
+        # arrivals in ascending rank order of their senders (the order changes no result)
+        parts = [_unpack(*recvs[s], got[s, 0], layout) for s in sorted(recvs)]
+        self.n_migrated += state.append(parts)
+
+    def reach(self):
+        """Ranks this rank may send ghosts to, and may receive ghosts from.
+
+        Rank s may send to rank r when slab s meets slab r widened by
+        ``r_list``; every rank evaluates the same expressions on the same
+        bounds, so sender and receiver agree.
+
+        Returns
+        -------
+        to, frm : (k,) int64
+            Ranks, ascending; this rank is in neither.
+        """
+        b = self.bounds
+        lo, hi = b[:-1] - self.r_list, b[1:] + self.r_list
+        # may[s, r]: some z in [b_s, b_s+1) lies in [lo_r, hi_r), the test _halo applies to rows
+        may = (b[:-1, None] < hi[None, :]) & (lo[None, :] < b[1:, None])
+        np.fill_diagonal(may, False)
+        return np.flatnonzero(may[self.rank]), np.flatnonzero(may[:, self.rank])
 
     def _halo(self, state):
-        """Send every rank the owned rows within r_list of its slab; append ghosts."""
+        """Send the ranks in reach the owned rows within r_list of their slabs; append ghosts.
+
+        Counts go to every rank in reach, rows only where there are some. The
+        ghost rows are stored in ascending rank order of their owners, and the
+        refresh plan of x, v, omega is built and run once to fill them.
+        """
         n = state.n_own
         z = state.x[:n, 2]
         lo = self.bounds[:-1] - self.r_list
         hi = self.bounds[1:] + self.r_list
-        send = []
-        for r in range(self.size):
-            if r == self.rank:
-                send.append(np.zeros(0, np.int64))
-            else:
-                send.append(np.flatnonzero((z >= lo[r]) & (z < hi[r])))
-        got = self._alltoall([{"ids": state.ids[s], "fixed": state.fixed[s], "xvw": _xvw(state, s)}
-                              for s in send])
-        recv_counts = [len(g["ids"]) for g in got]
-        total = n + sum(recv_counts)
-        if total > state.capacity:
-            state.grow(rows=int(total * 1.2) + 16)
-        k = n
-        for g in got:
-            m = len(g["ids"])
-            state.ids[k:k + m] = g["ids"]
-            state.fixed[k:k + m] = g["fixed"]
-            _set_xvw(state, slice(k, k + m), g["xvw"])
-            k += m
-        state.n_rows = total
-        self._plan = (send, recv_counts)
+        to, frm = self.reach()
+        send = {int(r): np.flatnonzero((z >= lo[r]) & (z < hi[r])) for r in to}
+        got = {int(s): np.zeros(1, np.int64) for s in frm}
+        self.net.exchange({r: [np.array([len(rows)], np.int64)] for r, rows in send.items()},
+                          {s: [c] for s, c in got.items()}, TAG_HALO_COUNT)
+        send = {r: rows for r, rows in send.items() if len(rows)}
+        recv, k = {}, n
+        for s in sorted(got):
+            m = int(got[s][0])
+            if m:
+                recv[s] = (k, m)
+                k += m
+        if k > state.capacity:
+            state.grow(rows=int(k * 1.2) + 16)
+        # ids and fixed flags straight into the ghost rows
+        self.net.exchange({r: [state.ids[rows], state.fixed[rows]] for r, rows in send.items()},
+                          {s: [state.ids[a:a + m], state.fixed[a:a + m]] for s, (a, m) in recv.items()},
+                          TAG_HALO_ROWS)
+        state.n_rows = k
+        self._plan = self.net.ghost_plan(send, recv)
+        self._plan.run((state.x, state.v, state.omega))
 
     def refresh(self, state):
         """Update ghost x, v, omega from their owners through the current plan."""
         if not self.parallel:
             return
-        send, recv_counts = self._plan
-        t = time.perf_counter()
-        reqs = []
-        bufs = []
-        k = state.n_own
-        for r in range(self.size):
-            m = recv_counts[r]
-            if m:
-                b = np.empty((m, 9))
-                bufs.append((k, m, b))
-                reqs.append(self.comm.Irecv(b, source=r, tag=7))
-            k += m
-        for r in range(self.size):
-            if len(send[r]):
-                reqs.append(self.comm.Isend(np.ascontiguousarray(_xvw(state, send[r])), dest=r, tag=7))
-        from mpi4py import MPI
-        MPI.Request.Waitall(reqs)
-        for k, m, b in bufs:
-            _set_xvw(state, slice(k, k + m), b)
-        self.comm_seconds += time.perf_counter() - t
+        if self._plan is None:
+            raise RuntimeError("Domain.refresh before the first rebuild")
+        self._plan.run((state.x, state.v, state.omega))
 
     def _owned_counts(self, state):
         """Owned mobile particles of every rank, (P,) int64 (a collective)."""
@@ -255,9 +280,7 @@ class Domain:
         """Merge per-rank id-sorted state arrays on rank 0 (None elsewhere)."""
         if not self.parallel:
             return arrays
-        t = time.perf_counter()
-        parts = self.comm.gather(arrays, root=0)
-        self.comm_seconds += time.perf_counter() - t
+        parts = self.net.gather(arrays, root=0)
         if self.rank != 0:
             return None
         return merge_sorted(parts)
@@ -296,11 +319,63 @@ def _local_state(a, rows, L_x, L_y):
     return st
 
 
-def _xvw(state, rows):
-    return np.concatenate([state.x[rows], state.v[rows], state.omega[rows]], axis=1)
+def _row_layout(state):
+    """How ``MOVE_FIELDS`` travel: [(name, float?, columns, row shape, dtype)].
+
+    Float fields go as float64 columns, the others as int64 columns; the
+    receiver reads the same layout from its own state.
+    """
+    out = []
+    for f in MOVE_FIELDS:
+        a = getattr(state, f)
+        out.append((f, a.dtype.kind == "f", int(np.prod(a.shape[1:], dtype=np.int64)), a.shape[1:], a.dtype))
+    return out
 
 
-def _set_xvw(state, rows, a):
-    state.x[rows] = a[:, 0:3]
-    state.v[rows] = a[:, 3:6]
-    state.omega[rows] = a[:, 6:9]
+def _widths(layout):
+    """float64 and int64 columns per row (the int columns end with the slot count)."""
+    wf = sum(w for _, isf, w, _, _ in layout if isf)
+    return wf, sum(w for _, isf, w, _, _ in layout if not isf) + 1
+
+
+def _pack(part, layout):
+    """A ``State.take`` dict as two flat arrays.
+
+    Returns
+    -------
+    floats : (m * wf + 3 M,) float64
+        The float fields row by row, then ``slot_ds``.
+    ints : (m * wi + M,) int64
+        The other fields and ``slot_n`` row by row, then ``slot_id``.
+    """
+    m = len(part["ids"])
+    fcols = [part[f].reshape(m, w) for f, isf, w, _, _ in layout if isf]
+    icols = [part[f].reshape(m, w) for f, isf, w, _, _ in layout if not isf] + [part["slot_n"].reshape(m, 1)]
+    floats = np.concatenate([np.hstack(fcols).ravel(), np.asarray(part["slot_ds"], np.float64).ravel()])
+    ints = np.concatenate([np.hstack(icols).astype(np.int64).ravel(), np.asarray(part["slot_id"], np.int64)])
+    return floats, ints
+
+
+def _empty_packed(m, slots, layout):
+    """Receive arrays for ``m`` packed rows with ``slots`` contact slots in all."""
+    wf, wi = _widths(layout)
+    return np.empty(m * wf + 3 * slots), np.empty(m * wi + slots, np.int64)
+
+
+def _unpack(floats, ints, m, layout):
+    """The ``State.append`` dict of ``m`` rows packed by ``_pack``."""
+    m = int(m)
+    wf, wi = _widths(layout)
+    fb, ib = floats[:m * wf].reshape(m, wf), ints[:m * wi].reshape(m, wi)
+    part, cf, ci = {}, 0, 0
+    for f, isf, w, shape, dtype in layout:
+        if isf:
+            part[f] = fb[:, cf:cf + w].astype(dtype).reshape((m,) + shape)
+            cf += w
+        else:
+            part[f] = ib[:, ci:ci + w].astype(dtype).reshape((m,) + shape)
+            ci += w
+    part["slot_n"] = ib[:, ci].copy()
+    part["slot_id"] = ints[m * wi:]
+    part["slot_ds"] = floats[m * wf:].reshape(-1, 3)
+    return part

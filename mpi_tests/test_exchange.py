@@ -1,0 +1,98 @@
+"""Migration, halo and refresh of ``Domain`` on buffers, without the engine.
+
+A column of particles spaced 0.5 d in z over K ranks: slabs are several halo
+widths thick, so each rank talks only to the next ones; rows moved, slots
+carried, ghosts exact copies after a refresh.
+"""
+import numpy as np
+
+from mpdem.decomp import Domain
+
+N = 160
+
+
+def column():
+    """The whole set every rank starts from: ids 1000.., z = 0.25 + 0.5 k [d]."""
+    k = np.arange(N)
+    x = np.column_stack([(0.37 * k) % 5.0, (0.61 * k) % 5.0, 0.25 + 0.5 * k])
+    rng = np.random.default_rng(2)
+    return {"id": 1000 + k, "x": x, "v": rng.normal(size=(N, 3)), "omega": rng.normal(size=(N, 3)),
+            "fixed": (k < 5).astype(np.uint8)}
+
+
+def gather_owned(comm, st):
+    """{id: (x, v, omega, slot ids, slot Delta s)} of every owned particle of every rank."""
+    own = {}
+    for part in comm.allgather([(int(st.ids[i]), st.x[i].copy(), st.v[i].copy(), st.omega[i].copy(),
+                                 *(a.copy() for a in st.slots_of(i))) for i in range(st.n_own)]):
+        for i, *rest in part:
+            assert i not in own, f"particle {i} owned twice"
+            own[i] = rest
+    return own
+
+
+def check_ghosts(comm, dom, st, members=True):
+    """Ghost rows are exact copies of their owners' x, v, omega; with ``members``,
+    they are exactly the particles within r_list of this slab (true right after a rebuild)."""
+    own = gather_owned(comm, st)
+    if members:
+        b, r = dom.bounds, comm.Get_rank()
+        want = {i for i, (x, *_) in own.items() if b[r] - dom.r_list <= x[2] < b[r + 1] + dom.r_list}
+        want -= set(st.ids[:st.n_own].tolist())
+        assert sorted(st.ids[st.n_own:st.n_rows].tolist()) == sorted(want)
+    for k in range(st.n_own, st.n_rows):
+        x, v, w = own[int(st.ids[k])][:3]
+        assert st.x[k].tobytes() == x.tobytes() and st.v[k].tobytes() == v.tobytes()
+        assert st.omega[k].tobytes() == w.tobytes()
+    return own
+
+
+def test_halo_talks_to_slabs_in_reach_and_refresh_copies_exactly(comm):
+    dom = Domain(comm, r_list=1.2)
+    st = dom.scatter(column(), 5.0, 5.0)
+    dom.rebuild(st)
+    check_ghosts(comm, dom, st)
+    P, r = comm.Get_size(), comm.Get_rank()
+    to, frm = dom.reach()
+    assert set(to.tolist()) == set(frm.tolist()) == {q for q in (r - 1, r + 1) if 0 <= q < P}
+    if P > 1:
+        assert dom._plan.peers == 2 * len(to)
+    ghosts = st.ids[st.n_own:st.n_rows].copy()
+    # owners change x, v, omega in place (ghost rows untouched): a refresh brings the ghosts along
+    for step in range(3):
+        n = st.n_own
+        st.x[:n] += 1e-3 * (step + 1) * np.sin(st.ids[:n, None] * [1.0, 2.0, 3.0])
+        st.v[:n] *= -1.5
+        st.omega[:n, 2] = np.nextafter(st.omega[:n, 2], np.inf)
+        t = dom.comm_seconds
+        dom.refresh(st)
+        assert dom.comm_seconds > t or P == 1
+        assert np.array_equal(st.ids[st.n_own:st.n_rows], ghosts)
+        check_ghosts(comm, dom, st, members=False)
+
+
+def test_migration_moves_rows_with_their_slots(comm):
+    dom = Domain(comm, r_list=1.2)
+    st = dom.scatter(column(), 5.0, 5.0)
+    n = st.n_own
+    # slots: each particle in contact with the next two ids, Delta s from the id (with a -0.0)
+    partner = np.repeat(st.ids[:n], 2) + np.tile([1, 2], n)
+    ds = np.column_stack([partner * 1e-3, -partner * 1e-4, np.full(2 * n, -0.0)])
+    st.set_contacts(np.full(n, 2), partner, ds)
+    dom.rebuild(st)
+    before = gather_owned(comm, st)
+    # everything moves up by 25 d: many particles change rank, on 4 ranks some by two slabs
+    # (the bounds then move too: the top rank holds more than its share)
+    st.x[:st.n_own, 2] += 25.0
+    dom.rebuild(st)
+    after = check_ghosts(comm, dom, st)
+    assert set(after) == set(before) and len(after) == N
+    b, r = dom.bounds, comm.Get_rank()
+    assert np.all((st.x[:st.n_own, 2] >= b[r]) & (st.x[:st.n_own, 2] < b[r + 1]))
+    for i, (x, v, w, sid, sds) in after.items():
+        x0, v0, w0, sid0, sds0 = before[i]
+        assert x.tobytes() == (x0 + [0.0, 0.0, 25.0]).tobytes() and v.tobytes() == v0.tobytes()
+        assert sid.tolist() == [i + 1, i + 2] and sid.tobytes() == sid0.tobytes()
+        assert sds.tobytes() == sds0.tobytes()
+    moved = int(dom.sum_int(np.array([dom.n_migrated]))[0])
+    assert moved > 0 or comm.Get_size() == 1

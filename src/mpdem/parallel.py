@@ -1,0 +1,275 @@
+"""Every collective and exchange of the run, on numpy buffers (design.md, invariant 3).
+
+``Channel`` wraps the communicator handed down by the CLI (or None for one
+rank without MPI) and times every call into ``seconds``. ``decomp`` decides
+what moves where and calls this module to move it:
+
+- exact reductions (``max_many``, ``sum_int``) into buffers kept between
+  calls, so the per-step allreduce allocates nothing;
+- ``alltoall_counts`` and ``exchange``: counts to everyone, then contiguous
+  arrays only to the ranks that have something to receive (migration and
+  halo, at rebuilds);
+- ``GhostPlan``: the per-step refresh of ghost x, v, omega through
+  persistent requests on buffers built at the rebuild;
+- pickled ``allgather``, ``alltoall`` and ``gather``, for the few exchanges
+  of whole state sets that run once per run or per checkpoint.
+
+mpi4py is imported when a Channel is made for a communicator, so one-rank
+runs without MPI never import it.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+# point-to-point tags; every exchange is completed before the next one starts
+TAG_GHOSTS = 31
+
+
+class Channel:
+    """Timed MPI calls of one communicator.
+
+    Parameters
+    ----------
+    comm : mpi4py communicator or None
+        None (or a one-rank communicator) makes every call local.
+
+    Attributes
+    ----------
+    seconds : float
+        Wall seconds spent in communication so far [s].
+    """
+
+    def __init__(self, comm=None):
+        self.comm = comm
+        self.size = 1 if comm is None else comm.Get_size()
+        self.rank = 0 if comm is None else comm.Get_rank()
+        self.mpi = None
+        if comm is not None:
+            from mpi4py import MPI
+            self.mpi = MPI
+        self.seconds = 0.0
+        self._max = {}      # length -> (buffer, NaN mask, +inf row, read-only view)
+        self._sum = {}      # shape -> (buffer, read-only view)
+
+    @property
+    def parallel(self):
+        return self.size > 1
+
+    # -- exact reductions (order independent, so rank-count independent) --
+    def max_many(self, values):
+        """Element-wise global max; NaN counts as +inf.
+
+        Parameters
+        ----------
+        values : (k,) float64 array or sequence of numbers
+
+        Returns
+        -------
+        (k,) float64, read-only
+            A buffer reused by the next call of the same length: unpack or copy it.
+        """
+        k = len(values)
+        if k not in self._max:
+            buf = np.zeros(k)
+            view = buf.view()
+            view.flags.writeable = False
+            self._max[k] = (buf, np.zeros(k, bool), np.full(k, np.inf), view)
+        buf, nan, inf, view = self._max[k]
+        np.copyto(buf, values)
+        # NaN -> +inf, so that a NaN on any rank wins the max on every rank
+        np.isnan(buf, out=nan)
+        np.copyto(buf, inf, where=nan)
+        if self.parallel:
+            t = time.perf_counter()
+            self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=self.mpi.MAX)
+            self.seconds += time.perf_counter() - t
+        return view
+
+    def sum_int(self, arr):
+        """Exact global sum of an integer array (fixed-point accumulators, counts).
+
+        Parameters
+        ----------
+        arr : array_like, any shape, cast to int64
+
+        Returns
+        -------
+        int64 array of ``arr``'s shape, read-only
+            A buffer reused by the next call of the same shape: use or copy it.
+        """
+        a = np.asarray(arr)
+        if a.shape not in self._sum:
+            buf = np.zeros(a.shape, np.int64)
+            view = buf.view()
+            view.flags.writeable = False
+            self._sum[a.shape] = (buf, view)
+        buf, view = self._sum[a.shape]
+        np.copyto(buf, a, casting="unsafe")
+        if self.parallel:
+            t = time.perf_counter()
+            self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=self.mpi.SUM)
+            self.seconds += time.perf_counter() - t
+        return view
+
+    # -- contiguous exchanges (rebuilds) --
+    def alltoall_counts(self, counts):
+        """Every rank's counts for this rank.
+
+        Parameters
+        ----------
+        counts : (P, k) int64
+            Row r: what this rank sends to rank r.
+
+        Returns
+        -------
+        (P, k) int64
+            Row s: what rank s sends to this rank.
+        """
+        counts = np.ascontiguousarray(counts, np.int64)
+        if not self.parallel:
+            return counts.copy()
+        out = np.empty_like(counts)
+        t = time.perf_counter()
+        self.comm.Alltoall(counts, out)
+        self.seconds += time.perf_counter() - t
+        return out
+
+    def exchange(self, sends, recvs, tag):
+        """Send and receive contiguous arrays with some peers, and wait for all.
+
+        Both sides must agree on the peers and on each array's size (exchange
+        counts first); arrays of size 0 are skipped on both sides.
+
+        Parameters
+        ----------
+        sends : dict of int -> list of C-contiguous arrays
+            Arrays for each destination rank, in a fixed order.
+        recvs : dict of int -> list of C-contiguous writable arrays
+            Arrays to fill from each source rank, in the same order.
+        tag : int
+            Tags ``tag, tag + 1, ...`` are used for the arrays of a peer.
+        """
+        if not sends and not recvs:
+            return
+        t = time.perf_counter()
+        reqs = []
+        for peer, arrays in recvs.items():
+            reqs += [self.comm.Irecv(a, source=peer, tag=tag + k) for k, a in enumerate(arrays) if a.size]
+        for peer, arrays in sends.items():
+            reqs += [self.comm.Isend(a, dest=peer, tag=tag + k) for k, a in enumerate(arrays) if a.size]
+        self.mpi.Request.Waitall(reqs)
+        self.seconds += time.perf_counter() - t
+
+    def ghost_plan(self, send_rows, recv_rows, n_fields=3):
+        """A ``GhostPlan`` on this communicator (see there)."""
+        return GhostPlan(self, send_rows, recv_rows, n_fields)
+
+    # -- pickled objects (once per run or per checkpoint) --
+    def allgather(self, obj):
+        """List of every rank's ``obj``, in rank order."""
+        if not self.parallel:
+            return [obj]
+        t = time.perf_counter()
+        out = self.comm.allgather(obj)
+        self.seconds += time.perf_counter() - t
+        return out
+
+    def alltoall(self, objs):
+        """``objs[r]`` goes to rank r; returns what each rank sent here."""
+        if not self.parallel:
+            return list(objs)
+        t = time.perf_counter()
+        out = self.comm.alltoall(objs)
+        self.seconds += time.perf_counter() - t
+        return out
+
+    def gather(self, obj, root=0):
+        """List of every rank's ``obj`` on ``root``, None elsewhere."""
+        if not self.parallel:
+            return [obj]
+        t = time.perf_counter()
+        out = self.comm.gather(obj, root=root)
+        self.seconds += time.perf_counter() - t
+        return out
+
+
+class GhostPlan:
+    """Persistent exchange of some fields of the halo rows, run at every step.
+
+    Built at a rebuild: per peer, the rows sent (gathered into a contiguous
+    send buffer) and the ghost rows received (scattered from a contiguous
+    receive buffer), with one persistent send or receive request each. A run
+    then allocates no array: gather, start, wait, scatter.
+
+    Parameters
+    ----------
+    channel : Channel
+        Communicator, and the clock the refresh is timed into.
+    send_rows : dict of int -> (m,) int
+        Owned rows sent to each peer, in the order the peer stores them.
+    recv_rows : dict of int -> (int, int)
+        (first ghost row, number of rows) received from each peer.
+    n_fields : int
+        Fields per run, each a (cap, 3) float64 array (x, v, omega: 3).
+    """
+
+    def __init__(self, channel, send_rows, recv_rows, n_fields=3):
+        self.channel = channel
+        comm = channel.comm
+        n_send = sum(len(r) for r in send_rows.values())
+        n_recv = sum(m for _, m in recv_rows.values())
+        # one flat buffer each way; peer p's part is a contiguous (n_fields, m, 3) block
+        self.send_buf = np.empty(n_fields * 3 * n_send)
+        self.recv_buf = np.empty(n_fields * 3 * n_recv)
+        self.sends, self.recvs, self.requests = [], [], []
+        off = 0
+        for peer in sorted(send_rows):
+            rows = np.ascontiguousarray(send_rows[peer], np.intp)
+            m = len(rows)
+            if m:
+                block = self.send_buf[off:off + n_fields * 3 * m].reshape(n_fields, m, 3)
+                self.sends.append((rows, tuple(block)))
+                self.requests.append(comm.Send_init(block, dest=peer, tag=TAG_GHOSTS))
+                off += block.size
+        off = 0
+        for peer in sorted(recv_rows):
+            start, m = recv_rows[peer]
+            if m:
+                block = self.recv_buf[off:off + n_fields * 3 * m].reshape(n_fields, m, 3)
+                self.recvs.append((start, start + m, tuple(block)))
+                self.requests.append(comm.Recv_init(block, source=peer, tag=TAG_GHOSTS))
+                off += block.size
+
+    @property
+    def peers(self):
+        """Number of messages per run (sends plus receives)."""
+        return len(self.requests)
+
+    def run(self, fields):
+        """Copy the owners' rows of ``fields`` into the ghost rows on every rank.
+
+        Parameters
+        ----------
+        fields : sequence of (cap, 3) float64
+            E.g. (x, v, omega), the same on every rank and at every run.
+        """
+        t = time.perf_counter()
+        for rows, blocks in self.sends:
+            for a, out in zip(fields, blocks):
+                # rows are valid: "clip" only keeps numpy from buffering the output
+                np.take(a, rows, axis=0, out=out, mode="clip")
+        if self.requests:
+            self.channel.mpi.Prequest.Startall(self.requests)
+            self.channel.mpi.Request.Waitall(self.requests)
+        for start, stop, blocks in self.recvs:
+            for a, b in zip(fields, blocks):
+                a[start:stop] = b
+        self.channel.seconds += time.perf_counter() - t
+
+    def free(self):
+        """Release the persistent requests (the plan cannot run afterwards)."""
+        for r in self.requests:
+            r.Free()
+        self.requests, self.sends, self.recvs = [], [], []
