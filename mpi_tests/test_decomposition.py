@@ -138,6 +138,16 @@ def write_stack(path, layers=8, n=5, L=6.0, gap=0.001, jitter=0.0002, seed=3):
     build.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
 
 
+def stack_config(comm, base, mu):
+    """Config of 1500 steps of the ``write_stack`` stack (written by rank 0 in ``base``), gamma_t = 25.7."""
+    p = os.path.join(base, "stack.txt")
+    if comm.Get_rank() == 0:
+        write_stack(p)
+    comm.Barrier()
+    return config.load(None, ["run.max_steps=1500", "box.L_x=6.0", "box.L_y=6.0", f'run.initial_file="{p}"',
+                              "output.progress_every=100000", f"contact.mu={mu}", "contact.gamma_t=25.7"])
+
+
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_frictionless_pile_matches_one_rank(comm, mu):
     """mu = 0 with gamma_t > 0: the stored Delta s are exact zeros (or, if
@@ -146,12 +156,7 @@ def test_frictionless_pile_matches_one_rank(comm, mu):
     digest, depends on the ranks. mu = 0.5 is the control: the same stack
     with friction."""
     base = shared_dir(comm)
-    p = os.path.join(base, "stack.txt")
-    if comm.Get_rank() == 0:
-        write_stack(p)
-    comm.Barrier()
-    cfg = config.load(None, ["run.max_steps=1500", "box.L_x=6.0", "box.L_y=6.0", f'run.initial_file="{p}"',
-                             "output.progress_every=100000", f"contact.mu={mu}", "contact.gamma_t=25.7"])
+    cfg = stack_config(comm, base, mu)
     r, s = run(cfg, os.path.join(base, "fp"), comm)
     n_contacts = r.engine.contacts()
     ref = serial_digest(cfg, os.path.join(base, "fs"), comm)
@@ -168,12 +173,7 @@ def test_ranks_times_threads_match_one_rank_one_thread(comm):
     cores of CI, where every parallel loop waits for a time slice)."""
     from mpdem import threads
     base = shared_dir(comm)
-    p = os.path.join(base, "stack.txt")
-    if comm.Get_rank() == 0:
-        write_stack(p)
-    comm.Barrier()
-    cfg = config.load(None, ["run.max_steps=1500", "box.L_x=6.0", "box.L_y=6.0", f'run.initial_file="{p}"',
-                             "output.progress_every=100000", "contact.mu=0.5", "contact.gamma_t=25.7"])
+    cfg = stack_config(comm, base, 0.5)
     t = 2 if comm.Get_size() == 2 or comm.Get_rank() == 0 else 1
     threads.configure(t)
     try:
