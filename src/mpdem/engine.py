@@ -253,9 +253,11 @@ class Engine:
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
         red = self._reduce
+        if len(red) != 4 + len(self.flags):
+            red = self._reduce = np.zeros(4 + len(self.flags))
         red[0], red[1], red[2], red[3] = d2, self._overlap, -z_min, z_max
-        d2, overlap, neg_z_min, z_max, *flags = dom.max_many(red if not self.flags else
-                                                             [d2, self._overlap, -z_min, z_max] + self.flags)
+        red[4:] = self.flags
+        d2, overlap, neg_z_min, z_max, *flags = dom.max_many(red)
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
