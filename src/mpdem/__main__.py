@@ -307,7 +307,8 @@ def parser():
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",
                    help="particle table to time (id x y z [vx vy vz] [fixed], plain or gzip), "
-                        "e.g. path/to/landed20k.txt.gz; LAMMPS's settings of lammps_table.in")
+                        "e.g. path/to/landed20k.txt.gz; run with the settings of the LAMMPS comparison: "
+                        "Hooke, k_n 2e5, epsilon 0.88, gamma_t = gamma_n/2, mu 0.5, dt 1e-4, skin 0.2")
     b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
     b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",
                    help="numba threads per rank (default 1 with --table; numba's default otherwise)")
@@ -349,15 +350,16 @@ def main(argv=None):
     import signal
     old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
            for s in (signal.SIGTERM, signal.SIGUSR1)}
-    # an in-process caller (tests) gets its numba thread count back
-    old_threads = sys.modules["numba"].get_num_threads() if "numba" in sys.modules else None
+    # an in-process caller (tests) gets its thread settings back
+    from . import threads
+    old_threads = threads.snapshot() if "numba" in sys.modules else None
     try:
         return _main(argv)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
         if old_threads is not None:
-            sys.modules["numba"].set_num_threads(old_threads)
+            threads.restore(old_threads)
 
 
 def threads_warnings(n, cores):

@@ -1,18 +1,18 @@
 """``python -m mpdem bench``: nanoseconds per atom-step, beside LAMMPS.
 
 ``bench --table FILE`` (the default bench) starts from a particle table
-(``build.read_table``: plain or gzip; e.g. ../shared/bench/landed20k.txt.gz)
-and times ``--steps`` steps (default 2000) of the physics.md model with the
-settings of ../shared/bench/lammps_table.in: Hooke, k_n = 2e5, epsilon =
+(``build.read_table``: plain or gzip; e.g. a landed 20 000-sphere pile)
+and times ``--steps`` steps (default 2000) of the contact model with the
+settings of the LAMMPS comparison input: Hooke, k_n = 2e5, epsilon =
 0.88, gamma_t = gamma_n / 2, mu = 0.5, dt = 1e-4, skin 0.2 d, box 20 d x 20 d
 (``--set`` overrides any of them), ``--tile NXxNY`` copies of the table side
 by side. Untimed first: the kernels on a tiny pile (then the memory
 baseline), the set-up force evaluation and 50 steps. It prints the case,
 rebuilds and contacts, each phase's share of the loop (forces, lists,
-integration from the engine's ``timers`` when it keeps them; communication
-from the Domain; glue the rest), memory per atom, and last
-``ns_per_atom_step=X`` with every atom (bed included) counted, as LAMMPS
-counts them (../shared/bench/side_by_side.sh reads that line).
+integration from the engine's ``timers``; communication from the Domain;
+glue the rest), memory per atom, and last ``ns_per_atom_step=X`` with every
+atom (bed included) counted, as LAMMPS counts them (a side-by-side script
+reads that line).
 
 ``bench --io`` times checkpoint writes and reads; ``bench --analysis`` times
 ``mpdem analyze`` of copies of a landed pile (``landed_pile``, made once and
@@ -73,7 +73,7 @@ def landed_pile(cfg, cache, log=print):
     return a, path
 
 
-# LAMMPS's settings of ../shared/bench/lammps_table.in (gamma_t = gamma_n / 2 is set after resolving)
+# the settings of the LAMMPS comparison input (gamma_t = gamma_n / 2 is set after resolving)
 TABLE_SETTINGS = ("contact.model=hooke", "contact.k_n=2e5", "contact.epsilon=0.88", "contact.mu=0.5",
                   "integration.dt=1e-4", "integration.skin=0.2", "box.L_x=20.0", "box.L_y=20.0")
 WARMUP_STEPS = 50
@@ -84,7 +84,7 @@ def table_config(sets=()):
     """The table bench's Config: LAMMPS's settings, then ``--set`` items.
 
     gamma_t is gamma_n / 2 (25.713732817929117 at epsilon 0.88, k_n 2e5, as
-    lammps_table.in) unless ``contact.gamma_t`` is among ``sets``.
+    LAMMPS's input) unless ``contact.gamma_t`` is among ``sets``.
     """
     cfg = config.load(None, ["run.max_steps=1", *TABLE_SETTINGS, *sets])
     if any(config.parse_set(item)[0] == "contact.gamma_t" for item in sets):
@@ -164,30 +164,18 @@ def load_table(path, cfg, tile=(1, 1), say=print):
 
 
 def phase_clock(eng, dom):
-    """Accumulated seconds per phase now: the engine's ``timers`` (if it keeps them) and communication."""
-    timers = getattr(eng, "timers", None) or {}
-    out = {k: float(timers[k]) for k in PHASES if k in timers}
+    """Accumulated seconds per phase now: the engine's ``timers`` and communication."""
+    out = {k: float(eng.timers[k]) for k in PHASES}
     out["communication"] = dom.comm_seconds
     return out
 
 
 def phase_lines(before, after, wall):
-    """``bench:`` lines of each phase's seconds and share of the loop's wall time [s].
-
-    glue = wall - the phases measured; phases the engine does not time are
-    named as unavailable (and then glue is not computed).
-    """
-    spent = {k: after[k] - before[k] for k in after}
-    lines = [f"bench: phase {k:<13s} {spent[k]:8.3f} s {100 * spent[k] / wall:5.1f}%"
-             for k in PHASES + ("communication",) if k in spent]
-    missing = [k for k in PHASES if k not in spent]
-    if missing:
-        lines.append(f"bench: phase {', '.join(missing)}, glue: unavailable (this engine keeps no "
-                     f"timers for them)")
-    else:
-        glue = wall - sum(spent.values())
-        lines.append(f"bench: phase {'glue':<13s} {glue:8.3f} s {100 * glue / wall:5.1f}%")
-    return lines
+    """``bench:`` lines of each phase's seconds and share of the loop's wall time [s];
+    glue is the rest of the loop."""
+    spent = {k: after[k] - before[k] for k in PHASES + ("communication",)}
+    spent["glue"] = wall - sum(spent.values())
+    return [f"bench: phase {k:<13s} {t:8.3f} s {100 * t / wall:5.1f}%" for k, t in spent.items()]
 
 
 def timed_loop(eng, dom, steps):
@@ -238,15 +226,13 @@ def after_loop(eng, dom, st, baseline):
 
     Returns contacts (global, both partners counted), E_k [m g d], imbalance,
     grown (peak RSS - baseline summed over ranks [bytes]), peak (largest
-    process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed,
-    or None when the engine does not offer it), threads.
+    process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed), threads.
     """
     from .threads import count
     et, er = eng.kinetic()
     return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st),
                 grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
-                engine_bytes=(int(dom.sum_int(np.array([eng.memory_bytes()]))[0])
-                              if hasattr(eng, "memory_bytes") else None),
+                engine_bytes=int(dom.sum_int(np.array([eng.memory_bytes()]))[0]),
                 threads=count())
 
 
@@ -268,7 +254,7 @@ def report_lines(fig):
         *phase_lines(*fig["phases"], fig["wall"]),
         f"bench: memory {fig['grown'] / n:.0f} bytes per atom (peak RSS minus the import baseline"
         + (", summed over ranks" if par else "") + ")"
-        + (f", engine arrays {fig['engine_bytes'] / n:.0f} bytes per atom" if fig["engine_bytes"] is not None else "")
+        + f", engine arrays {fig['engine_bytes'] / n:.0f} bytes per atom"
         + f"; process peak RSS {fig['peak'] / 1e6:.0f} MB" + (" (largest rank)" if par else ""),
         f"ns_per_atom_step={fig['ns']:.6g}",
     ]

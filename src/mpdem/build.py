@@ -290,7 +290,10 @@ def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap
                              f"{z_floor:g} (the bed)")
     if len(x) < 2 or not mob.any() or allow_overlap:
         return
-    pairs, r = overlapping_pairs(x, fixed, L_x, L_y)
+    from .analysis import find_contacts
+    pairs, r = find_contacts(x, L_x, L_y)
+    bed_pair = (fixed[pairs[:, 0]] == 1) & (fixed[pairs[:, 1]] == 1)
+    pairs, r = pairs[~bed_pair], r[~bed_pair]
     if not len(pairs):
         return
     k = int(np.argmin(r))
@@ -302,33 +305,3 @@ def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap
                          f"overlaps up to checks.overlap_warn = {overlap_warn:g} d")
     (warn or warnings.warn)(f"initial state: {len(pairs)} overlapping pairs accepted (each at most "
                             f"checks.overlap_warn = {overlap_warn:g} d); the largest: {worst}")
-
-
-def overlapping_pairs(x, fixed, L_x, L_y):
-    """Pairs closer than d (bed-bed pairs left out), x and y periodic.
-
-    Parameters
-    ----------
-    x : (N, 3) float64 centres [d]; fixed : (N,) uint8, 1 for bed spheres
-    L_x, L_y : float, periodic box [d]
-
-    Returns
-    -------
-    pairs : (M, 2) int64 row indices, i < j
-    r : (M,) float64 centre distances [d], each < 1
-    """
-    from scipy.spatial import cKDTree
-    span = x[:, 2].max() - x[:, 2].min() + 10.0
-    pts = x.copy()
-    pts[:, 0] %= L_x
-    pts[:, 1] %= L_y
-    pts[:, 2] -= pts[:, 2].min()
-    tree = cKDTree(pts, boxsize=[L_x, L_y, 2 * span])
-    pairs = tree.query_pairs(1.0, output_type="ndarray").reshape(-1, 2)
-    pairs = pairs[~(fixed[pairs[:, 0]].astype(bool) & fixed[pairs[:, 1]].astype(bool))]
-    d = pts[pairs[:, 0]] - pts[pairs[:, 1]]
-    d[:, 0] -= L_x * np.round(d[:, 0] / L_x)
-    d[:, 1] -= L_y * np.round(d[:, 1] / L_y)
-    r = np.sqrt(np.einsum("ij,ij->i", d, d))
-    keep = r < 1.0
-    return pairs[keep].astype(np.int64), r[keep]

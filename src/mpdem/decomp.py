@@ -69,10 +69,6 @@ class Domain:
         """Wall seconds spent communicating so far [s] (refresh and reductions included)."""
         return self.net.seconds
 
-    @comm_seconds.setter
-    def comm_seconds(self, value):
-        self.net.seconds = value
-
     # -- exact reductions (order independent, so rank-count independent) --
     def max_many(self, values):
         """Element-wise global max of a float array; NaN becomes +inf first.

@@ -90,6 +90,7 @@ class Engine:
         self.hist = np.zeros((0, 3))
         self.touch = np.zeros(0, np.uint8)
         self.has_lists = False
+        self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
         state.packer = self.sync_slots
         t = threads.apply()
         # one chunk per thread would do, more balance the load; pairs across a border are computed twice
@@ -110,7 +111,7 @@ class Engine:
         if self.has_lists:
             self.sync_slots()      # the links of the old chunks say where the history is
         self.nchunk = int(nchunk)
-        self._scratch(getattr(self, "_width", 64))
+        self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
@@ -132,8 +133,7 @@ class Engine:
             return
         n = s.n_own
         total = history.count_contacts(n, self.nbr_start, self.touch, s.slot_n, self.nchunk)
-        start = np.zeros(n + 1, np.int64)
-        np.cumsum(s.slot_n[:n], out=start[1:])
+        start = s.slot_offsets()
         slot_id = np.empty(total, np.int64)
         slot_ds = np.empty((total, 3))
         history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self.hist, self.touch,
@@ -143,11 +143,8 @@ class Engine:
 
     def _unpack_slots(self):
         s = self.state
-        n = s.n_own
-        start = np.zeros(n + 1, np.int64)
-        np.cumsum(s.slot_n[:n], out=start[1:])
-        history.slots_to_entries(n, s.ids, self.nbr_start, self.nbr_list, start, s.slot_id, s.slot_ds,
-                                 self.hist, self.touch, self.nchunk)
+        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, s.slot_offsets(), s.slot_id,
+                                 s.slot_ds, self.hist, self.touch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (physics.md 2.6), whatever an initial file held
             self.hist[:] = 0.0

@@ -151,12 +151,18 @@ class State:
         counts, partner, ds = select_contacts(self.slot_n[:n], self.slot_id, self.slot_ds, order)
         return counts, partner, ds, order
 
+    def slot_offsets(self):
+        """(n_own + 1,) int64: owned row i's slots are ``slot_id[o[i]:o[i + 1]]`` (from ``slot_n``)."""
+        n = self.n_own
+        o = np.zeros(n + 1, np.int64)
+        np.cumsum(self.slot_n[:n], out=o[1:])
+        return o
+
     def slots_of(self, i):
         """Partner ids (m,) int64 and Delta s (m, 3) [d] of owned row i."""
         self._check_slots()
-        start = int(self.slot_n[:i].sum())
-        m = int(self.slot_n[i])
-        return self.slot_id[start:start + m], self.slot_ds[start:start + m]
+        o = self.slot_offsets()
+        return self.slot_id[o[i]:o[i + 1]], self.slot_ds[o[i]:o[i + 1]]
 
     # -- moving rows --
     def permute(self, order):

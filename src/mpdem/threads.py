@@ -59,6 +59,20 @@ def usable_cores():
         return os.cpu_count() or 1
 
 
+def snapshot():
+    """This process's thread settings (mpdem's request, numba's count), for ``restore``."""
+    import numba
+    return _requested, numba.get_num_threads()
+
+
+def restore(saved):
+    """Put back the settings of ``snapshot`` (an in-process caller of the CLI gets its own back)."""
+    import numba
+    global _requested
+    _requested = saved[0]
+    numba.set_num_threads(saved[1])
+
+
 def count():
     """Threads numba uses now."""
     import numba
