@@ -1,9 +1,10 @@
-"""Command line: ``python -m mpdem run|restart|analyze|collect|info|export|bench``.
+"""Command line: ``python -m mpdem run|restart|analyze|collect|sweep|info|export|bench``.
 
     python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...]
     python -m mpdem collect RUN_DIR ... [--out DIR]
+    python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
     python -m mpdem info FILE [--digest]
     python -m mpdem export FILE --format lammps-dump|xyz [--out PATH]
     python -m mpdem bench --table FILE [--steps S] [--threads T] [--tile NXxNY] [--set ...]
@@ -23,7 +24,6 @@ import os
 import sys
 import time
 import tomllib
-from importlib import resources
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
 T_START = time.monotonic()
@@ -88,15 +88,17 @@ def start_mpi():
     return comm
 
 
-def margin(text):
-    """Seconds >= 0 (argparse type of --walltime-margin)."""
-    try:
-        sec = float(text)
-        if sec >= 0 and sec != float("inf"):
-            return sec
-    except ValueError:
-        pass
-    raise argparse.ArgumentTypeError(f"--walltime-margin {text!r}: accepted seconds >= 0")
+def seconds(flag):
+    """argparse type: seconds >= 0, refused with a message naming ``flag``."""
+    def parse(text):
+        try:
+            sec = float(text)
+            if sec >= 0 and sec != float("inf"):
+                return sec
+        except ValueError:
+            pass
+        raise argparse.ArgumentTypeError(f"{flag} {text!r}: accepted seconds >= 0")
+    return parse
 
 
 def default_out():
@@ -106,12 +108,7 @@ def default_out():
 def cmd_run(args, comm):
     from . import config
     from .simulation import Run
-    if args.config is None:
-        text = resources.files("mpdem").joinpath("example.toml").read_text()
-        raw = config.flatten(tomllib.loads(text), origin="built-in example")
-        cfg = config.load(None, args.set, base=raw)
-    else:
-        cfg = config.load(args.config, args.set)
+    cfg = config.load_run_config(args.config, args.set)
     out = args.out or default_out()
     # rank 0 looks, before any rank can write there
     held = os.path.exists(os.path.join(out, "config.toml")) if comm.Get_rank() == 0 else None
@@ -246,6 +243,30 @@ def cmd_collect(args, comm):
     return EXIT_OK
 
 
+def cmd_sweep(args):
+    """Run the rows of sweep tables here, J at a time, then collect them (no MPI in this process)."""
+    from . import sweep
+    from .config import ConfigError
+    try:
+        rows = sweep.plan(args.tables, args.config, args.set)
+    except ConfigError as e:
+        sys.stderr.write(f"mpdem: error: {e}\n")
+        return EXIT_ERROR
+    jobs = args.jobs or sweep.default_jobs(args.ranks, args.threads)
+    rc = sweep.Sweep(rows, args.out, args.config, args.set, jobs=jobs, ranks=args.ranks, threads=args.threads,
+                     progress=args.progress).run()
+    if rc == sweep.EXIT_RESTART or args.no_collect:
+        return rc
+    from .analysis.collect import collect
+    from .analysis.report import AnalysisError
+    try:
+        collect([args.out], args.collect or os.path.join(args.out, "collect"))
+    except AnalysisError as e:
+        sys.stderr.write(f"mpdem: error: collect: {e}\n")
+        return EXIT_ERROR
+    return rc
+
+
 def _quiet(quiet):
     return (lambda msg: None) if quiet else print
 
@@ -296,7 +317,7 @@ def parser():
                        help="numba threads per rank (default 1)")
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
                        help="write a checkpoint and exit (status 75) before this much wall time")
-        q.add_argument("--walltime-margin", type=margin, default=None, metavar="SECONDS",
+        q.add_argument("--walltime-margin", type=seconds("--walltime-margin"), default=None, metavar="SECONDS",
                        help="seconds kept free before --walltime besides twice the last checkpoint "
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
@@ -340,6 +361,22 @@ def parser():
     co.add_argument("--no-analyze", action="store_true",
                     help="use only runs that already have analysis/summary.json")
     co.add_argument("--quiet", action="store_true", help="print nothing")
+    sw = sub.add_parser("sweep", help="run the rows of sweep tables on this machine, then collect them")
+    sw.add_argument("tables", nargs="+", metavar="TABLE",
+                    help="sweep tables (columns mu epsilon k_n phi_i seed or section.key, one run per line)")
+    sw.add_argument("--out", required=True, help="directory of the run directories (one per row, named from it)")
+    sw.add_argument("--config", help="TOML config under each row's values (default: the built-in example)")
+    sw.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="a value for every row, under the row's own (repeatable)")
+    sw.add_argument("--jobs", type=positive_int("--jobs"), default=None, metavar="J",
+                    help="rows at a time (default cores / (R T))")
+    sw.add_argument("--ranks", type=positive_int("--ranks"), default=1, metavar="R", help="MPI ranks per row (default 1)")
+    sw.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
+                    help="numba threads per rank (default 1)")
+    sw.add_argument("--progress", type=seconds("--progress"), default=300.0, metavar="SECONDS",
+                    help="seconds between progress lines (default 300)")
+    sw.add_argument("--collect", metavar="DIR", help="where collect writes (default OUT/collect)")
+    sw.add_argument("--no-collect", action="store_true", help="run the rows only")
     i = sub.add_parser("info", help="what a state file holds")
     i.add_argument("file")
     i.add_argument("--digest", action="store_true", help="print a SHA-256 of the state sorted by id")
@@ -381,6 +418,8 @@ def _main(argv):
     args = p.parse_args(argv)
     if args.cmd == "bench":
         check_bench_mode(p, args)
+    if args.cmd == "sweep":         # a manager of mpdem processes: no MPI, no kernels here
+        return cmd_sweep(args)
     comm = start_mpi()
     # before anything imports the numba kernels (numba sizes its pool at import)
     from .threads import ThreadsError, configure, usable_cores

@@ -237,6 +237,15 @@ def load(path=None, sets=(), base=None):
     return resolve(raw)
 
 
+def load_run_config(path=None, sets=()):
+    """The config of ``mpdem run``: the TOML file ``path``, or the built-in example without it."""
+    if path is not None:
+        return load(path, sets)
+    from importlib import resources
+    text = resources.files("mpdem").joinpath("example.toml").read_text()
+    return load(None, sets, base=flatten(tomllib.loads(text), origin="built-in example"))
+
+
 def _coerce(key, value):
     spec = KEYS[key]
     if spec.kind is bool:
