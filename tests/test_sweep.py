@@ -1,0 +1,164 @@
+"""``mpdem sweep``: tables read as the cluster helper reads them, bad input refused
+before any run, and real rows run, stopped, resumed bit-identically and skipped."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mpdem import config, sweep
+from mpdem.checkpoint import digest, read_state
+
+ROOT = Path(__file__).resolve().parents[1]
+DEV = ROOT / "analysis" / "sweeps" / "dev"
+# a small pile that settles in seconds and still has a bulk region to analyse
+SMALL = ["pour.N=300", "box.L_x=4", "box.L_y=4", "run.max_steps=2000000"]
+
+
+def env():
+    e = {k: v for k, v in os.environ.items() if not k.startswith(("MPDEM_", "SLURM_", "PBS_"))}
+    e["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + e.get("PYTHONPATH", "")
+    return e
+
+
+def mpdem(*args, cwd=None, timeout=600):
+    return subprocess.run([sys.executable, "-m", "mpdem", *map(str, args)], env=env(), cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def tables():
+    return sorted(ROOT.glob("analysis/sweeps/**/*.tsv")) + [ROOT / "jobs" / "sweep.example.tsv"]
+
+
+def test_rows_are_named_and_set_as_the_cluster_helper_does(tmp_path):
+    """Every row of every shipped table: the same run directory and --set items as
+    ``jobs/mpdem-segment.sh --sweep``, so a sweep moves between cluster and laptop."""
+    fake = tmp_path / "fake-mpdem.sh"
+    fake.write_text('printf "%s\\n" "$*" >> "$FAKE_LOG"\n')
+    e = env()
+    e.update(MPDEM_CMD=f"bash {fake}", FAKE_LOG=str(tmp_path / "calls"))
+    for t in tables():
+        rows = sweep.read_table(str(t))
+        (tmp_path / "calls").write_text("")
+        for r in rows:
+            p = subprocess.run(["bash", str(ROOT / "jobs/mpdem-segment.sh"), "--sweep", str(t), str(r.line),
+                                "root", ""], env=e, capture_output=True, text=True, cwd=tmp_path)
+            assert p.returncode == 0, (t, r.line, p.stderr)
+        calls = [c.split() for c in (tmp_path / "calls").read_text().splitlines()]
+        assert [c[2] for c in calls] == [f"root/{r.name}" for r in rows], t
+        assert [[c[k + 1] for k in range(len(c)) if c[k] == "--set"] for c in calls] == [r.sets for r in rows], t
+
+
+def test_the_development_tables():
+    """analysis/sweeps/dev: N = 2000 in a 10 d box; the issue's mu x epsilon x 3 seeds, k_n ladder
+    for two families with 2 seeds, phi_i ladder with 2 seeds; no run directory shared."""
+    rows = sweep.plan(sorted(str(t) for t in DEV.glob("*.tsv")), str(DEV / "dev.toml"))
+    cfgs = {r.name: config.load(str(DEV / "dev.toml"), r.sets).values for r in rows}
+    assert len(cfgs) == len(rows) == 60 + 16 + 12
+    assert all(v["pour.N"] == 2000 and v["box.L_x"] == v["box.L_y"] == 10 for v in cfgs.values())
+    by_table = {}
+    for r in rows:
+        by_table.setdefault(Path(r.table).name, []).append(cfgs[r.name])
+    sets = {}
+    for v in by_table["fig2-4.tsv"]:
+        sets.setdefault((v["contact.mu"], v["contact.epsilon"]), set()).add(v["run.seed"])
+    assert set(sets) == {(m, e) for m in (0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1, 2, 10) for e in (0.88, 0.26)}
+    assert all(len(s) == 3 for s in sets.values())
+    fam = {}
+    for v in by_table["fig7.tsv"]:
+        fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {}).setdefault(v["contact.k_n"], set()).add(v["run.seed"])
+    assert set(fam) == {(0.0, 0.88), (0.5, 0.88)}
+    assert all(sorted(k) == [2e5, 2e6, 2e7, 2e8] and all(len(s) == 2 for s in k.values()) for k in fam.values())
+    assert sorted({v["pour.phi_i"] for v in by_table["fig9.tsv"]}) == [0.02, 0.05, 0.08, 0.13, 0.20, 0.30]
+    # the cheapest rows first: the stiffest last
+    assert [cfgs[r.name]["contact.k_n"] for r in rows[-4:]] == [2e8] * 4
+    assert rows[0].cost == min(r.cost for r in rows)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("mu\tcolour\n0.5\tred\n", "unknown column 'colour'"),
+    ("mu\tcontact.k_x\n0.5\t1\n", "column 'contact.k_x' is no config key"),
+    ("mu\tseed\n0.5\n", "row 1: 1 values for 2 columns"),
+    ("mu\tseed\n0.5\t1\n0.5\t1\n", "row 2 of .* and row 1 of .* both make run directory mu0.5_s1"),
+    ("mu\tseed\n0.5\t1\n-3\t2\n", r"row 2 \(mu-3_s2\): .*contact.mu"),
+    ("mu\tseed\n0.5\ta/b\n", "row 1: value 'a/b' of seed"),
+    ("# only a comment\n", "no header line"),
+    ("mu\tseed\n", "a header but no rows"),
+])
+def test_bad_tables_are_refused_before_any_run(tmp_path, text, match):
+    import re
+    t = tmp_path / "t.tsv"
+    t.write_text(text)
+    p = mpdem("sweep", t, "--out", tmp_path / "out")
+    assert p.returncode == 1
+    assert p.stderr.startswith("mpdem: error: sweep") and re.search(match, p.stderr), p.stderr
+    assert str(t) in p.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_default_jobs_fill_the_cores(monkeypatch):
+    monkeypatch.setattr(sweep, "cores", lambda: 8)
+    assert [sweep.default_jobs(r, t) for r, t in ((1, 1), (2, 1), (2, 2), (3, 1), (16, 1))] == [8, 4, 2, 2, 1]
+
+
+def wait_for(pred, timeout, what):
+    t0 = time.monotonic()
+    while not pred():
+        assert time.monotonic() - t0 < timeout, f"timed out waiting for {what}"
+        time.sleep(0.2)
+
+
+def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
+    """Two real frictional rows and one that fails (a missing initial file): the failure is
+    reported with its reason while the others go on; SIGINT stops a running row with a
+    checkpoint (exit 75); the next sweep restarts it from there and it ends bit-identical
+    to a straight run; a third sweep finds everything finished and runs nothing."""
+    t = tmp_path / "t.tsv"
+    t.write_text("# a pile\nmu\tseed\n0.5\t1\n")
+    broken = tmp_path / "broken.tsv"
+    broken.write_text("mu\tseed\trun.initial_file\n0.5\t2\tmissing.txt\n")
+    out = tmp_path / "runs"
+    argv = [sys.executable, "-m", "mpdem", "sweep", str(t), str(broken), "--out", str(out), "--jobs", "1",
+            "--progress", "1", "--collect", str(tmp_path / "collect")]
+    for s in SMALL:
+        argv += ["--set", s]
+    run1 = out / "mu0.5_s1"
+    p = subprocess.Popen(argv, env=env(), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        # the sweep runs cheapest first (equal cost: table order), one at a time
+        wait_for(lambda: (run1 / "thermo.csv").exists() and len((run1 / "thermo.csv").read_text().splitlines()) > 3,
+                 300, "the first row to make progress")
+        p.send_signal(signal.SIGINT)
+        text, _ = p.communicate(timeout=300)
+    finally:
+        p.kill()
+    assert p.returncode == 75, text
+    assert "SIGINT: stopping the running rows" in text and "mu0.5_s1: stopped (checkpoint written)" in text
+    assert list((run1 / "checkpoints").glob("*.h5")) and not (run1 / "final.h5").exists()
+    assert not (out / "mu0.5_s2_initial_filemissing.txt").exists()   # never started
+    assert not (tmp_path / "collect").exists()                     # a stopped sweep does not collect
+
+    q = subprocess.run(argv, env=env(), cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert q.returncode == 1, q.stdout + q.stderr              # a row failed; the other finished
+    assert "mu0.5_s1: restart from its checkpoint" in q.stdout
+    fail = [ln for ln in q.stdout.splitlines() if ln.startswith("sweep: failed: mu0.5_s2_initial_filemissing.txt")]
+    assert fail and "missing.txt" in fail[0] and "run exit 1" in fail[0], q.stdout
+    assert "1/2 finished (0 not converged), 0 running, 1 failed" in q.stdout
+    summ = json.loads((run1 / "analysis" / "summary.json").read_text())
+    assert summ["converged"] and summ["params"]["contact.mu"] == 0.5
+    assert (tmp_path / "collect" / "runs.csv").exists()
+
+    ref = tmp_path / "ref"
+    r = mpdem("run", "--out", ref, "--quiet", *sum((["--set", s] for s in SMALL + ["contact.mu=0.5", "run.seed=1"]), []))
+    assert r.returncode == 0, r.stderr
+    assert digest(read_state(str(run1 / "final.h5"))[0]) == digest(read_state(str(ref / "final.h5"))[0])
+
+    # everything finished (the broken row fails again, and alone)
+    before = (run1 / "sweep.log").read_text()
+    s = subprocess.run(argv[:5] + argv[6:], env=env(), cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert "1 already finished" in s.stdout, s.stdout
+    assert (run1 / "sweep.log").read_text() == before
