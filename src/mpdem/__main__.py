@@ -2,7 +2,7 @@
 
     python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS] [--threads T]
-    python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...]
+    python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...] [--series]
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
     python -m mpdem info FILE [--digest]
@@ -231,6 +231,10 @@ def cmd_analyze(args, comm):
         return EXIT_OK
     if comm.Get_size() > 1:
         print(f"analyze: one process does the work (numba threads); {comm.Get_size() - 1} rank(s) idle")
+    if args.series:
+        from .analysis.series import series
+        series(args.target, args.set, args.out, plots=not args.no_plots, log=_quiet(args.quiet))
+        return EXIT_OK
     analyze(args.target, args.out, args.set, plots=not args.no_plots, log=_quiet(args.quiet))
     return EXIT_OK
 
@@ -354,6 +358,9 @@ def parser():
     an.add_argument("--set", action="append", default=[], metavar="analysis.KEY=VALUE",
                     help="change an analysis setting (repeatable)")
     an.add_argument("--no-plots", action="store_true", help="summary and tables only")
+    an.add_argument("--series", action="store_true",
+                    help="measure every snapshot of RUN_DIR (bulk z, phi, contacts, E_k) into "
+                         "RUN/analysis/series.csv and series.png: how the run settled")
     an.add_argument("--quiet", action="store_true", help="print nothing")
     co = sub.add_parser("collect", help="many runs -> the paper's tables and figures (Figs. 2-9)")
     co.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories (or directories holding them)")

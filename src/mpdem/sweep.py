@@ -279,11 +279,14 @@ class Sweep:
         if ran:
             per_cost = sum(r.seconds for r in ran) / sum(r.cost for r in ran)
             rest = sum(r.cost for r in left if r.state == "todo")
-            rest += sum(max(r.cost - (time.monotonic() - r.started) / per_cost, 0.0) for r in left if r.state == "running")
+            # a running row past its estimate still has some way to go: a tenth of it, say
+            rest += sum(max(r.cost - (time.monotonic() - r.started) / per_cost, 0.1 * r.cost)
+                        for r in left if r.state == "running")
             eta = f"ETA {hms(per_cost * rest / self.jobs)}"
         self.log(f"sweep: {n['done'] + n['not converged']}/{len(self.rows)} finished "
                  f"({n['not converged']} not converged), {n['running']} running, {n['failed']} failed, "
-                 f"{n['todo']} to go; {hms(time.monotonic() - self.t0)} elapsed, {eta}")
+                 f"{n['todo']} to go" + (f", {n['stopped']} stopped" if n["stopped"] else "")
+                 + f"; {hms(time.monotonic() - self.t0)} elapsed, {eta}")
 
     def run(self):
         """Run every row that is not finished. Returns 0, 1 (a row failed) or 75 (stopped)."""
