@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
 
-.PHONY: setup run test test-serial test-mpi bench clean
+.PHONY: setup run test test-serial test-mpi bench reproduce collect-dev clean
 
 setup:
 	@bash tools/setup.sh
@@ -32,6 +32,18 @@ test-mpi:
 bench: setup
 	@test -n "$(TABLE)" || { echo "make bench TABLE=path/to/landed20k.txt.gz: bench needs a particle table"; exit 2; }
 	$(PY) -m mpdem bench --table "$(TABLE)"
+
+# The paper at development size: every row of analysis/sweeps/dev/*.tsv not finished yet
+# (hours on 2 cores; Ctrl-C checkpoints the running rows, the next `make reproduce` goes on),
+# then collect into analysis/results/dev. From nothing: rm -rf analysis/results/dev/runs first.
+DEV := analysis/sweeps/dev
+reproduce: setup
+	$(PY) -m mpdem sweep $(DEV)/fig2-4.tsv $(DEV)/fig7.tsv $(DEV)/fig9.tsv --config $(DEV)/dev.toml \
+	  --out analysis/results/dev/runs --collect analysis/results/dev
+
+# The tables, fits and figures of analysis/results/dev again, from its committed summaries alone.
+collect-dev: setup
+	$(PY) -m mpdem collect analysis/results/dev/runs --out analysis/results/dev --no-analyze
 
 clean:
 	rm -rf runs .pytest_cache

@@ -10,6 +10,7 @@ and the runs skipped.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -17,6 +18,9 @@ from .. import rundir
 from . import fits, paper
 from .figures import FIGURES
 from .runs import NAN, families, fmt_kn, fmt_pm
+
+# findings written by hand beside the results, copied into the README by every collect
+NOTES = "NOTES.md"
 
 
 # ---------------------------------------------------------------- comparison with the paper
@@ -74,7 +78,8 @@ def comparisons(sets, fit_res):
                 m, e, n = s.stat(p["quantity"])
                 add(p["quantity"], f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}; N = {s.p('N')}, "
                     f"{s.p('L_x'):g}d box vs 7.1 (N = 2000, 10d box)", s.id, m, e, n, p["value"],
-                    None, None, p["source"], "one seed in 7.1; no acceptance range given")
+                    None, p["accept"], p["source"], "7.1 is one seed; the acceptance is this project's "
+                    "development-size choice")
     for e in fit_res["eq7"]:
         if e["status"] != "fitted":
             continue
@@ -186,6 +191,14 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
         L.append(f"- `{fname}`: {shows}. " + ("Made." if f["made"] else f"**Not made**: {f['reason']}."))
     for name, notes in figs["_notes"].items():
         L += [f"  - note ({name}): {n}" for n in notes]
+    for name, fname, shows in FIGURES:
+        if figs[name]["made"]:
+            L += ["", f"![{shows}]({fname})"]
+    # the findings a person wrote beside the results (OUT/NOTES.md) belong in the README
+    notes = os.path.join(os.path.dirname(path), NOTES)
+    if os.path.exists(notes):
+        with open(notes) as fh:
+            L += ["", f"## Findings (from `{NOTES}`)", "", fh.read().strip()]
     L += ["", "## Skipped", ""]
     L += [_table(["run", "reason"], [[f"`{s['path']}`", s["reason"]] for s in skipped])] if skipped else ["None."]
     rundir.write_atomic(path, "\n".join(L) + "\n")
