@@ -28,22 +28,28 @@
 # counted in RUN_DIR/jobs.segments (delete it to reset the cap).
 #
 # Environment:
-#   MPDEM_LAUNCH        MPI launcher (default mpiexec), e.g. srun, "mpiexec -n 8"
-#   MPDEM_PYTHON        python (default python)
+#   MPDEM_LAUNCH        MPI launcher, e.g. "srun --mpi=pmix", "mpiexec -n 8"; default (or
+#                       "auto"): in a Slurm job whose srun offers pmix (srun --mpi=list),
+#                       srun --mpi=pmix; else the repository's .venv/bin/mpiexec, else mpiexec
+#   MPDEM_PYTHON        python (default the repository's .venv/bin/python, else python3)
 #   MPDEM_CMD           the whole mpdem command, default "$MPDEM_LAUNCH $MPDEM_PYTHON -m mpdem"
 #   MPDEM_WALLTIME      the job's time limit, [D-]HH:MM:SS. mpdem gets --walltime =
-#                       the time left (of this, of $SLURM_JOB_END_TIME or Torque's
-#                       $PBS_WALLTIME, whichever ends first) minus MPDEM_MARGIN;
-#                       none of them set: no --walltime
-#   MPDEM_MARGIN        seconds kept for checkpoint, shutdown, resubmission (default 300)
+#                       the time left (of this, of Slurm's `squeue -o %L` or
+#                       $SLURM_JOB_END_TIME, or Torque's $PBS_WALLTIME, whichever ends
+#                       first) minus MPDEM_MARGIN; none of them known: no --walltime
+#   MPDEM_MARGIN        seconds kept for checkpoint, shutdown, resubmission (default: a
+#                       tenth of the time left, at least 20 and at most 300)
 #   MPDEM_MAX_SEGMENTS  default 50
 #   MPDEM_RESUBMIT      the resubmit command when none follows --
 # SIGUSR1 and SIGTERM to this shell are forwarded to the launcher. When the
 # resubmit command is qsub, every exported MPDEM_* variable is passed with -v
-# (PBS does not pass the environment on); sbatch passes it anyway.
+# (PBS does not pass the environment on); sbatch passes it anyway, and in a
+# Slurm job gets the job's own size, time, partition, account and QOS (read
+# back with scontrol), so options given on the first sbatch command line last.
 set -euo pipefail
 shopt -s nullglob
 me=${0##*/}
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 die() { echo "$me: $*" >&2; exit 2; }
 usage="usage: $me RUN_DIR CONFIG [KEY=VALUE ...] [-- RESUBMIT ...]
        $me --sweep TABLE ROW ROOT CONFIG [KEY=VALUE ...] [-- RESUBMIT ...]"
@@ -65,10 +71,26 @@ done
 (( $# )) && shift
 resub=("$@")
 (( ${#resub[@]} )) || read -ra resub <<<"${MPDEM_RESUBMIT:-}"
-read -ra cmd <<<"${MPDEM_CMD:-${MPDEM_LAUNCH:-mpiexec} ${MPDEM_PYTHON:-python} -m mpdem}"
+# the launcher: what works here, and why (said in the log)
+launch=${MPDEM_LAUNCH:-auto} launch_why="MPDEM_LAUNCH"
+if [[ $launch == auto ]]; then
+  if [[ -n ${SLURM_JOB_ID:-} ]] && command -v srun >/dev/null && srun --mpi=list 2>&1 | grep -qw pmix; then
+    launch="srun --mpi=pmix" launch_why="Slurm offers pmix (srun --mpi=list)"
+  elif [[ -x $repo/.venv/bin/mpiexec ]]; then
+    launch=$repo/.venv/bin/mpiexec launch_why="the project's venv${SLURM_JOB_ID:+; Slurm offers no pmix}"
+  else
+    launch=mpiexec launch_why="on the PATH${SLURM_JOB_ID:+; Slurm offers no pmix}"
+  fi
+fi
+python=${MPDEM_PYTHON:-}
+if [[ -z $python ]]; then
+  python=python3
+  [[ ! -x $repo/.venv/bin/python ]] || python=$repo/.venv/bin/python
+fi
+read -ra cmd <<<"${MPDEM_CMD:-$launch $python -m mpdem}"
 (( ${#cmd[@]} )) || die "empty MPDEM_CMD"
-max=${MPDEM_MAX_SEGMENTS:-50} margin=${MPDEM_MARGIN:-300}
-[[ $max =~ ^[0-9]+$ && $margin =~ ^[0-9]+$ ]] || die "MPDEM_MAX_SEGMENTS, MPDEM_MARGIN: whole numbers"
+max=${MPDEM_MAX_SEGMENTS:-50} margin=${MPDEM_MARGIN:-auto}
+[[ $max =~ ^[0-9]+$ && $margin =~ ^([0-9]+|auto)$ ]] || die "MPDEM_MAX_SEGMENTS, MPDEM_MARGIN: whole numbers"
 
 # qsub passes no environment: hand every exported MPDEM_* on with -v
 if (( ${#resub[@]} )) && [[ ${resub[0]##*/} == qsub ]]; then
@@ -108,16 +130,32 @@ fi
 # time left in this job, from every source there is
 secs() { [[ $1 =~ ^(([0-9]+)-)?([0-9]+):([0-5][0-9]):([0-5][0-9])$ ]] || return 1
   echo $(( 10#${BASH_REMATCH[2]:-0} * 86400 + 10#${BASH_REMATCH[3]} * 3600 + 10#${BASH_REMATCH[4]} * 60 + 10#${BASH_REMATCH[5]} )); }
+# squeue's %L: [D-]HH:MM:SS, MM:SS or SS (or UNLIMITED, NOT_SET, INVALID: none)
+slurm_secs() {
+  [[ $1 =~ ^(([0-9]+)-)?([0-9]+(:[0-9]+){0,2})$ ]] || return 1
+  local d=${BASH_REMATCH[2]:-0} p n=0
+  IFS=: read -ra p <<<"${BASH_REMATCH[3]}"
+  # with days the fields are H[:M[:S]], without them [[H:]M:]S
+  [[ -z ${BASH_REMATCH[1]} ]] || while (( ${#p[@]} < 3 )); do p+=(0); done
+  for x in "${p[@]}"; do n=$(( n * 60 + 10#$x )); done
+  echo $(( 10#$d * 86400 + n )); }
 left=()
 if [[ -n ${MPDEM_WALLTIME:-} ]]; then
   s=$(secs "$MPDEM_WALLTIME") || die "MPDEM_WALLTIME=$MPDEM_WALLTIME: not [D-]HH:MM:SS"
   left+=("$s")
 fi
 if [[ ${SLURM_JOB_END_TIME:-} =~ ^[0-9]+$ ]]; then left+=($(( SLURM_JOB_END_TIME - $(date +%s) ))); fi
+if [[ -n ${SLURM_JOB_ID:-} ]] && command -v squeue >/dev/null; then
+  if s=$(slurm_secs "$(squeue -h -j "$SLURM_JOB_ID" -o %L 2>/dev/null | head -n 1)"); then left+=("$s"); fi
+fi
 if [[ ${PBS_WALLTIME:-} =~ ^[0-9]+$ ]]; then left+=("$PBS_WALLTIME"); fi
 
 mkdir -p "$run_dir"
 job=${SLURM_JOB_ID:-${PBS_JOBID:-local-$$}}
+# an array task by the name of its output file (ARRAYJOB_TASK), with its own job id
+if [[ -n ${SLURM_ARRAY_JOB_ID:-} && -n ${SLURM_ARRAY_TASK_ID:-} ]]; then
+  job="${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID} (id $SLURM_JOB_ID)"
+fi
 log() { printf '%s job %s: %s\n' "$(date '+%Y-%m-%d %H:%M:%S')" "$job" "$*" | tee -a "$run_dir/jobs.log" >&2; }
 newest() {  # the highest N of RUN_DIR/checkpoints/*N.h5, -1 if none
   local f n best=-1
@@ -153,19 +191,59 @@ fi
 if (( ${#left[@]} )); then
   t=${left[0]}
   for l in "${left[@]}"; do (( l >= t )) || t=$l; done
+  if [[ $margin == auto ]]; then  # a tenth of the job, 20 s to 300 s
+    margin=$(( t / 10 )); (( margin >= 20 )) || margin=20; (( margin <= 300 )) || margin=300
+  fi
   t=$(( t - margin - SECONDS ))
-  (( t >= 60 )) || { log "error: under $(( margin + 60 ))s left in the job (MPDEM_MARGIN=$margin); not running"; exit 1; }
+  (( t >= 30 )) || { log "error: under $(( margin + 30 ))s left in the job (margin $margin s); not running"; exit 1; }
   args+=(--walltime "$(printf '%02d:%02d:%02d' $(( t / 3600 )) $(( t % 3600 / 60 )) $(( t % 60 )))")
+fi
+
+# a resubmission by sbatch from inside a Slurm job asks for what this job got, read back
+# from Slurm: options given on the first sbatch command line are not in the script
+if (( ${#resub[@]} )) && [[ ${resub[0]##*/} == sbatch && -n ${SLURM_JOB_ID:-} ]] && command -v scontrol >/dev/null; then
+  keep=()
+  for kv in $(scontrol -o show job "$SLURM_JOB_ID" 2>/dev/null); do
+    k=${kv%%=*} v=${kv#*=}
+    [[ -n $v && $v != "(null)" && $v != *[!A-Za-z0-9_.:/+-]* ]] || continue
+    case $k in
+      NumNodes) keep+=(--nodes="$v") ;;
+      NumTasks) keep+=(--ntasks="$v") ;;
+      CPUs/Task) keep+=(--cpus-per-task="$v") ;;
+      TimeLimit) [[ $v == UNLIMITED ]] || keep+=(--time="$v") ;;
+      Partition) keep+=(--partition="$v") ;;
+      Account) keep+=(--account="$v") ;;
+      QOS) keep+=(--qos="$v") ;;
+      JobName) keep+=(--job-name="$v") ;;
+    esac
+  done
+  resub=("${resub[0]}" ${keep[@]+"${keep[@]}"} "${resub[@]:1}")
 fi
 
 seg=$(( done_n + 1 ))
 echo "$seg" >"$seg_file"
+[[ -n ${MPDEM_CMD:-} ]] || log "launcher: $launch ($launch_why)"
 log "segment $seg/$max: $what: ${cmd[*]} ${args[*]}"
 got="" pid=""
 forward() { got+=" $1"; [[ -z $pid ]] || kill -s "$1" "$pid" 2>/dev/null || true; }
 trap 'forward USR1' USR1
 trap 'forward TERM' TERM
-"${cmd[@]}" "${args[@]}" &
+# exit 75 is mpdem's "stopped with a checkpoint": drop the launcher's report of it, which reads
+# like a crash (srun's "Exited with exit code 75", Open MPI's "non-zero status" blocks)
+quiet75() {
+  awk '
+    /^srun: error: .*Exited with exit code 75$/ { next }
+    /^--------------------+$/ { if (!inblk) { inblk = 1; blk = $0 "\n"; next }
+                 inblk = 0; blk = blk $0 "\n"
+                 if (blk ~ /Primary job +terminated normally/) { held = held blk }
+                 else if (blk ~ /Exit code: *75\n/) { held = "" }
+                 else { printf "%s%s", held, blk; held = "" }
+                 fflush(); next }
+    inblk { blk = blk $0 "\n"; next }
+    { printf "%s", held; held = ""; print; fflush() }
+    END { printf "%s%s", held, (inblk ? blk : "") }'
+}
+"${cmd[@]}" "${args[@]}" 2> >(quiet75 >&2) &
 pid=$!
 rc=0; wait "$pid" || rc=$?
 while kill -0 "$pid" 2>/dev/null; do rc=0; wait "$pid" || rc=$?; done  # wait ended by a trap
@@ -190,5 +268,20 @@ fi
 if (( ${#resub[@]} == 0 )); then
   log "interrupted (exit 75), checkpoint $after; no resubmit command: run this again"; exit 75
 fi
-log "interrupted (exit 75), checkpoint $after: resubmitting: ${resub[*]}"
-"${resub[@]}" || { rc=$?; log "error: resubmission failed (exit $rc); resubmit by hand"; exit 1; }
+log "checkpointed, resubmitting (mpdem exit 75: stopped before the time limit, checkpoint $after): ${resub[*]}"
+out=$("${resub[@]}") || { rc=$?; log "error: resubmission failed (exit $rc); resubmit by hand"; exit 1; }
+[[ -z $out ]] || echo "$out"
+# a job Slurm will never start pends for ever without a word: say so, and take it back
+new=$(sed -n 's/^Submitted batch job \([0-9][0-9]*\).*/\1/p' <<<"$out")
+if [[ -n $new ]] && command -v squeue >/dev/null; then
+  for _ in 1 2 3 4 5; do
+    why=$(squeue -h -j "$new" -o %r 2>/dev/null | head -n 1 || true)
+    case $why in
+      PartitionConfig|PartitionNodeLimit|PartitionTimeLimit|BadConstraints|InvalidAccount|InvalidQOS|AccountNotAllowed|QOSMaxWallDurationPerJobLimit)
+        log "error: Slurm will not start job $new ($why); cancelled it: mend the job's options and submit again"
+        scancel "$new" 2>/dev/null || true
+        exit 1 ;;
+    esac
+    sleep 1
+  done
+fi

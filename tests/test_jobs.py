@@ -72,6 +72,15 @@ if act == "ckpt75":
     done(75)
 if act == "noprog75":
     done(75)
+if act.startswith("noisy"):  # a launcher's report of a non-zero exit on stderr (noisyN: exit N)
+    sys.stderr.write("srun: error: node1: tasks 0-1: Exited with exit code " + act[5:] + "\n" + "-" * 74 + "\n"
+                     "Primary job  terminated normally, but 1 process returned\n"
+                     "a non-zero exit code. Per user-direction, the job has been aborted.\n" + "-" * 74 + "\n"
+                     + "-" * 74 + "\nmpiexec detected that one or more processes exited with non-zero status\n\n"
+                     "  Process name: [[4059,1],0]\n  Exit code:    " + act[5:] + "\n" + "-" * 74 + "\n"
+                     "mpdem: a line of its own\n")
+    checkpoint()
+    done(int(act[5:]))
 if act.startswith("final"):
     (run_dir / "final.h5").write_text("")
     done(int(act[5:]))
@@ -160,6 +169,12 @@ class Cluster:
         self.env = {k: v for k, v in os.environ.items() if not k.startswith(OURS)}
         self.env["PATH"] = f"{self.bin}:{os.environ['PATH']}"
         self.plan("ckpt75", "ckpt75", "final0")
+
+    def tool(self, name, body):
+        """A stand-in command on the PATH (a bash script)."""
+        p = self.bin / name
+        p.write_text("#!/bin/bash\n" + body)
+        p.chmod(0o755)
 
     def plan(self, *acts):
         (self.log / "plan").write_text(" ".join(acts))
@@ -317,22 +332,28 @@ def test_helper_by_hand_run_force_restart(cl):
 
 def test_default_command_and_walltime_sources(cl):
     cl.plan("final0")
-    # the default command: MPDEM_LAUNCH MPDEM_PYTHON -m mpdem
+    # the default command: MPDEM_LAUNCH MPDEM_PYTHON -m mpdem; a Slurm whose srun offers no
+    # pmix (the stand-in srun lists none) gets mpiexec, and no venv here: python3
     cl.submit("slurm", CHAIN["slurm"], MPDEM_RUN_DIR="runs/a")
     cl.submit("pbs", CHAIN["pbs"], MPDEM_RUN_DIR="runs/b", MPDEM_PYTHON="/opt/py/bin/python")
     cl.helper("runs/c", "", MPDEM_LAUNCH="mpiexec -n 3")
     assert [(c["exe"], c["prefix"]) for c in cl.calls] == [
-        ("srun", ["python", "-m", "mpdem"]), ("mpiexec", ["/opt/py/bin/python", "-m", "mpdem"]),
-        ("mpiexec", ["-n", "3", "python", "-m", "mpdem"])]
-    assert walltime(cl.calls[0]) > 12 * 3600 - 310 and walltime(cl.calls[1]) > 12 * 3600 - 310
+        ("mpiexec", ["python3", "-m", "mpdem"]), ("mpiexec", ["/opt/py/bin/python", "-m", "mpdem"]),
+        ("mpiexec", ["-n", "3", "python3", "-m", "mpdem"])]
+    assert "launcher: mpiexec (on the PATH; Slurm offers no pmix)" in cl.joblog("runs/a")
+    # Slurm's time left unknown (no squeue answer): no --walltime; PBS's template default 12 h
+    assert "--walltime" not in cl.calls[0]["args"] and walltime(cl.calls[1]) > 12 * 3600 - 310
     # the sooner end wins: Slurm's own end time; days; the margin
     cl.helper("runs/d", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="12:00:00",
               SLURM_JOB_END_TIME=str(int(time.time()) + 1000))
-    assert 1000 - 300 - 5 <= walltime(cl.calls[-1]) <= 1000 - 300
+    assert 1000 - 100 - 5 <= walltime(cl.calls[-1]) <= 1000 - 100   # margin: a tenth
     cl.helper("runs/e", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="1-00:00:00", MPDEM_MARGIN="60")
     assert 86400 - 60 - 5 <= walltime(cl.calls[-1]) <= 86400 - 60
+    # the margin follows the job: a tenth of the time left, 20 s to 300 s
+    cl.helper("runs/e5", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="00:05:00")
+    assert 300 - 30 - 5 <= walltime(cl.calls[-1]) <= 300 - 30
     n = len(cl.calls)
-    p = cl.helper("runs/f", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="00:05:00")  # 300 s + 60 s needed
+    p = cl.helper("runs/f", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="00:00:45")  # 20 s + 30 s needed
     assert p.returncode == 1 and "left in the job" in cl.joblog("runs/f")
     p = cl.helper("runs/g", "", MPDEM_CMD=cl.mpdem, MPDEM_WALLTIME="90")
     assert p.returncode == 2 and "MPDEM_WALLTIME" in p.stderr
@@ -401,7 +422,7 @@ def test_sweep_row_errors(cl):
     p = cl.run("bash", SWEEP["slurm"], MPDEM_CMD=cl.mpdem, MPDEM_TASK="1", MPDEM_SWEEP="dotted.tsv")
     assert p.returncode == 0, p.stderr
     assert cl.calls[0]["args"] == ["--out", "runs/sweep/s4_E_stop1e-9", "--set", "run.seed=4",
-                                   "--set", "stop.E_stop=1e-9", "--walltime", cl.calls[0]["args"][-1]]
+                                   "--set", "stop.E_stop=1e-9"]   # no time limit known: no --walltime
 
 
 def start_job(cl, sched):
@@ -448,3 +469,101 @@ def test_sigterm_to_the_batch_shell_checkpoints_but_does_not_resubmit(cl, sched,
     assert [c.get("signals") for c in cl.calls] == [["SIGTERM"]]
     assert cl.submits == [] and (cl.work / "runs/c/checkpoints/ckpt-00000.h5").exists()
     assert "got SIGTERM" in cl.joblog("runs/c").splitlines()[-1]
+
+
+PMIX_SRUN = 'if [[ $1 == --mpi=list ]]; then printf "MPI plugin types are...\\n\\tnone\\n\\tpmix\\n"; exit 0; fi\n' \
+            'exec "{mpdem}" "$@"\n'
+
+
+def test_launcher_and_python_chosen_to_work(cl):
+    """In a Slurm job whose srun offers pmix: srun --mpi=pmix; else the repository's venv
+    mpiexec (and its python, found from the helper's own path); each said in jobs.log."""
+    cl.plan("final0")
+    cl.tool("srun", PMIX_SRUN.format(mpdem=cl.mpdem))
+    cl.helper("runs/a", "", SLURM_JOB_ID="41")
+    assert (cl.calls[-1]["exe"], cl.calls[-1]["prefix"]) == ("fake-mpdem", ["--mpi=pmix", "python3", "-m", "mpdem"])
+    assert "launcher: srun --mpi=pmix (Slurm offers pmix (srun --mpi=list))" in cl.joblog("runs/a")
+    venv = cl.work / ".venv" / "bin"
+    venv.mkdir(parents=True)
+    for name in ("mpiexec", "python"):
+        shutil.copy(cl.bin / "mpiexec", venv / name)
+    cl.helper("runs/b", "")                               # no Slurm: the venv's mpiexec
+    assert (cl.calls[-1]["exe"], cl.calls[-1]["prefix"]) == ("mpiexec", [str(venv / "python"), "-m", "mpdem"])
+    assert f"launcher: {venv / 'mpiexec'} (the project's venv)" in cl.joblog("runs/b")
+    cl.helper("runs/c", "", SLURM_JOB_ID="42", MPDEM_LAUNCH="srun")   # said by the user: as said
+    assert cl.calls[-1]["prefix"] == [str(venv / "python"), "-m", "mpdem"]   # srun as given, no --mpi
+    assert "launcher: srun (MPDEM_LAUNCH)" in cl.joblog("runs/c")
+
+
+@pytest.mark.parametrize("left, expect", [("1:30", 90 - 20), ("45:00", 2700 - 270), ("1-00:00:00", 86400 - 300)])
+def test_time_left_read_from_slurm(cl, left, expect):
+    """squeue -o %L gives the time left (Slurm 22.05 sets no SLURM_JOB_END_TIME)."""
+    cl.plan("final0")
+    cl.tool("squeue", f'[[ "$*" == *"-o %L"* ]] && echo "{left}"\n')
+    cl.helper("runs/t", "", MPDEM_CMD=cl.mpdem, SLURM_JOB_ID="43")
+    assert expect - 5 <= walltime(cl.calls[-1]) <= expect
+
+
+SCONTROL = """if [[ $1 == -o ]]; then
+  echo "JobId=$3 JobName=mpdem-chain UserId=u(1) Account=(null) QOS=normal Partition=short TimeLimit=00:03:00 NumNodes=1 NumCPUs=2 NumTasks=2 CPUs/Task=1 Command=$MPDEM_FAKE_COMMAND WorkDir=/x"
+else
+  printf '   JobId=%s JobName=mpdem-chain\\n   Command=%s\\n' "$3" "$MPDEM_FAKE_COMMAND"
+fi
+"""
+
+
+def test_resubmission_keeps_the_jobs_options_from_any_directory(cl):
+    """Options given on the first sbatch line (read back with scontrol) go with every
+    resubmission; the script is found from the path it was submitted by, from any directory."""
+    cl.tool("scontrol", SCONTROL)
+    sub = cl.work / "elsewhere"
+    sub.mkdir()
+    env = {**cl.env, "MPDEM_CMD": cl.mpdem, "MPDEM_FAKE_COMMAND": "../jobs/slurm/chain.sbatch"}
+    p = subprocess.run([str(cl.bin / "sbatch"), "--ntasks=2", "--time=3", "../jobs/slurm/chain.sbatch"], cwd=sub,
+                       env=env, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert [c["sub"] for c in cl.calls] == ["run", "restart", "restart"]
+    assert all(c["cwd"] == str(sub) and c["run_dir"] == "runs/chain" for c in cl.calls)
+    script = str(sub / "../jobs/slurm/chain.sbatch")
+    for s in cl.submits[1:]:
+        assert sorted(s["argv"][:-2]) == ["--cpus-per-task=1", "--job-name=mpdem-chain", "--nodes=1", "--ntasks=2",
+                                          "--partition=short", "--qos=normal", "--time=00:03:00"], s["argv"]
+        assert s["argv"][-2:] == ["--export=ALL", script]
+    assert [j["rc"] for j in cl.jobs] == [0, 0, 0]
+    log = (sub / "runs/chain/jobs.log").read_text()
+    assert log.count("checkpointed, resubmitting (mpdem exit 75") == 2
+
+
+def test_a_resubmission_slurm_will_never_start_is_an_error(cl):
+    """A resubmitted job pending for a reason that never clears (PartitionConfig) is taken
+    back with scancel and logged as an error, not left to pend for ever."""
+    cl.plan("ckpt75")
+    cl.tool("squeue", '[[ "$*" == *"-o %r"* ]] && echo PartitionConfig\n')
+    cl.tool("scancel", 'echo "$*" >> "{}"\n'.format(cl.log / "scancel"))
+    cl.tool("sbatch", 'echo "Submitted batch job 999"\n')
+    p = cl.helper("runs/p", "", "--", "sbatch", "chain.sbatch", MPDEM_CMD=cl.mpdem, SLURM_JOB_ID="44")
+    assert p.returncode == 1
+    assert "Slurm will not start job 999 (PartitionConfig); cancelled it" in cl.joblog("runs/p").splitlines()[-1]
+    assert (cl.log / "scancel").read_text().split() == ["999"]
+
+
+def test_array_task_logged_by_its_output_file_name(cl):
+    cl.plan("final0")
+    cl.submit("slurm", SWEEP["slurm"], "--array=2", MPDEM_CMD=cl.mpdem)
+    d = cl.calls[0]["run_dir"]
+    assert " job 100_2 (id 100): segment 1/50" in cl.joblog(d)
+
+
+@pytest.mark.parametrize("rc", [75, 1])
+def test_the_launchers_report_of_exit_75_is_dropped(cl, rc):
+    """Exit 75 is a checkpoint, not a crash: the launcher's 'exit code 75' lines and blocks are
+    dropped (one log line says what happened); for any other code they stay."""
+    cl.plan(f"noisy{rc}", "final0")
+    p = cl.helper("runs/n", "", "--", "true", MPDEM_CMD=cl.mpdem)
+    noise = ("Exited with exit code", "Primary job", "non-zero status", "Exit code:")
+    assert "mpdem: a line of its own" in p.stderr
+    if rc == 75:
+        assert not any(w in p.stderr for w in noise), p.stderr
+        assert "checkpointed, resubmitting" in p.stderr
+    else:
+        assert all(w in p.stderr for w in noise), p.stderr

@@ -92,6 +92,14 @@ def test_restart_on_other_rank_counts_gives_the_straight_digest(straight, tmp_pa
     mpdem("restart", again, "--quiet", n=n_second, check=0)
     s = summary(again)
     assert (s["digest"], s["steps"], s["segments"]) == (ref, steps, 2)
+    # a restart leaves config.toml as it was, byte for byte (derived defaults stay marked)
+    assert (again / "config.toml").read_bytes() == (first / "config.toml").read_bytes()
+    if n_second == 1:   # the counters add up over segments: all here are the first segment's
+        import h5py
+        with h5py.File(again / "checkpoints" / "ckpt-00000.h5") as f:
+            rs = json.loads(f.attrs["run_state"])
+        assert (s["migrated"], s["rebalances"]) == (rs["migrated"], rs["rebalances"])
+        assert rs["migrated"] > 0
     assert thermo(again) == thermo(run)                  # the table continues, no row twice
     # file numbering continues: the restarted run wrote checkpoint 1 at step 2K again
     assert (again / "checkpoints" / "ckpt-00001.h5").exists()
@@ -105,8 +113,12 @@ def test_restart_from_a_final_state_with_more_steps(straight, tmp_path):
     assert summary(short)["status"] == "max_steps"
     p = mpdem("restart", short, n=3, check=3)                     # nothing to do at the cap
     assert "raise it with --set run.max_steps" in p.stdout + p.stderr
+    before = (short / "config.toml").read_text().splitlines()
     mpdem("restart", short, "--set", "run.max_steps=400000", "--quiet", n=3, check=0)
     assert summary(short)["digest"] == ref
+    after = (short / "config.toml").read_text().splitlines()
+    assert [(a, b) for a, b in zip(before, after) if a != b] == [(f"max_steps = {K}", "max_steps = 400000")]
+    assert len(before) == len(after)
     p = mpdem("restart", short, check=0)                          # finished: nothing to do
     assert "nothing to do" in p.stdout
 

@@ -205,6 +205,23 @@ def flatten(doc, origin="config"):
     return flat
 
 
+def raw_from_toml(text, origin="config"):
+    """The flat keys of a ``Config.to_toml`` text, less those marked "# derived default".
+
+    Resolving the result derives those keys again (the same values), so the
+    Config knows them as derived and its ``to_toml`` gives back the same text.
+    """
+    raw = flatten(tomllib.loads(text), origin=origin)
+    section, derived = None, set()
+    for line in text.splitlines():
+        line = line.strip()
+        if line.startswith("[") and line.endswith("]"):
+            section = line[1:-1].strip()
+        elif line.endswith("# derived default") and "=" in line and section:
+            derived.add(f"{section}.{line.split('=', 1)[0].strip()}")
+    return {k: v for k, v in raw.items() if k not in derived}
+
+
 def parse_set(item):
     """'section.key=value' -> ('section.key', value); value parsed as TOML if it can be."""
     if "=" not in item:

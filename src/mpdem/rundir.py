@@ -148,7 +148,8 @@ def restart_config(attrs, path, run, sets):
     --set tries to change such a key.
     """
     try:
-        raw = config.flatten(tomllib.loads(attrs.get("config", "")), origin=path)
+        # the keys derived in the run stay derived: a restart leaves config.toml as it was
+        raw = config.raw_from_toml(attrs.get("config", ""), origin=path)
         cfg = config.resolve(raw)
     except (tomllib.TOMLDecodeError, config.ConfigError) as e:
         raise StateFileError(f"{path}: its config is unusable ({e})") from None

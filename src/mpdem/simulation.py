@@ -405,8 +405,9 @@ class Run:
         st, cfg = self.state, self.cfg
         # one reduction: the last overlap, and one wall-clock reading for all ranks (attributes must agree)
         overlap, wall = self.domain.max_many([self.engine._overlap, self._wall_total()])
+        migrated, rebalances = self._counters()
         rs = dict(self.cont, stop_samples=list(self.stop.samples), n_rebuilds=self.engine.n_rebuilds,
-                  wall_seconds=float(wall), max_overlap=float(overlap),
+                  wall_seconds=float(wall), max_overlap=float(overlap), migrated=migrated, rebalances=rebalances,
                   z_bed=self.z_bed, z_bed_mean=self.z_bed_mean, h_insert=self.h_insert)
         return {"kind": kind, "step": st.step, "time": st.time, "n": self.n_mobile + self.n_bed,
                 "n_mobile": self.n_mobile, "n_bed": self.n_bed, "L_x": st.L_x, "L_y": st.L_y,
@@ -414,6 +415,13 @@ class Run:
                 "seed": cfg.run.seed, "rng": "numpy PCG64 streams keyed by (run.seed, purpose); used at set-up only",
                 "mpdem_version": __import__("mpdem").__version__,
                 "config": cfg.to_toml(), "run_state": json.dumps(rs)}
+
+    def _counters(self):
+        """Migrations (summed over ranks) and rebalances of the whole run: the earlier
+        segments' (restart state) and this one's (collective)."""
+        seg = int(self.domain.sum_int(np.array([self.domain.n_migrated]))[0])
+        return (int(self.cont.get("migrated", 0)) + seg,
+                int(self.cont.get("rebalances", 0)) + int(self.domain.n_rebalances))
 
     def write_checkpoint(self):
         """Write RUN/checkpoints/ckpt-NNNNN.h5 collectively; keep the newest few."""
@@ -454,7 +462,7 @@ class Run:
         """Write RUN/final.h5 (with the contact list) and summary.json; print bulk z and phi."""
         cfg, st, log = self.cfg, self.state, self.log
         arrays = self.domain.gather_arrays(checkpoint.gather_state(st))
-        migrated = int(self.domain.sum_int(np.array([self.domain.n_migrated]))[0])
+        migrated, rebalances = self._counters()
         path = self.write_snapshot(final=True)
         if self.rank != 0:
             log.close()
@@ -467,12 +475,12 @@ class Run:
                    "segments": self.cont["segments"],
                    "ns_per_particle_step": ns, "ranks": self.domain.size,
                    "comm_share": self.domain.comm_seconds / max(self.wall, 1e-9),
-                   "migrated": migrated, "rebalances": self.domain.n_rebalances,
+                   "migrated": migrated, "rebalances": rebalances,
                    "digest": checkpoint.digest(arrays)}
         par = ""
         if self.domain.parallel:
             par = (f"; {self.domain.size} ranks, communication {100 * summary['comm_share']:.0f}%, "
-                   f"{migrated} migrations, {self.domain.n_rebalances} rebalances")
+                   f"{migrated} migrations, {rebalances} rebalances")
         log(f"end: {'converged' if self.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
             f"{steps} steps, t = {st.time:.4g}, E_k/N = {self.ek:.3e}, wall {self.wall:.1f} s "
             f"({ns:.0f} ns per particle-step{par})")
