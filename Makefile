@@ -18,7 +18,7 @@ run: setup
 test: setup test-serial test-mpi
 
 test-serial:
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -rs tests
 
 test-mpi:
 	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \

@@ -203,7 +203,8 @@ fi
 # from Slurm: options given on the first sbatch command line are not in the script
 if (( ${#resub[@]} )) && [[ ${resub[0]##*/} == sbatch && -n ${SLURM_JOB_ID:-} ]] && command -v scontrol >/dev/null; then
   keep=()
-  for kv in $(scontrol -o show job "$SLURM_JOB_ID" 2>/dev/null); do
+  # (the record of this job only: for an array job scontrol lists every task)
+  for kv in $(scontrol -o show job "$SLURM_JOB_ID" 2>/dev/null | grep -m 1 -E "^JobId=$SLURM_JOB_ID( |$)"); do
     k=${kv%%=*} v=${kv#*=}
     [[ -n $v && $v != "(null)" && $v != *[!A-Za-z0-9_.:/+-]* ]] || continue
     case $k in

@@ -66,6 +66,14 @@ MSG
   fi
   have_system || { echo "setup: $pkgs installed but $mpicc/$h5pc still not found" >&2; exit 1; }
 fi
+# a single-node Slurm for the `slurm` tests (tools/local-slurm.sh): best effort, as root with apt
+if ! command -v slurmctld >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  say "installing slurm-wlm and munge (the job templates are tested against a real Slurm)"
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null 2>&1 \
+    || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null; } \
+    || say "slurm-wlm not installed; the slurm tests will say so and not run"
+fi
+
 # shellcheck lints the job scripts in the tests; a developer tool, so best effort
 if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
   say "installing shellcheck (lints jobs/ in the tests)"
