@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT / "tools" / "local-slurm.sh"
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
 # a pile that takes longer than one 2-minute job (its first segment), and settles in the second
-PILE = "pour.N=400 box.L_x=5 box.L_y=5 run.max_steps=2000000 output.progress_every=50000"
+PILE = "pour.N=600 box.L_x=5 box.L_y=5 run.max_steps=2000000 output.progress_every=50000"
 # the last line of a jobs.log that ends a chain
 ENDS = ("finished (exit", "error:", "stop:", "not converged:")
 SMALL = "pour.N=150 box.L_x=4 box.L_y=4 run.max_steps=2000000 output.progress_every=50000"
