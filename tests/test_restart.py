@@ -123,6 +123,19 @@ def test_restart_from_a_final_state_with_more_steps(straight, tmp_path):
     assert "nothing to do" in p.stdout
 
 
+def test_a_converged_run_goes_on_under_a_stricter_stop_rule(straight, tmp_path):
+    """restart --set stop.E_stop=... on a converged run continues it from final.h5 until
+    the new rule holds (without a stop.* change there is nothing to do)."""
+    run, ref, steps = straight
+    more = tmp_path / "more"
+    shutil.copytree(run, more)
+    p = mpdem("restart", more, "--set", "stop.E_stop=0.005", check=0)
+    assert "going on under the changed stop rule (stop.E_stop = 0.005)" in p.stdout
+    s = summary(more)
+    assert s["converged"] and s["steps"] > steps and s["segments"] == 2 and s["digest"] != ref
+    assert s["E_k_per_particle"] < summary(run)["E_k_per_particle"]
+
+
 def _pids_of(run, n):
     """PIDs of the n rank processes of the run writing to ``run``."""
     out = subprocess.run(["pgrep", "-f", f"mpdem run .*--out {run}"], capture_output=True, text=True).stdout

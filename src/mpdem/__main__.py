@@ -147,6 +147,7 @@ def cmd_restart(args, comm):
                 raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
                                      f"restart accepts the checkpoints, snapshots and final.h5 of a run")
             cfg = rundir.restart_config(attrs, path, run_dir, args.set)
+            old_cfg = rundir.restart_config(attrs, path, run_dir, [])
             break
         except StateFileError as e:
             if not os.path.isdir(args.target):
@@ -159,9 +160,14 @@ def cmd_restart(args, comm):
         say.warn(f"restart: skipping {e}")
     if skipped:
         say.warn(f"restart: falling back to {path} (step {attrs['step']})")
-    if attrs.get("converged"):
+    # a stricter stop rule given now may make a converged run go on
+    stop_changed = [k for k in cfg.values if k.startswith("stop.") and cfg.values[k] != old_cfg.values[k]]
+    if attrs.get("converged") and not stop_changed:
         say(f"restart: {path}: the run converged at step {attrs['step']}; nothing to do")
         return EXIT_OK
+    if attrs.get("converged"):
+        say(f"restart: {path} converged at step {attrs['step']}; going on under the changed stop rule "
+            f"({', '.join(f'{k} = {cfg.values[k]!r}' for k in stop_changed)})")
     # a checkpoint at the cap still goes on, to write the final state
     if attrs.get("kind") == "final" and int(attrs["step"]) >= cfg.run.max_steps:
         say(f"restart: {path} is at step {attrs['step']} and run.max_steps = {cfg.run.max_steps}; "
