@@ -3,6 +3,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,6 +111,16 @@ def test_run_directory_contents(tmp_path):
     assert len(rows) > 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 300 and summary["converged"] is False
+    # the exit status that follows is explained in one line
+    log = (out / "log.txt").read_text()
+    assert "exit status 3: the run reached run.max_steps = 300 before the stop rule held; not an error" in log
+
+
+def test_progress_before_the_first_energy_sample_shows_a_dash(tmp_path):
+    out, r, s = run_small(tmp_path, "dash", "output.progress_every=10", "stop.sample_interval=0.01")
+    lines = [ln for ln in (out / "log.txt").read_text().splitlines() if ln.startswith("step ")]
+    assert "E_k/N         -  " in lines[0] and not any("inf" in ln for ln in lines)
+    assert "E_k/N 0." in lines[-1] or "e-" in lines[-1].split("E_k/N")[1].split()[0]
 
 
 def cli(*args, cwd=None):
@@ -152,3 +163,36 @@ def test_runtime_checks_stop_the_run(tmp_path):
     r.prepare()
     with pytest.raises(RunError, match="fell through the bed"):
         r.run()
+
+
+def test_version_and_nearest_key(tmp_path):
+    from mpdem import __version__
+    p = cli("--version")
+    assert p.returncode == 0 and p.stdout.strip() == f"mpdem {__version__}"
+    for given, near in (("contact.kn", "contact.k_n"), ("k_n", "contact.k_n"), ("pour.phi", "pour.phi_i"),
+                        ("stop.Estop", "stop.E_stop")):
+        p = cli("run", "--set", f"{given}=1", "--out", str(tmp_path / "x"))
+        assert p.returncode == 1 and f"--set {given}: unknown key (did you mean {near}?)" in p.stderr, p.stderr
+    toml = tmp_path / "c.toml"
+    toml.write_text("[contakt]\nk_n = 1\n")
+    p = cli("run", str(toml))
+    assert p.returncode == 1 and "unknown section [contakt] (did you mean contact?)" in p.stderr
+    toml.write_text("[contact]\nepsilom = 0.5\n")
+    p = cli("run", str(toml))
+    assert p.returncode == 1 and "unknown key contact.epsilom (did you mean contact.epsilon?)" in p.stderr
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_an_out_directory_that_cannot_be_made_is_one_line(tmp_path, ranks):
+    """A path under /proc, or under a regular file: one line naming it and why, before any work."""
+    (tmp_path / "file").write_text("")
+    mpiexec = [str(Path(sys.executable).parent / "mpiexec"), "-n", str(ranks)] if ranks > 1 else []
+    for out in ("/proc/mpdem-cannot/run", str(tmp_path / "file" / "run")):
+        p = subprocess.run(mpiexec + [sys.executable, "-m", "mpdem", "run", "--out", out, "--set", "pour.N=10"],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode != 0
+        lines = [ln for ln in p.stderr.splitlines() if ln.startswith("mpdem: error: --out")]
+        assert lines and all(ln == lines[0] for ln in lines), p.stderr
+        assert f"--out {out}: cannot be created or written (" in lines[0]
+        assert "Traceback" not in p.stderr and "bed:" not in p.stdout   # no work started

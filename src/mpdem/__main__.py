@@ -101,6 +101,25 @@ def seconds(flag):
     return parse
 
 
+def writable(out, probe=65536):
+    """None if run directory ``out`` can be made and written (a ``probe``-byte file is
+    written and removed), else why not, in a few words."""
+    try:
+        os.makedirs(out, exist_ok=True)
+        path = os.path.join(out, f".mpdem-write-test-{os.getpid()}")
+        try:
+            with open(path, "wb") as fh:
+                fh.write(b"\0" * probe)
+                fh.flush()
+                os.fsync(fh.fileno())
+        finally:
+            if os.path.exists(path):
+                os.remove(path)
+    except OSError as e:
+        return f"cannot be created or written ({e.strerror or e})"
+    return None
+
+
 def default_out():
     return os.path.join("runs", time.strftime("run-%Y%m%d-%H%M%S"))
 
@@ -110,9 +129,12 @@ def cmd_run(args, comm):
     from .simulation import Run
     cfg = config.load_run_config(args.config, args.set)
     out = args.out or default_out()
-    # rank 0 looks, before any rank can write there
-    held = os.path.exists(os.path.join(out, "config.toml")) if comm.Get_rank() == 0 else None
-    if comm.bcast(held, root=0) and not args.force:
+    # rank 0 looks, before any rank can write there; every rank then stops with the same line
+    found = (os.path.exists(os.path.join(out, "config.toml")), writable(out)) if comm.Get_rank() == 0 else None
+    held, why = comm.bcast(found, root=0)
+    if why:
+        raise config.ConfigError(f"--out {out}: {why}")
+    if held and not args.force:
         raise config.ConfigError(f"--out {out}: already holds a run (config.toml); "
                                  f"choose another directory or pass --force")
     run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
@@ -308,7 +330,9 @@ def threads_wanted(args):
 
 
 def parser():
+    from . import __version__
     p = argparse.ArgumentParser(prog="mpdem", description="Discrete-element sphere packings (physics.md).")
+    p.add_argument("--version", action="version", version=f"mpdem {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run a pile (the built-in example without CONFIG)")
     r.add_argument("config", nargs="?", help="TOML config in reduced units")

@@ -190,17 +190,36 @@ def _toml_value(v):
     return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def did_you_mean(name, known):
+    """' (did you mean X?)' for the known name nearest to ``name``, or '' when none is near.
+
+    ``known`` are full ``section.key`` names or section names; a key is also
+    matched by its part after the dot (``kn`` finds ``contact.k_n``).
+    """
+    import difflib
+    known = list(known)
+    hit = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+    if not hit and "." not in name:
+        tails = {k.split(".", 1)[1]: k for k in known if "." in k}
+        hit = [tails[t] for t in difflib.get_close_matches(name, list(tails), n=1, cutoff=0.6)]
+    if not hit and "." in name:
+        tails = {k.split(".", 1)[1]: k for k in known if "." in k}
+        hit = [tails[t] for t in difflib.get_close_matches(name.split(".", 1)[1], list(tails), n=1, cutoff=0.75)]
+    return f" (did you mean {hit[0]}?)" if hit else ""
+
+
 def flatten(doc, origin="config"):
     """{'section': {'key': v}} -> {'section.key': v}, rejecting unknown names."""
     flat = {}
     for sec, body in doc.items():
         if sec not in SECTIONS or not isinstance(body, dict):
-            raise ConfigError(f"{origin}: unknown section [{sec}]; known sections: {', '.join(SECTIONS)}")
+            raise ConfigError(f"{origin}: unknown section [{sec}]{did_you_mean(str(sec), SECTIONS)}; "
+                              f"known sections: {', '.join(SECTIONS)}")
         for name, v in body.items():
             key = f"{sec}.{name}"
             if key not in KEYS:
                 known = ", ".join(k.name for k in SCHEMA if k.section == sec)
-                raise ConfigError(f"{origin}: unknown key {key}; keys of [{sec}]: {known}")
+                raise ConfigError(f"{origin}: unknown key {key}{did_you_mean(key, KEYS)}; keys of [{sec}]: {known}")
             flat[key] = v
     return flat
 
@@ -228,7 +247,7 @@ def parse_set(item):
         raise ConfigError(f"--set {item!r}: expected section.key=value")
     key, text = (s.strip() for s in item.split("=", 1))
     if key not in KEYS:
-        raise ConfigError(f"--set {key}: unknown key; known keys: {', '.join(KEYS)}")
+        raise ConfigError(f"--set {key}: unknown key{did_you_mean(key, KEYS)}; known keys: {', '.join(KEYS)}")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:

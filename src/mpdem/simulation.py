@@ -345,7 +345,9 @@ class Run:
                     if self.domain.parallel:
                         comm_share = self.domain.comm_seconds / max(now - t0, 1e-9)
                         par = f"  imbalance {self.domain.imbalance(st):4.2f}  comm {100 * comm_share:3.0f}%"
-                    log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek:9.3e}  "
+                    # no E_k before the first sample: a dash, not "inf"
+                    ek_text = f"{ek:9.3e}" if math.isfinite(ek) else f"{'-':>9}"
+                    log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek_text}  "
                         f"max_delta {info.max_overlap:8.2e}  contacts/N {info.n_contacts / N:5.2f}  "
                         f"{rate:7.0f} steps/s{par}  eta cap {_fmt_seconds((max_steps - st.step) / rate)}  "
                         f"stop ~{_fmt_seconds(t_stop)}")
@@ -497,6 +499,11 @@ class Run:
             log.warn(f"no bulk measurement: {e}")
         rundir.write_atomic(os.path.join(self.out, "summary.json"), json.dumps(summary, indent=1))
         log(f"wrote {path}")
+        if not self.converged:
+            # the exit code that follows is a result, not a crash (mpiexec reports it at length)
+            log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
+                f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {self.out} "
+                f"--set run.max_steps=...`")
         log.close()
         return summary
 
