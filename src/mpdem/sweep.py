@@ -289,7 +289,8 @@ class Sweep:
                  + f"; {hms(time.monotonic() - self.t0)} elapsed, {eta}")
 
     def run(self):
-        """Run every row that is not finished. Returns 0, 1 (a row failed) or 75 (stopped)."""
+        """Run every row that is not finished. Returns 0, 1 (a row failed) or 75 (a row stopped
+        with a checkpoint: run the sweep again to go on)."""
         for r in self.rows:
             if finished(self.dir(r)) and os.path.exists(os.path.join(self.dir(r), SUMMARY)):
                 r.state = "done" if self.converged(r) else "not converged"
@@ -325,7 +326,7 @@ class Sweep:
         for r in self.rows:
             if r.state == "failed":
                 self.log(f"sweep: failed: {r.name} ({r.table} row {r.line}): {r.reason}")
-        if self.stopping:
+        if self.stopping or any(r.state == "stopped" for r in self.rows):
             return EXIT_RESTART
         return 1 if any(r.state == "failed" for r in self.rows) else 0
 
