@@ -193,6 +193,6 @@ def test_an_out_directory_that_cannot_be_made_is_one_line(tmp_path, ranks):
                            capture_output=True, text=True, timeout=300)
         assert p.returncode != 0
         lines = [ln for ln in p.stderr.splitlines() if ln.startswith("mpdem: error: --out")]
-        assert lines and all(ln == lines[0] for ln in lines), p.stderr
+        assert len(lines) == 1, p.stderr          # every rank stops; rank 0 says why, once
         assert f"--out {out}: cannot be created or written (" in lines[0]
         assert "Traceback" not in p.stderr and "bed:" not in p.stdout   # no work started

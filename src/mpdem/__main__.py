@@ -133,9 +133,9 @@ def cmd_run(args, comm):
     found = (os.path.exists(os.path.join(out, "config.toml")), writable(out)) if comm.Get_rank() == 0 else None
     held, why = comm.bcast(found, root=0)
     if why:
-        raise config.ConfigError(f"--out {out}: {why}")
+        raise config.AgreedError(f"--out {out}: {why}")
     if held and not args.force:
-        raise config.ConfigError(f"--out {out}: already holds a run (config.toml); "
+        raise config.AgreedError(f"--out {out}: already holds a run (config.toml); "
                                  f"choose another directory or pass --force")
     run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
               t_start=T_START, signals=SIGNALS)
@@ -471,13 +471,18 @@ def _main(argv):
             sys.stderr.write(f"mpdem: warning: {w}\n")
     from .build import InputError
     from .checkpoint import StateFileError
-    from .config import ConfigError
+    from .config import AgreedError, ConfigError
     from .simulation import RunError
     from .analysis.report import AnalysisError
     handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, comm)
+    except AgreedError as e:       # every rank is here with the same message: one line, no abort
+        if comm.Get_rank() == 0:
+            sys.stderr.write(f"mpdem: error: {e}\n")
+            sys.stderr.flush()
+        sys.exit(EXIT_ERROR)
     except (ConfigError, InputError, StateFileError, RunError, AnalysisError, NotImplementedError) as e:
         _fail(comm, f"mpdem: error: {e}")
     except KeyboardInterrupt:

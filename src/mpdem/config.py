@@ -22,6 +22,11 @@ class ConfigError(ValueError):
     """A configuration value that cannot be run."""
 
 
+class AgreedError(ConfigError):
+    """A ConfigError that every rank raises together, from a value all ranks were given:
+    the ranks stop without MPI_Abort, whose teardown can lose the message."""
+
+
 @dataclass(frozen=True)
 class Key:
     section: str
