@@ -127,7 +127,10 @@ def default_out():
 def cmd_run(args, comm):
     from . import config
     from .simulation import Run
-    cfg = config.load_run_config(args.config, args.set)
+    try:
+        cfg = config.load_run_config(args.config, args.set)
+    except config.ConfigError as e:   # the same inputs on every rank: the same error on every rank
+        raise config.AgreedError(str(e)) from None
     out = args.out or default_out()
     # rank 0 looks, before any rank can write there; every rank then stops with the same line
     found = (os.path.exists(os.path.join(out, "config.toml")), writable(out)) if comm.Get_rank() == 0 else None
