@@ -189,8 +189,9 @@ def test_an_out_directory_that_cannot_be_made_is_one_line(tmp_path, ranks):
     (tmp_path / "file").write_text("")
     mpiexec = [str(Path(sys.executable).parent / "mpiexec"), "-n", str(ranks)] if ranks > 1 else []
     for out in ("/proc/mpdem-cannot/run", str(tmp_path / "file" / "run")):
+        # env: os.environ, not the C environment of a process an earlier test made an MPI singleton
         p = subprocess.run(mpiexec + [sys.executable, "-m", "mpdem", "run", "--out", out, "--set", "pour.N=10"],
-                           capture_output=True, text=True, timeout=300)
+                           capture_output=True, text=True, timeout=300, env=dict(os.environ))
         assert p.returncode != 0
         lines = [ln for ln in p.stderr.splitlines() if ln.startswith("mpdem: error: --out")]
         assert len(lines) == 1, p.stderr          # every rank stops; rank 0 says why, once

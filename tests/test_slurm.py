@@ -30,19 +30,21 @@ SMALL = "pour.N=150 box.L_x=4 box.L_y=4 run.max_steps=2000000 output.progress_ev
 @pytest.fixture(scope="module")
 def slurm(tmp_path_factory):
     """A running single-node Slurm: the environment to talk to it (SLURM_CONF)."""
-    why = subprocess.run(["bash", str(TOOL), "check"], capture_output=True, text=True)
+    # os.environ, not the C environment: an earlier test may have made this process an MPI singleton
+    why = subprocess.run(["bash", str(TOOL), "check"], capture_output=True, text=True, env=dict(os.environ))
     if why.returncode != 0:
         pytest.skip(f"no real Slurm here: {why.stdout.strip() or why.stderr.strip()} "
                     f"(make test installs slurm-wlm and munge as root on Debian)")
     d = tmp_path_factory.mktemp("slurm")
-    p = subprocess.run(["bash", str(TOOL), "start", str(d)], capture_output=True, text=True, timeout=180)
+    p = subprocess.run(["bash", str(TOOL), "start", str(d)], capture_output=True, text=True, timeout=180,
+                       env=dict(os.environ))
     assert p.returncode == 0, p.stdout + p.stderr
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MPDEM_", "SLURM_", "OMPI_", "PMI"))}
     env["SLURM_CONF"] = str(d / "slurm.conf")
     try:
         yield env
     finally:
-        subprocess.run(["bash", str(TOOL), "stop", str(d)], capture_output=True, timeout=120)
+        subprocess.run(["bash", str(TOOL), "stop", str(d)], capture_output=True, timeout=120, env=dict(os.environ))
 
 
 def jobs_log_until(path, words, timeout, env):
@@ -60,7 +62,7 @@ def jobs_log_until(path, words, timeout, env):
 
 def digest(path):
     p = subprocess.run([sys.executable, "-m", "mpdem", "info", "--digest", str(path)], capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=120, env=dict(os.environ))
     assert p.returncode == 0, p.stderr
     return p.stdout.strip()
 
@@ -76,7 +78,8 @@ def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_pat
     ref = {}
     straight = threading.Thread(target=lambda: ref.update(p=subprocess.run(
         [sys.executable, "-m", "mpdem", "run", "--out", str(tmp_path / "straight"), "--quiet"]
-        + sum((["--set", kv] for kv in PILE.split()), []), capture_output=True, text=True, timeout=1800)))
+        + sum((["--set", kv] for kv in PILE.split()), []), capture_output=True, text=True, timeout=1800,
+        env=dict(os.environ))))
     straight.start()
     log = jobs_log_until(sub / "runs/chain/jobs.log", ENDS, 1800, slurm)
     straight.join()
