@@ -157,7 +157,7 @@ def _go(run):
 
 
 def cmd_restart(args, comm):
-    from . import checkpoint, rundir
+    from . import checkpoint, config, rundir
     from .checkpoint import StateFileError
     from .simulation import Logger, Run
     # rank 0 chooses the order; every rank then reads the same files collectively
@@ -172,7 +172,8 @@ def cmd_restart(args, comm):
                 raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
                                      f"restart accepts the checkpoints, snapshots and final.h5 of a run")
             cfg = rundir.restart_config(attrs, path, run_dir, args.set)
-            old_cfg = rundir.restart_config(attrs, path, run_dir, [])
+            # the file's own config, to see which stop.* keys --set changed
+            old_cfg = config.resolve(config.raw_from_toml(attrs["config"], origin=path))
             break
         except StateFileError as e:
             if not os.path.isdir(args.target):

@@ -81,10 +81,7 @@ class Channel:
         # NaN -> +inf, so that a NaN on any rank wins the max on every rank
         np.isnan(buf, out=nan)
         np.copyto(buf, inf, where=nan)
-        if self.parallel:
-            t = time.perf_counter()
-            self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=self.mpi.MAX)
-            self.seconds += time.perf_counter() - t
+        self._allreduce(buf, self.mpi.MAX if self.parallel else None)
         return view
 
     def sum_int(self, arr):
@@ -107,11 +104,15 @@ class Channel:
             self._sum[a.shape] = (buf, view)
         buf, view = self._sum[a.shape]
         np.copyto(buf, a, casting="unsafe")
+        self._allreduce(buf, self.mpi.SUM if self.parallel else None)
+        return view
+
+    def _allreduce(self, buf, op):
+        """``buf`` reduced in place over the ranks with ``op`` (timed); nothing on one rank."""
         if self.parallel:
             t = time.perf_counter()
-            self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=self.mpi.SUM)
+            self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=op)
             self.seconds += time.perf_counter() - t
-        return view
 
     # -- contiguous exchanges (rebuilds) --
     def alltoall_counts(self, counts):
