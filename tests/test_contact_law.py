@@ -57,8 +57,9 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     t = np.zeros((2, 3))
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full
-    res = contact_forces(2, x, v, omega, fx, nbr_start, nbr, np.full(2, -1, np.int32), hist, touch, f, t,
-                         10.0, 10.0, law, increment, np.zeros(2), np.zeros(2, np.int64),
+    # each entry its own history slot (no pairs shared: hist[k] is entry k's)
+    res = contact_forces(2, x, v, omega, fx, nbr_start, nbr, np.arange(2, dtype=np.int32), 0, hist,
+                         np.zeros((0, 6)), touch, f, t, 10.0, 10.0, law, increment, np.zeros(2), np.zeros(2, np.int64),
                          np.zeros((2, 4), np.int32))
     return f, t, touch, hist, res
 

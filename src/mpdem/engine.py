@@ -77,7 +77,8 @@ class Engine:
     """
 
     def __init__(self, state, physics, domain):
-        from . import threads
+        from . import memory, threads
+        memory.return_freed_memory()
         self.state, self.phys, self.domain = state, physics, domain
         p = physics
         self.law = Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu),
@@ -88,6 +89,8 @@ class Engine:
         self.nbr_list = np.zeros(0, np.int32)
         self.link = np.zeros(0, np.int32)
         self.hist = np.zeros((0, 3))
+        self.pair = np.zeros((0, 6))
+        self._n_pairs = 0
         self.touch = np.zeros(0, np.uint8)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
@@ -116,8 +119,7 @@ class Engine:
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
         if self.has_lists:
-            s = self.state
-            link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link)
+            self._link()
             self._unpack_slots()
 
     def _scratch(self, width):
@@ -131,20 +133,23 @@ class Engine:
         s = self.state
         if s.slots_current:
             return
+        # the pair slots are scratch of one force evaluation: freed while the slots are
+        # made (forces() takes them back), so the peak memory holds the history once
+        self.pair = np.zeros((0, 6))
         n = s.n_own
         total = history.count_contacts(n, self.nbr_start, self.touch, s.slot_n, self.nchunk)
         start = s.slot_offsets()
         slot_id = np.empty(total, np.int64)
         slot_ds = np.empty((total, 3))
-        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self.hist, self.touch,
-                                 start, slot_id, slot_ds, self.nchunk)
+        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs, self.hist,
+                                 self.touch, start, slot_id, slot_ds, self.nchunk)
         s.slot_id, s.slot_ds = slot_id, slot_ds
         s.slots_current = True
 
     def _unpack_slots(self):
         s = self.state
-        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, s.slot_offsets(), s.slot_id,
-                                 s.slot_ds, self.hist, self.touch, self.nchunk)
+        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs,
+                                 s.slot_offsets(), s.slot_id, s.slot_ds, self.hist, self.touch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (physics.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
@@ -158,6 +163,9 @@ class Engine:
         s = self.state
         if self.has_lists:
             self.sync_slots()
+        # the history is in the slots now: freed until the new lists, so the peak memory
+        # holds the history once
+        self.hist = np.zeros((0, 3))
         if self.n_rebuilds % self.sort_every == 0:
             self._sort_rows()
         self.domain.rebuild(s)
@@ -172,18 +180,29 @@ class Engine:
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
         if longest > self._width:
             self._scratch(2 * longest)
-        link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link)
+        self._link()
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
         self.n_rebuilds += 1
         self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
 
+    def _link(self):
+        """History slots of the entries (``link_entries``); a new ``hist`` for them.
+
+        Only when the history is in the compact slots (``sync_slots``).
+        """
+        s = self.state
+        first = np.zeros((2, self.nchunk + 1), np.int64)
+        n_pairs, n_other = link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk,
+                                        self.link, first)
+        self._n_pairs = int(n_pairs)
+        self.hist = np.empty((int(n_pairs + n_other), 3))
+
     def _alloc_lists(self, size):
         # the history moved to the slots before the lists were rebuilt: nothing to keep
         self.nbr_list = np.zeros(size, np.int32)
         self.link = np.zeros(size, np.int32)
-        self.hist = np.zeros((size, 3))
         self.touch = np.zeros(size, np.uint8)
 
     def _sort_rows(self):
@@ -206,8 +225,11 @@ class Engine:
         """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
         t = time.perf_counter()
         s, p = self.state, self.phys
+        if len(self.pair) < self._n_pairs:
+            # each step's lower rows write a pair's slot before the higher row reads it
+            self.pair = np.empty((self._n_pairs, 6))
         max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
-                                     self.link, self.hist, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
+                                     self.link, self._n_pairs, self.hist, self.pair, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
                                      increment, self._chunk_max, self._chunk_count, self._found)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
@@ -298,4 +320,4 @@ class Engine:
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
         return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
-                                                             self.hist, self.touch))
+                                                             self.hist, self.pair, self.touch))

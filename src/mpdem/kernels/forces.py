@@ -9,16 +9,20 @@ the partner of row i, on this rank or another, holds the mirror of i's
 contact to the bit.
 
 Contact history lives with the neighbour list: entry k of the list (row i,
-partner j) owns ``hist[k]``, the tangential displacement Delta s of i
-relative to j, read and written in place each step, and ``touch[k]``, 1 while
-the pair is in contact. Rows are split into chunks, one thread per chunk.
-Within a chunk, a pair of two owned rows is computed in full once, by the
-lower row, which gives the higher row its tangential force (exactly minus
-its own) in the higher row's ``hist`` slot; the higher row then computes
-only the normal part, which is as cheap as reading it back. That is the
-same arithmetic, bit for bit, as computing both views, so the result does
-not depend on the chunks or threads. Stored zeros are +0.0 (``x + 0.0``), so
-the stored state does not depend on which arithmetic path produced a zero.
+partner j) has ``touch[k]``, 1 while the pair is in contact, and the slot
+``h = link[k]`` of ``hist``, the tangential displacement Delta s of i
+relative to j, read and written in place each step. Rows are split into
+chunks, one thread per chunk. A pair of two owned rows of one chunk has one
+slot h < P for both entries (``link_entries``): the lower row computes the
+contact in full, keeps its Delta s in ``hist[h]`` and leaves its contact
+force and torque in ``pair[h]``; the higher row adds minus that force and
+the same torque. Its own view would give exactly these values (n and F_t
+flip sign, f_n and n x F_t do not), so this is the same arithmetic, bit for
+bit, as computing both views, and the result does not depend on the chunks
+or threads. The lower rows meet their pairs in slot order, so they read and
+write ``hist`` and ``pair`` in sequence.
+Stored zeros are +0.0 (``x + 0.0``), so the stored state does not depend on
+which arithmetic path produced a zero.
 """
 import math
 from typing import NamedTuple
@@ -58,7 +62,7 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f, torque,
+def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque,
                    L_x, L_y, law, increment, chunk_max, chunk_count, found):
     """Forces and torques on owned rows, updating the contact history in place.
 
@@ -74,11 +78,14 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, hist, t
     nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32
         Full neighbour lists in CSR form, each sorted by partner id.
     link : (E,) int32
-        Mirror entry of a partner in the same chunk of rows (``link_entries``), else -1.
-    hist : (E, 3) float64, in/out
-        Delta s [d] of each entry's pair, zero when not in contact; at an
-        entry whose linked partner is a lower row, the tangential force the
-        partner gave instead (its Delta s is then minus the partner's).
+        Each entry's history slot (``link_entries``); below ``n_pairs`` shared
+        by the two entries of a pair within a chunk.
+    n_pairs : int
+    hist : (n_pairs + U, 3) float64, in/out
+        Delta s [d] of each slot's pair (the lower row's view for a shared
+        slot), zero when not in contact.
+    pair : (>= n_pairs, 6) float64, scratch
+        Per shared slot: the lower row's contact force [m g] and torque [m g d].
     touch : (E,) uint8, in/out
         1 if the entry's pair is in contact after this evaluation.
     f, torque : (n_rows, 3) float64, out
@@ -103,8 +110,8 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, hist, t
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed,
-                       nbr_start, nbr_list, link, hist, touch, f, torque, L_x, L_y, law, increment,
-                       found[c])
+                       nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque, L_x, L_y, law,
+                       increment, found[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -116,7 +123,7 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, hist, t
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f, torque, L_x, L_y,
+def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque, L_x, L_y,
           law, increment, found):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
@@ -125,7 +132,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
     predictable order, so a branch there is mispredicted often); then the
     law is applied to the contacts in partner-id order. A contact with a
     linked lower row of the chunk (done earlier by this thread) takes the
-    tangential force that row computed; any other is computed in full.
+    force and torque that row left; any other is computed in full.
     """
     k_n, k_t, gamma_n, gamma_t, mu = law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
@@ -162,10 +169,11 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
             was = touch[k]
             touch[k] = on
             if was > on:
-                # the contact ended (rare): its history is deleted
-                hist[k, 0] = 0.0
-                hist[k, 1] = 0.0
-                hist[k, 2] = 0.0
+                # the contact ended (rare): its history is deleted (by both rows of a shared slot)
+                h = link[k]
+                hist[h, 0] = 0.0
+                hist[h, 1] = 0.0
+                hist[h, 2] = 0.0
         n_contacts += m
         fx = 0.0
         fy = 0.0
@@ -176,6 +184,18 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
         for q in range(m):
             k = found[q]
             j = nbr_list[k]
+            g = link[k]
+            shared = g < n_pairs
+            if shared and j < i:
+                # the lower row of the chunk computed this pair: minus its force, its torque
+                fx += -pair[g, 0]
+                fy += -pair[g, 1]
+                fz += -pair[g, 2]
+                if friction:
+                    tx += pair[g, 3]
+                    ty += pair[g, 4]
+                    tz += pair[g, 5]
+                continue
             dx = min_image(xi - x[j, 0], L_x, hx)
             dy = min_image(yi - x[j, 1], L_y, hy)
             dz = zi - x[j, 2]
@@ -205,38 +225,39 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, hist, touch, f,
             fcy = fn * ny
             fcz = fn * nz
             if friction:
-                g = link[k]
-                if g < 0 or j > i:
-                    # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
-                    wx = rwix + R * omega[j, 0]
-                    wy = rwiy + R * omega[j, 1]
-                    wz = rwiz + R * omega[j, 2]
-                    vtx = vrx - vn * nx - (wy * nz - wz * ny)
-                    vty = vry - vn * ny - (wz * nx - wx * nz)
-                    vtz = vrz - vn * nz - (wx * ny - wy * nx)
-                    sx, sy, sz, ftx, fty, ftz = _tangential(
-                        hist[k, 0], hist[k, 1], hist[k, 2], vtx, vty, vtz, nx, ny, nz,
-                        hertz, scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
-                    # + 0.0 stores a zero as +0.0 whichever way it was reached
-                    hist[k, 0] = sx + 0.0
-                    hist[k, 1] = sy + 0.0
-                    hist[k, 2] = sz + 0.0
-                    if g >= 0:
-                        # the partner's view is the exact negative: give it F_t in its history slot
-                        hist[g, 0] = -ftx
-                        hist[g, 1] = -fty
-                        hist[g, 2] = -ftz
-                else:
-                    ftx = hist[k, 0]
-                    fty = hist[k, 1]
-                    ftz = hist[k, 2]
+                # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
+                wx = rwix + R * omega[j, 0]
+                wy = rwiy + R * omega[j, 1]
+                wz = rwiz + R * omega[j, 2]
+                vtx = vrx - vn * nx - (wy * nz - wz * ny)
+                vty = vry - vn * ny - (wz * nx - wx * nz)
+                vtz = vrz - vn * nz - (wx * ny - wy * nx)
+                sx, sy, sz, ftx, fty, ftz = _tangential(
+                    hist[g, 0], hist[g, 1], hist[g, 2], vtx, vty, vtz, nx, ny, nz,
+                    hertz, scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
+                # + 0.0 stores a zero as +0.0 whichever way it was reached
+                hist[g, 0] = sx + 0.0
+                hist[g, 1] = sy + 0.0
+                hist[g, 2] = sz + 0.0
                 fcx += ftx
                 fcy += fty
                 fcz += ftz
                 # T_i += -R n x F_t (the same for both partners)
-                tx += -(R * (ny * ftz - nz * fty))
-                ty += -(R * (nz * ftx - nx * ftz))
-                tz += -(R * (nx * fty - ny * ftx))
+                tix = -(R * (ny * ftz - nz * fty))
+                tiy = -(R * (nz * ftx - nx * ftz))
+                tiz = -(R * (nx * fty - ny * ftx))
+                tx += tix
+                ty += tiy
+                tz += tiz
+                if shared:
+                    pair[g, 3] = tix
+                    pair[g, 4] = tiy
+                    pair[g, 5] = tiz
+            if shared:
+                # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
+                pair[g, 0] = fcx
+                pair[g, 1] = fcy
+                pair[g, 2] = fcz
             fx += fcx
             fy += fcy
             fz += fcz

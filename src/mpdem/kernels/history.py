@@ -1,7 +1,9 @@
 """Contact history between its two homes: list entries and compact slots.
 
-Between rebuilds the history of row i's contact with partner j is at the
-neighbour-list entry k of that pair (``hist[k]``, ``touch[k]``). At a rebuild,
+Between rebuilds the history of row i's contact with partner j is with the
+neighbour-list entry k of that pair: ``touch[k]``, and Delta s in the slot
+``hist[link[k]]``, which the two entries of a pair within a chunk share
+(``neighbours.link_entries``). At a rebuild,
 a migration or a checkpoint it is in compact per-row slots (partner ids
 ascending, Delta s), which travel with the particle (design.md, invariant 2).
 Both are sorted by partner id, so each direction is one merge per row.
@@ -37,18 +39,21 @@ def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
 
 
 @njit(cache=True, parallel=True)
-def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, touch, slot_start, slot_id, slot_ds,
-                     nchunk):
+def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, n_pairs, hist, touch, slot_start, slot_id,
+                     slot_ds, nchunk):
     """Pack the entries in contact into compact slots.
 
-    An entry linked to a lower row (``link_entries``) holds the tangential
-    force that row gave it; its Delta s is minus the lower row's, +0.0 for zero.
+    The higher row of a pair within a chunk (``link_entries``) shares the
+    pair's history slot, which holds the lower row's Delta s: its own is
+    the negative, +0.0 for zero.
 
     Parameters
     ----------
     ids : (n_rows,) int64
     nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32, link : (E,) int32
-    hist : (E, 3) float64, touch : (E,) uint8
+    n_pairs : int
+        History slots below this are shared by the two entries of a pair.
+    hist : (n_pairs + U, 3) float64, touch : (E,) uint8
     slot_start : (n_own + 1,) int64
         Offsets of each row's slots (prefix sum of ``count_contacts``).
     slot_id : (M,) int64, slot_ds : (M, 3) float64, out
@@ -59,43 +64,51 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, touch, slot_st
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 if touch[k]:
                     j = nbr_list[k]
+                    h = link[k]
                     slot_id[p] = ids[j]
-                    g = link[k]
-                    if g >= 0 and j < i:
+                    if h < n_pairs and j < i:
                         for a in range(3):
-                            slot_ds[p, a] = -hist[g, a] + 0.0
+                            slot_ds[p, a] = -hist[h, a] + 0.0
                     else:
                         for a in range(3):
-                            slot_ds[p, a] = hist[k, a]
+                            slot_ds[p, a] = hist[h, a]
                     p += 1
 
 
 @njit(cache=True, parallel=True)
-def slots_to_entries(n_own, ids, nbr_start, nbr_list, slot_start, slot_id, slot_ds, hist, touch,
-                     nchunk):
+def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, n_pairs, slot_start, slot_id, slot_ds, hist,
+                     touch, nchunk):
     """Unpack compact slots onto the entries of new neighbour lists.
 
     A slot whose partner is not in the new list is dropped: the pair is
-    beyond the list cutoff, so not in contact. Zeros are stored as +0.0.
+    beyond the list cutoff, so not in contact. Zeros are stored as +0.0. A
+    shared pair slot (``link_entries``) is written from its lower row's
+    view, which is exactly minus the higher row's.
 
     Parameters
     ----------
+    link : (E,) int32, n_pairs : int
     slot_start : (n_own + 1,) int64, slot_id : (M,) int64, slot_ds : (M, 3) float64
-    hist : (E, 3) float64, touch : (E,) uint8, out
+    hist : (n_pairs + U, 3) float64, touch : (E,) uint8, out
     """
     for c in prange(nchunk):
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             p = slot_start[i]
             pe = slot_start[i + 1]
             for k in range(nbr_start[i], nbr_start[i + 1]):
-                jid = ids[nbr_list[k]]
+                j = nbr_list[k]
+                jid = ids[j]
+                h = link[k]
+                own = h >= n_pairs or j > i
                 while p < pe and slot_id[p] < jid:
                     p += 1
                 if p < pe and slot_id[p] == jid:
                     touch[k] = 1
-                    for a in range(3):
-                        hist[k, a] = slot_ds[p, a] + 0.0
+                    if own:
+                        for a in range(3):
+                            hist[h, a] = slot_ds[p, a] + 0.0
                 else:
                     touch[k] = 0
-                    for a in range(3):
-                        hist[k, a] = 0.0
+                    if own:
+                        for a in range(3):
+                            hist[h, a] = 0.0

@@ -167,34 +167,83 @@ def chunk_of(i, n, nchunk):
     return ((i + 1) * nchunk - 1) // n
 
 
-@njit(cache=True, parallel=True)
-def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link):
-    """For an entry i -> j with j an owned mobile row of i's chunk: the entry j -> i.
+@njit(cache=True, inline="always")
+def mirror_entry(nbr_start, nbr_list, ids, j, idi):
+    """The entry of row j's list (sorted by id) whose partner has id ``idi``."""
+    lo = nbr_start[j]
+    hi = nbr_start[j + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if ids[nbr_list[mid]] < idi:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
-    Rows of a chunk are done in ascending order by one thread, so of such a
-    pair the lower row computes the pair once and the higher one takes its
-    tangential force (``contact_forces``). Lists are symmetric (the distance
-    test is mirror-exact) and sorted by id, so the mirror is found by
-    bisection. ``link`` gets -1 for ghost, bed and other-chunk partners.
+
+@njit(cache=True, inline="always")
+def _linked(j, n_own, fixed, nchunk, c):
+    """True if partner row j of a row of chunk c is an owned mobile row of that chunk."""
+    return j < n_own and not fixed[j] and chunk_of(j, n_own, nchunk) == c
+
+
+@njit(cache=True, parallel=True)
+def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, first):
+    """Give each entry its history slot: one per pair within a chunk, one per other entry.
+
+    Rows of a chunk are done in ascending order by one thread, so of a pair of
+    two owned mobile rows of one chunk the lower row computes the contact
+    once, and the higher row takes its force and torque (``contact_forces``).
+    Such a pair has one slot, ``0 <= link < P``, for both its entries, and
+    keeps its Delta s as seen from the lower row; the pairs are numbered in
+    the order the lower rows meet them, chunk after chunk, so the lower rows
+    read and write their slots in sequence. Every other entry (ghost, bed or
+    other-chunk partner) has a slot of its own, ``P <= link < P + U``. Lists
+    are symmetric (the distance test is mirror-exact) and sorted by id, so
+    the mirror entry is found by bisection.
 
     Parameters
     ----------
     link : (len(nbr_list),) int32, out
+    first : (2, nchunk + 1) int64, out
+        Chunk c's pair slots start at ``first[0, c]``, its other slots at ``P + first[1, c]``.
+
+    Returns
+    -------
+    P, U : int
+        Pairs, and other entries.
     """
     for c in prange(nchunk):
+        mp = 0
+        mo = 0
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                j = nbr_list[k]
+                if not _linked(j, n_own, fixed, nchunk, c):
+                    mo += 1
+                elif j > i:
+                    mp += 1
+        first[0, c + 1] = mp
+        first[1, c + 1] = mo
+    first[0, 0] = 0
+    first[1, 0] = 0
+    for c in range(nchunk):
+        first[0, c + 1] += first[0, c]
+        first[1, c + 1] += first[1, c]
+    n_pairs = first[0, nchunk]
+    for c in prange(nchunk):
+        p = first[0, c]
+        o = n_pairs + first[1, c]
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             idi = ids[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
-                if j >= n_own or fixed[j] or chunk_of(j, n_own, nchunk) != c:
-                    link[k] = -1
-                    continue
-                lo = nbr_start[j]
-                hi = nbr_start[j + 1]
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if ids[nbr_list[mid]] < idi:
-                        lo = mid + 1
-                    else:
-                        hi = mid
-                link[k] = lo
+                if not _linked(j, n_own, fixed, nchunk, c):
+                    link[k] = o
+                    o += 1
+                elif j > i:
+                    # the higher row's entry of this pair is set here, before that row is reached
+                    link[k] = p
+                    link[mirror_entry(nbr_start, nbr_list, ids, j, idi)] = p
+                    p += 1
+    return n_pairs, first[1, nchunk]
