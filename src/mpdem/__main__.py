@@ -6,7 +6,7 @@
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
     python -m mpdem info FILE [--digest]
-    python -m mpdem export FILE --format lammps-dump|xyz [--out PATH]
+    python -m mpdem export FILE --format lammps-dump|lammps-data|xyz [--out PATH]
     python -m mpdem bench --table FILE [--steps S] [--threads T] [--tile NXxNY] [--set ...]
     python -m mpdem bench --io|--analysis [--N 1000000]
 
@@ -125,11 +125,13 @@ def default_out():
 
 
 def cmd_run(args, comm):
-    from . import config
+    from . import config, lammps
+    from .build import InputError
     from .simulation import Run
     try:
         cfg = config.load_run_config(args.config, args.set)
-    except config.ConfigError as e:   # the same inputs on every rank: the same error on every rank
+        cfg, initial = lammps.initial_for(cfg)
+    except (config.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise config.AgreedError(str(e)) from None
     out = args.out or default_out()
     # rank 0 looks, before any rank can write there; every rank then stops with the same line
@@ -142,7 +144,7 @@ def cmd_run(args, comm):
                                  f"choose another directory or pass --force")
     run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
               t_start=T_START, signals=SIGNALS)
-    run.prepare()
+    run.prepare(lammps_initial=initial)
     return _go(run)
 
 
@@ -360,8 +362,8 @@ def parser():
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
     e.add_argument("file")
-    e.add_argument("--format", required=True, choices=("lammps-dump", "xyz"))
-    e.add_argument("--out", help="output path (default: FILE with .dump or .xyz)")
+    e.add_argument("--format", required=True, choices=("lammps-dump", "lammps-data", "xyz"))
+    e.add_argument("--out", help="output path (default: FILE with .dump, .data or .xyz)")
     b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",

@@ -139,16 +139,18 @@ def _open_text(path):
 def read_table(path):
     """Read a text table of particles.
 
-    Columns ``id x y z`` with optional ``vx vy vz`` and ``fixed`` (1 = bed).
-    A first line naming the columns (``#`` optional) sets their order;
-    without it, 4, 5, 7 or 8 columns are read as id x y z [vx vy vz] [fixed].
+    Columns ``id x y z`` with optional ``vx vy vz``, ``omegax omegay omegaz``
+    and ``fixed`` (1 = bed). A first line naming the columns (``#``
+    optional) sets their order; without it, 4, 5, 7 or 8 columns are read
+    as id x y z [vx vy vz] [fixed].
 
     A gzip-compressed table (any name; recognised by its magic bytes) is
     read the same way.
 
     Returns
     -------
-    dict with ids (N,) int64, x (N, 3), v (N, 3), fixed (N,) uint8.
+    dict with ids (N,) int64, x (N, 3), v (N, 3), omega (N, 3) (zero when
+    not in the table), fixed (N,) uint8.
     """
     try:
         with _open_text(path) as fh:
@@ -177,10 +179,10 @@ def read_table(path):
                              f"id x y z [vx vy vz] [fixed]")
     if len(names) != data.shape[1]:
         raise InputError(f"{path}: header names {len(names)} columns but rows have {data.shape[1]}")
-    known = {"id", "x", "y", "z", "vx", "vy", "vz", "fixed"}
+    known = {"id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz", "fixed"}
     unknown = set(names) - known
     if unknown or not {"id", "x", "y", "z"} <= set(names):
-        raise InputError(f"{path}: columns {names}; need id x y z, optional vx vy vz fixed")
+        raise InputError(f"{path}: columns {names}; need id x y z, optional vx vy vz omegax omegay omegaz fixed")
     col = {n: data[:, i] for i, n in enumerate(names)}
     if not np.all(np.isfinite(data)):
         raise InputError(f"{path}: non-finite values in the particle table")
@@ -192,25 +194,29 @@ def read_table(path):
         raise InputError(f"{path}: duplicate particle ids")
     n = len(ids)
     v = np.zeros((n, 3))
+    omega = np.zeros((n, 3))
     for a, nm in enumerate(("vx", "vy", "vz")):
         if nm in col:
             v[:, a] = col[nm]
+        if "omega" + "xyz"[a] in col:
+            omega[:, a] = col["omega" + "xyz"[a]]
     fixed = col.get("fixed", np.zeros(n))
     if np.any((fixed != 0) & (fixed != 1)):
         raise InputError(f"{path}: column fixed must be 0 or 1")
-    return {"ids": ids, "x": np.stack([col["x"], col["y"], col["z"]], axis=1), "v": v,
+    return {"ids": ids, "x": np.stack([col["x"], col["y"], col["z"]], axis=1), "v": v, "omega": omega,
             "fixed": fixed.astype(np.uint8)}
 
 
-def write_table(path, ids, x, v=None, fixed=None):
-    """Write a particle table readable by ``read_table`` (exact: repr of doubles)."""
+def write_table(path, ids, x, v=None, fixed=None, omega=None):
+    """Write a particle table readable by ``read_table`` (exact: repr of doubles);
+    with ``omega``, the columns omegax omegay omegaz too."""
     n = len(ids)
     v = np.zeros((n, 3)) if v is None else v
     fixed = np.zeros(n, np.uint8) if fixed is None else fixed
     with open(path, "w") as fh:
-        fh.write("# id x y z vx vy vz fixed\n")
+        fh.write("# id x y z vx vy vz" + (" omegax omegay omegaz" if omega is not None else "") + " fixed\n")
         for k in range(n):
-            row = [float(a) for a in (*x[k], *v[k])]
+            row = [float(a) for a in (*x[k], *v[k], *(omega[k] if omega is not None else ()))]
             fh.write(f"{int(ids[k])} " + " ".join(map(repr, row)) + f" {int(fixed[k])}\n")
 
 

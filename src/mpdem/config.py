@@ -44,7 +44,8 @@ def _k(section, name, default, doc, kind=float, choices=()):
 SCHEMA = (
     _k("run", "max_steps", REQUIRED, "hard cap on time steps (required); a run that hits it is 'not converged'", int),
     _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int),
-    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file or a text table `id x y z [vx vy vz] [fixed]`", str),
+    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text dump (recognised by their content)", str),
+    _k("run", "fixed_types", (), "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one", tuple),
     _k("box", "L_x", 20.0, "periodic box length in x [d]"),
     _k("box", "L_y", 20.0, "periodic box length in y [d]"),
     _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
@@ -135,6 +136,8 @@ class Config:
     values: MappingProxyType
     warnings: tuple = ()
     derived: frozenset = field(default_factory=frozenset)
+    # the keys the user gave (config file, --set), as opposed to defaults
+    given: frozenset = field(default_factory=frozenset)
 
     def __getattr__(self, section):
         # called only when the section is not yet cached on the instance
@@ -151,7 +154,9 @@ class Config:
         """A new Config with ``{'section.key': value}`` overrides, re-resolved."""
         raw = {k: v for k, v in self.values.items() if k not in self.derived}
         raw.update(updates)
-        return resolve(raw)
+        new = resolve(raw)
+        object.__setattr__(new, "given", self.given | frozenset(updates))
+        return new
 
     def to_toml(self):
         """Every key with its value; derived defaults are marked."""
@@ -186,6 +191,8 @@ class _Section:
 
 
 def _toml_value(v):
+    if isinstance(v, tuple):
+        return "[" + ", ".join(_toml_value(a) for a in v) + "]"
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -284,7 +291,10 @@ def load_run_config(path=None, sets=()):
         return load(path, sets)
     from importlib import resources
     text = resources.files("mpdem").joinpath("example.toml").read_text()
-    return load(None, sets, base=flatten(tomllib.loads(text), origin="built-in example"))
+    cfg = load(None, sets, base=flatten(tomllib.loads(text), origin="built-in example"))
+    # the example's values are its defaults: only --set keys count as given
+    object.__setattr__(cfg, "given", frozenset(parse_set(item)[0] for item in sets))
+    return cfg
 
 
 def _coerce(key, value):
@@ -298,6 +308,12 @@ def _coerce(key, value):
                                            (isinstance(value, float) and value.is_integer())):
             raise ConfigError(f"{key} = {value!r}: expected an integer")
         return int(value)
+    if spec.kind is tuple:
+        # a list of positive integers (atom types)
+        if not isinstance(value, (list, tuple)) or any(
+                isinstance(a, bool) or not isinstance(a, int) or a < 1 for a in value):
+            raise ConfigError(f"{key} = {value!r}: expected a list of integers >= 1, e.g. [2]")
+        return tuple(int(a) for a in value)
     if spec.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key} = {value!r}: expected a number")
@@ -430,7 +446,7 @@ def resolve(raw):
          "-1 (automatic) or 0 < fit_xi_lo < fit_xi_hi")
     need("analysis.zeta_bins", vals["analysis.zeta_bins"] >= 1, "zeta_bins >= 1")
     need("analysis.mobilised", 0 < vals["analysis.mobilised"] <= 1, "0 < mobilised <= 1")
-    return Config(MappingProxyType(vals), tuple(warns), frozenset(derived))
+    return Config(MappingProxyType(vals), tuple(warns), frozenset(derived), frozenset(raw))
 
 
 def as_dict(cfg):

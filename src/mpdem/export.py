@@ -172,7 +172,16 @@ def _xyz(a, attrs):
                       np.full(len(a["id"]), R), a["id"]])
 
 
-FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz)}
+def _lammps_data(a, attrs, path):
+    """LAMMPS data file, atom_style sphere (``lammps.data_lines``)."""
+    from .lammps import data_lines
+    title = (f"mpdem state {os.path.basename(path)}, step {int(attrs['step'])}, time {float(attrs['time']):.17g}; "
+             f"atom_style sphere, type 1 mobile, 2 bed")
+    return data_lines(a["id"], a["x"], a["v"], a["omega"], a["fixed"], float(attrs["L_x"]), float(attrs["L_y"]),
+                      title)
+
+
+FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz), "lammps-data": (".data", _lammps_data)}
 
 
 def export_file(path, fmt, out=None):
@@ -185,6 +194,10 @@ def export_file(path, fmt, out=None):
     ``xyz``: extended XYZ with ``Lattice`` (L_x, L_y, z extent), ``Origin``
     (0, 0, z_lo), ``pbc="T T F"``, ``Time``, ``Step`` and properties
     species (M mobile, B bed), pos, velo, omega, radius, id.
+    ``lammps-data``: a LAMMPS data file (``read_data``) with atom_style
+    sphere, types 1 mobile and 2 bed, and Velocities with the angular
+    velocities (``lammps.data_lines``); it reads back as ``run.initial_file``
+    with ``run.fixed_types = [2]`` to the same particles.
 
     Floats are written with 17 significant digits, so they read back exactly.
     Particles only (no contacts or pairs).
@@ -193,7 +206,7 @@ def export_file(path, fmt, out=None):
     ----------
     path : str
         An mpdem state file (checksums are verified).
-    fmt : {"lammps-dump", "xyz"}
+    fmt : {"lammps-dump", "xyz", "lammps-data"}
     out : str, optional
         Output path; default ``path`` with the suffix ``.dump`` or ``.xyz``.
 
@@ -206,5 +219,5 @@ def export_file(path, fmt, out=None):
     suffix, render = FORMATS[fmt]
     out = out or os.path.splitext(path)[0] + suffix
     arrays, attrs = checkpoint.read_state(path)
-    write_atomic(out, render(arrays, attrs))
+    write_atomic(out, render(arrays, attrs, path) if fmt == "lammps-data" else render(arrays, attrs))
     return out

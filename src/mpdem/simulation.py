@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from . import analysis, build, checkpoint, rundir
+from . import analysis, build, checkpoint, lammps, rundir
 from .config import collision_time
 from .decomp import Domain
 from .engine import Engine, Physics
@@ -152,9 +152,14 @@ class Run:
         return self.status == "converged"
 
     # -- a new run --
-    def prepare(self):
-        """Build or read the initial state, check it, write config and bed files."""
+    def prepare(self, lammps_initial=None):
+        """Build or read the initial state, check it, write config and bed files.
+
+        ``lammps_initial``: the particles of a LAMMPS ``run.initial_file``
+        (``lammps.initial_for``), when read already.
+        """
         cfg, log = self.cfg, self.log
+        self._lammps_initial = lammps_initial
         for w in cfg.warnings:
             log.warn(w)
         if self.rank == 0:
@@ -238,10 +243,17 @@ class Run:
             a, _ = checkpoint.read_state(path)
             ids, x, v, omega, fixed = a["id"], a["x"], a["v"], a["omega"], a["fixed"]
             self._initial_slots = (a["count"], a["partner"], a["ds"])
+        elif lammps.kind(path):
+            t = getattr(self, "_lammps_initial", None)
+            if t is None or all_fixed:
+                t = lammps.read(path, () if all_fixed else self.cfg.run.fixed_types,
+                                what="bed.file" if all_fixed else "run.initial_file")
+            self.log(f"read {path}: {t['note']}; {int(t['fixed'].sum())} bed spheres "
+                     f"(types {list(self.cfg.run.fixed_types)})" if not all_fixed else f"read {path}: {t['note']}")
+            ids, x, v, omega, fixed = t["ids"], t["x"], t["v"], t["omega"], t["fixed"]
         else:
             t = build.read_table(path)
-            ids, x, v, fixed = t["ids"], t["x"], t["v"], t["fixed"]
-            omega = np.zeros_like(x)
+            ids, x, v, omega, fixed = t["ids"], t["x"], t["v"], t["omega"], t["fixed"]
         if all_fixed:
             fixed = np.ones(len(ids), np.uint8)
         return ids, x, v, omega, fixed
