@@ -343,11 +343,19 @@ def test_analyze_a_crystal_file_writes_summary_tables_and_plots(tmp_path):
     n_ref = saved["gofr"]["n_ref"]
     assert g["count"][99] == 12 * n_ref and g["count"][141] == 6 * n_ref
     assert saved["gofr"]["near_contacts_per_ref"] == 12.0
-    for name in ("profile", "coordination", "gofr", "gofr_near", "zeta"):
+    for name in ("packing", "profile", "coordination", "gofr", "gofr_near", "zeta"):
         assert (tmp_path / "fcc-analysis" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-        if name != "gofr_near":
+        if name not in ("gofr_near", "packing"):
             assert (tmp_path / "fcc-analysis" / f"{name}.csv").exists()
     assert not list((tmp_path / "fcc-analysis").glob("*.tmp"))
+    # the picture shows spheres: the crystal's 12 contacts in the slab's colour, the bed's greys
+    import matplotlib.image
+    img = matplotlib.image.imread(tmp_path / "fcc-analysis" / "packing.png")[..., :3]
+    colours = {tuple(c) for c in (img * 255).astype(int).reshape(-1, 3)[::7]}
+    assert len(colours) > 50
+    from matplotlib import colormaps
+    twelve = (np.array(colormaps["viridis"].resampled(13)(12)[:3]) * 255).astype(int)
+    assert (np.abs((img * 255).astype(int) - twelve).max(axis=-1) <= 2).sum() > 1000
 
 
 def test_analyze_settings_and_errors(tmp_path):

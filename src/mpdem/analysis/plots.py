@@ -6,6 +6,8 @@ import os
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors  # noqa: E402
+import matplotlib.patches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -93,8 +95,62 @@ def plot_zeta(out, s, t):
     save(fig, os.path.join(out, "zeta.png"))
 
 
+def _spheres(ax, xy, colours, edge="none"):
+    """Discs of diameter 1 at the centres xy (n, 2), in data units."""
+    from matplotlib.collections import EllipseCollection
+    n = len(xy)
+    ax.add_collection(EllipseCollection(np.ones(n), np.ones(n), np.zeros(n), units="xy", offsets=xy,
+                                        offset_transform=ax.transData, facecolors=colours, edgecolors=edge,
+                                        linewidths=0.2))
+
+
+def plot_packing(out, s, t, slab=2.0):
+    """A picture of the packing: a side view of a slab coloured by contact number, the bulk marked,
+    and a top view of the bed coloured by height.
+
+    Parameters
+    ----------
+    slab : float
+        Thickness in y of the side view's slab, about the middle of the box [d].
+    """
+    pk = t["packing"]
+    x, fixed, counts, L_x, L_y = pk["x"], pk["fixed"], pk["counts"], pk["L_x"], pk["L_y"]
+    mid = 0.5 * L_y
+    # the slab |y - L_y / 2| < slab / 2, drawn back to front so nearer spheres cover farther ones
+    sel = np.flatnonzero(np.abs(x[:, 1] - mid) < 0.5 * slab)
+    sel = sel[np.argsort(-(x[sel, 1] - mid))]
+    top = float(x[:, 2].max()) + 1.0 if len(x) else 1.0
+    width = 8.0 + 4.0 * L_y / max(L_x, 1.0)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(width, 6), gridspec_kw={"width_ratios": [2, 1]})
+    cmap = plt.get_cmap("viridis", 13)
+    colours = np.where(fixed[sel, None], np.array([[0.6, 0.6, 0.6, 1.0]]), cmap(np.minimum(counts[sel], 12)))
+    _spheres(a, x[sel][:, [0, 2]], colours, edge="k")
+    a.axhspan(s["z1"], s["z2"], color="tab:red", alpha=0.10, zorder=0)
+    for z in (s["z1"], s["z2"]):
+        a.axhline(z, color="tab:red", lw=0.8, ls="--")
+    a.text(0.0, s["z2"] + 0.1, f"bulk z in [{s['z1']:.1f}, {s['z2']:.1f}]", color="tab:red", va="bottom",
+           fontsize=9, bbox=dict(facecolor="white", alpha=0.8, edgecolor="none", pad=1))
+    a.set(xlim=(-0.5, L_x + 0.5), ylim=(min(-0.5, float(x[:, 2].min()) - 0.6) if len(x) else -0.5, top),
+          aspect="equal", xlabel="x [d]", ylabel="z [d]",
+          title=f"side view: |y - {mid:g}| < {0.5 * slab:g} d, {len(sel)} spheres (grey: bed)")
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(-0.5, 12.5))
+    fig.colorbar(sm, ax=a, ticks=range(0, 13, 2), label="contacts (12: 12 or more)", shrink=0.7)
+    bed = np.flatnonzero(fixed)
+    if len(bed):
+        zb = x[bed, 2]
+        norm = matplotlib.colors.Normalize(float(zb.min()), float(zb.max()) + 1e-12)
+        _spheres(b, x[bed][:, :2], plt.get_cmap("cividis")(norm(zb)), edge="k")
+        fig.colorbar(plt.cm.ScalarMappable(cmap="cividis", norm=norm), ax=b, label="bed sphere height z [d]",
+                     shrink=0.7)
+    b.add_patch(matplotlib.patches.Rectangle((0, 0), L_x, L_y, fill=False, lw=0.8))
+    b.set(xlim=(-0.5, L_x + 0.5), ylim=(-0.5, L_y + 0.5), aspect="equal", xlabel="x [d]", ylabel="y [d]",
+          title=f"bed from above\n{len(bed)} spheres, {len(bed) / (L_x * L_y):.2f} per d$^2$")
+    save(fig, os.path.join(out, "packing.png"))
+
+
 def run_plots(out, s, t):
     """All plots of one analysis into ``out``."""
+    plot_packing(out, s, t)
     plot_profile(out, s, t)
     plot_coordination(out, s)
     if "gofr" in t:

@@ -167,7 +167,9 @@ def measure(arrays, attrs, cfg):
                             0.5 * reg["margin_top"], a.profile_bin)
     s["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])
 
-    tables = {"profile": reg, "z_profile": _profile(pk, reg)}
+    tables = {"profile": reg, "z_profile": _profile(pk, reg),
+              "packing": {"x": pk.x, "fixed": pk.fixed, "counts": pk.counts, "L_x": L_x, "L_y": L_y,
+                          "z_bed": pk.z_bed}}
     s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, gofr=None)
     r_full = _range(a.g_r_max, L_x, L_y, z1, z2, a.g_dr, "g_r_max", warns)
     r_near = _range(a.near_r_max, L_x, L_y, z1, z2, a.g_dr, "near_r_max", warns)
