@@ -206,3 +206,39 @@ def test_a_rank_that_owns_nothing(comm):
         assert owned0 == 0
     if comm.Get_rank() == 0:
         assert s["digest"] == ref
+
+
+def write_sparse_bed_pile(path):
+    """Six bed spheres on a 5 d x 5 d box (far too few to hold a pile) under 96 mobile
+    spheres on a lattice from z = 2 up, with small random velocities: most fall to the wall."""
+    rng = np.random.default_rng(11)
+    g = np.array([0.5, 1.75, 3.0, 4.25])
+    mob = np.array([[x, y, 2.0 + 1.25 * k] for k in range(6) for y in g for x in g])
+    bed = np.array([[0.5, 0.5, 0.5], [2.5, 1.0, 0.5], [4.0, 3.0, 0.5], [1.0, 4.0, 0.5], [3.0, 3.5, 0.5],
+                    [2.0, 2.5, 0.5]])
+    x = np.concatenate([mob, bed])
+    v = np.concatenate([rng.normal(scale=0.3, size=mob.shape), np.zeros(bed.shape)])
+    fixed = np.r_[np.zeros(len(mob)), np.ones(len(bed))].astype(np.uint8)
+    build.write_table(path, np.arange(1, len(x) + 1), x, v, fixed)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_a_pile_on_the_wall_under_a_sparse_bed_matches_one_rank(comm, mu):
+    """bed.wall: spheres fall through the bed onto the wall plane (below z = 0.9, under the bed
+    spheres' tops) and bounce or rest there with their own wall histories; migrations carry
+    them, and the digest is the one-rank digest."""
+    base = shared_dir(comm)
+    p = os.path.join(base, "sparse.txt")
+    if comm.Get_rank() == 0:
+        write_sparse_bed_pile(p)
+    comm.Barrier()
+    cfg = config.load(None, ["run.max_steps=40000", "box.L_x=5.0", "box.L_y=5.0", f'run.initial_file="{p}"',
+                             "output.progress_every=100000", f"contact.mu={mu}", "bed.wall=true"])
+    r, s = run(cfg, os.path.join(base, "wp"), comm)
+    st = r.state
+    on_wall = int(r.domain.sum_int(np.array([np.count_nonzero(
+        (st.x[:st.n_own, 2] < 0.9) & (st.fixed[:st.n_own] == 0))]))[0])
+    ref = serial_digest(cfg, os.path.join(base, "ws"), comm)
+    assert on_wall >= 8
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref

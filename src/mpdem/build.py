@@ -253,7 +253,8 @@ def tile_table(table, L_x, L_y, nx, ny):
             "fixed": np.tile(table["fixed"], nx * ny)}
 
 
-def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap_warn=0.0, warn=None):
+def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap_warn=0.0, warn=None,
+                  wall=False):
     """physics.md section 8, initial-state checks; raises InputError naming the problem.
 
     Parameters
@@ -278,6 +279,9 @@ def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap
         a deeper one is an error naming the pair. 0 refuses any overlap.
     warn : callable or None
         Takes the warning line; default ``warnings.warn``.
+    wall : bool
+        The run has the wall plane z = 0 (``bed.wall``): mobile spheres may
+        be below the bed, but not in the wall deeper than ``overlap_warn``.
     """
     if not np.all(np.isfinite(x)):
         raise InputError("initial state: non-finite positions")
@@ -288,12 +292,20 @@ def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap
         k = np.flatnonzero(mob)[np.flatnonzero(bad)[0]]
         raise InputError(f"initial state: particle {ids[k]} at x = {float(x[k, 0])!r}, y = {float(x[k, 1])!r} "
                          f"is outside [0, {L_x:g}) x [0, {L_y:g})")
-    if fixed.any():
+    if wall:
+        low = xm[:, 2] < 0.5 - overlap_warn
+        if low.any():
+            k = np.flatnonzero(mob)[np.argmin(xm[:, 2])]
+            raise InputError(f"initial state: particle {ids[k]} at z = {float(x[k, 2])!r} overlaps the wall plane "
+                             f"z = 0 by {0.5 - float(x[k, 2]):.6g} d; accepted up to checks.overlap_warn = "
+                             f"{overlap_warn:g}")
+    elif fixed.any():
         low = xm[:, 2] <= z_floor
         if low.any():
             k = np.flatnonzero(mob)[np.flatnonzero(low)[0]]
             raise InputError(f"initial state: particle {ids[k]} at z = {float(x[k, 2])!r} is not above "
-                             f"{z_floor:g} (the bed)")
+                             f"{z_floor:g} (the bed); under a sparse bed, bed.wall = true puts a wall "
+                             f"plane at z = 0 to rest on")
     if len(x) < 2 or not mob.any() or allow_overlap:
         return
     from .analysis import find_contacts

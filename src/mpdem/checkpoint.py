@@ -10,6 +10,9 @@ collectively by all ranks (h5py ``mpio`` driver), rows in rank order:
     contact slots: per-row counts (n,), aligned with ``/particles``, then the
     flat partner ids (M,) and tangential displacements Delta s (M, 3) of the
     rows in row order;
+``/wall/wall_ds`` (runs with ``bed.wall`` only)
+    Delta s of each particle's contact with the wall plane (n, 3) [d],
+    aligned with ``/particles``;
 ``/pairs/{id_i, id_j, delta, F_n, F_t, ds_i}`` (snapshots only)
     every contact once: ids, overlap [d], normal force (signed, along the
     unit vector from j to i) [m g], tangential force on i (P, 3) [m g],
@@ -41,12 +44,13 @@ KINDS = ("checkpoint", "snapshot", "final")
 PARTICLE_FIELDS = ("id", "x", "v", "omega", "f", "torque", "fixed")
 CONTACT_FIELDS = ("count", "partner", "ds")
 PAIR_FIELDS = ("id_i", "id_j", "delta", "F_n", "F_t", "ds_i")
-GROUPS = {"particles": PARTICLE_FIELDS, "contacts": CONTACT_FIELDS, "pairs": PAIR_FIELDS}
+WALL_FIELDS = ("wall_ds",)
+GROUPS = {"particles": PARTICLE_FIELDS, "contacts": CONTACT_FIELDS, "wall": WALL_FIELDS, "pairs": PAIR_FIELDS}
 DTYPES = {"id": np.int64, "fixed": np.uint8, "count": np.int32, "partner": np.int64,
           "id_i": np.int64, "id_j": np.int64, "delta": np.float64, "F_n": np.float64}
-WIDE = {"x", "v", "omega", "f", "torque", "ds", "F_t", "ds_i"}     # (n, 3) datasets
+WIDE = {"x", "v", "omega", "f", "torque", "ds", "F_t", "ds_i", "wall_ds"}     # (n, 3) datasets
 # the row-length dataset of each group (contacts' slot rows are counted by count)
-ROWS_OF = {"particles": "id", "contacts": "partner", "pairs": "id_i"}
+ROWS_OF = {"particles": "id", "contacts": "partner", "wall": "wall_ds", "pairs": "id_i"}
 
 # Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
 KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
@@ -100,14 +104,17 @@ def checksums(local):
     out["contacts"] = _row_hashes([owner, local["partner"], local["ds"]], len(owner), 2)
     if "id_i" in local:
         out["pairs"] = _row_hashes([local[k] for k in PAIR_FIELDS], len(local["id_i"]), 3)
+    if "wall_ds" in local:
+        out["wall"] = _row_hashes([local["id"], local["wall_ds"]], n, 4)
     return {g: np.sum(h, dtype=np.uint64) for g, h in out.items()}
 
 
 def digest(arrays):
     """SHA-256 over the state sorted by id (positions, velocities, angular
-    velocities, forces, torques, contact slots), as hex."""
+    velocities, forces, torques, contact slots, and the wall histories of a
+    run with the wall), as hex."""
     h = hashlib.sha256()
-    for name in PARTICLE_FIELDS + CONTACT_FIELDS:
+    for name in PARTICLE_FIELDS + CONTACT_FIELDS + tuple(k for k in WALL_FIELDS if k in arrays):
         a = np.ascontiguousarray(arrays[name])
         if name == "count":
             a = a.astype(np.int64)
@@ -122,12 +129,15 @@ def gather_state(state):
     """The owned particles of a State as id-sorted arrays (this rank's rows)."""
     n = state.n_own
     counts, partner, ds, order = state.contacts_flat()
-    return {
+    out = {
         "id": state.ids[:n][order], "x": state.x[:n][order], "v": state.v[:n][order],
         "omega": state.omega[:n][order], "f": state.f[:n][order],
         "torque": state.torque[:n][order], "fixed": state.fixed[:n][order],
         "count": counts, "partner": partner, "ds": ds,
     }
+    if state.wall:
+        out["wall_ds"] = state.wall_ds[:n][order]
+    return out
 
 
 # -- collective helpers (comm None or size 1: serial) --
@@ -173,7 +183,8 @@ def write(path, local, attrs, comm=None):
         and renamed by rank 0 when every rank has finished.
     local : dict of arrays
         This rank's rows: PARTICLE_FIELDS, ``count`` (rows,), ``partner``
-        (M,), ``ds`` (M, 3); optionally the PAIR_FIELDS of a snapshot.
+        (M,), ``ds`` (M, 3); optionally ``wall_ds`` (rows, 3) and the PAIR_FIELDS
+        of a snapshot.
     attrs : dict
         Attributes, identical on every rank.
     comm : mpi4py communicator or None
@@ -242,9 +253,10 @@ def _check_layout(f, path):
             if name not in f[g]:
                 return None, f"{path}: missing dataset /{g}/{name}"
             m = f[g][name].shape[0]
-            if g == "contacts" and name == "count":
+            if (g == "contacts" and name == "count") or g == "wall":
+                # aligned with the particle rows
                 if m != f["particles"]["id"].shape[0]:
-                    return None, f"{path}: /contacts/count has {m} rows, /particles {f['particles']['id'].shape[0]}"
+                    return None, f"{path}: /{g}/{name} has {m} rows, /particles {f['particles']['id'].shape[0]}"
                 continue
             if n is not None and m != n:
                 return None, f"{path}: datasets of /{g} have different lengths"
@@ -285,6 +297,8 @@ def read(path, comm=None, pairs=False):
             for name in PARTICLE_FIELDS:
                 local[name] = f["particles"][name][lo:hi]
             local["count"] = f["contacts"]["count"][lo:hi].astype(np.int64)
+            if "wall" in groups:
+                local["wall_ds"] = f["wall"]["wall_ds"][lo:hi]
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
         _agree(comm, err)
@@ -304,7 +318,7 @@ def read(path, comm=None, pairs=False):
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
         _agree(comm, err)
-    have = ["particles", "contacts"] + (["pairs"] if "id_i" in local else [])
+    have = ["particles", "contacts"] + (["pairs"] if "id_i" in local else []) + (["wall"] if "wall_ds" in local else [])
     sums = _sum_u64(comm, [checksums(local)[g] for g in have])
     bad = [g for g, s in zip(have, sums) if int(s) != int(attrs[f"checksum_{g}"])]
     if bad:
@@ -316,7 +330,7 @@ def sort_by_id(local):
     """Rows (with their contact slots and pairs) in ascending id order."""
     from .state import select_contacts
     order = np.argsort(local["id"], kind="stable")
-    out = {k: local[k][order] for k in PARTICLE_FIELDS}
+    out = {k: local[k][order] for k in PARTICLE_FIELDS + WALL_FIELDS if k in local}
     out["count"], out["partner"], out["ds"] = select_contacts(local["count"], local["partner"],
                                                               local["ds"], order)
     if "id_i" in local:

@@ -62,6 +62,7 @@ SCHEMA = (
     _k("contact", "limit_damping", False, "clip an attractive normal force to 0 (off in the reference model)", bool),
     _k("contact", "history", "project", "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|", str, ("project", "rotate")),
     _k("bed", "file", "", "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
+    _k("bed", "wall", False, "a plane at z = 0 under the bed with the pile's contact law and a tangential history of its own (LAMMPS wall/gran hooke/history zplane 0): a backstop under a sparse bed; without it a mobile sphere below the bed is an error", bool),
     _k("bed", "thickness", 1.0, "thickness of the slab cut from the settled packing [d]; physics.md 5.2 says 1.2, which holds ~1.34 per d^2 of a dense packing, above the 1.0-1.3 check"),
     _k("bed", "gap", 4.0, "height of the cut slab's bottom above the temporary floor [d] (>= 2; the floor layers the packing up to ~3 d)"),
     _k("bed", "settle_density", 8.0, "spheres settled per unit floor area to make the bed [1/d^2]"),

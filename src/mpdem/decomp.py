@@ -30,6 +30,9 @@ import numpy as np
 from .parallel import Channel
 from .state import MOVE_FIELDS, select_contacts
 
+# the per-particle arrays of a state-array dict (``checkpoint.read``); wall_ds only with the wall
+ROW_KEYS = ("id", "x", "v", "omega", "f", "torque", "fixed", "wall_ds")
+
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11
 TAG_HALO_COUNT = 21
@@ -286,8 +289,7 @@ def merge_sorted(parts):
     """Concatenate id-sorted state arrays of several ranks into one id-sorted set."""
     ids = np.concatenate([p["id"] for p in parts])
     order = np.argsort(ids, kind="stable")
-    out = {k: np.concatenate([p[k] for p in parts])[order]
-           for k in ("id", "x", "v", "omega", "f", "torque", "fixed")}
+    out = {k: np.concatenate([p[k] for p in parts])[order] for k in ROW_KEYS if k in parts[0]}
     counts = np.concatenate([p["count"] for p in parts])
     partner = np.concatenate([p["partner"] for p in parts])
     ds = np.concatenate([np.asarray(p["ds"]).reshape(-1, 3) for p in parts])
@@ -297,7 +299,7 @@ def merge_sorted(parts):
 
 def _subset(a, rows):
     """Rows of a state-array dict, with their contact slots."""
-    out = {k: a[k][rows] for k in ("id", "x", "v", "omega", "f", "torque", "fixed")}
+    out = {k: a[k][rows] for k in ROW_KEYS if k in a}
     out["count"], out["partner"], out["ds"] = select_contacts(a["count"], a["partner"], a["ds"], rows)
     return out
 
@@ -307,7 +309,7 @@ def _local_state(a, rows, L_x, L_y):
     from .state import State
     st = State(a["id"][rows], a["x"][rows], a["v"][rows], a["omega"][rows], a["fixed"][rows],
                L_x, L_y, capacity=int(1.1 * len(rows)) + 64)
-    for k in ("f", "torque"):
+    for k in ("f", "torque", "wall_ds"):
         if k in a:
             getattr(st, k)[:len(rows)] = a[k][rows]
     if "count" in a:

@@ -14,7 +14,7 @@ import numpy as np
 
 from .kernels import history
 from .kernels.exactsum import new_accumulator, to_float
-from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces
+from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces, wall_forces
 from .kernels.integrate import kick, kick_drift, kinetic_energy
 from .kernels.neighbours import build_neighbours, link_entries
 
@@ -34,6 +34,7 @@ class Physics:
     limit_damping: bool = False
     rescale_history: bool = False
     floor: bool = False         # temporary frictionless floor at z = 0 (bed making)
+    wall: bool = False          # the wall plane z = 0 under the bed (bed.wall)
 
     @classmethod
     def from_config(cls, cfg):
@@ -41,7 +42,7 @@ class Physics:
         return cls(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
                    dt=cfg.integration.dt, skin=cfg.integration.skin, gravity=cfg.box.gravity,
                    model=c.model, limit_damping=c.limit_damping,
-                   rescale_history=(c.history == "rotate"))
+                   rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
 
 
 @dataclass
@@ -80,6 +81,7 @@ class Engine:
         from . import memory, threads
         memory.return_freed_memory()
         self.state, self.phys, self.domain = state, physics, domain
+        state.wall = physics.wall
         p = physics
         self.law = Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu),
                        float(p.gravity), float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE,
@@ -229,10 +231,14 @@ class Engine:
             # each step's lower rows write a pair's slot before the higher row reads it
             self.pair = np.empty((self._n_pairs, 6))
         max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
-                                     self.link, self._n_pairs, self.hist, self.pair, self.touch, s.f, s.torque, s.L_x, s.L_y, self.law,
-                                     increment, self._chunk_max, self._chunk_count, self._found)
+                                     self.link, self._n_pairs, self.hist, self.pair, self.touch, s.f, s.torque,
+                                     s.L_x, s.L_y, self.law, increment, self._chunk_max, self._chunk_count,
+                                     self._found)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
+        if p.wall:
+            max_ov = max(max_ov, wall_forces(s.n_own, s.x, s.v, s.omega, s.fixed, s.wall_ds, s.f, s.torque,
+                                             self.law, increment, self._chunk_max))
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c

@@ -194,13 +194,15 @@ class Run:
         self.z_bed_mean = bed.z_mean if self.n_bed else -math.inf
         z_floor = bed.z_mean if cfg.run.initial_file else z_bed + 0.5
         build.check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=slots is not None,
-                            overlap_warn=cfg.checks.overlap_warn, warn=log.warn)
+                            overlap_warn=cfg.checks.overlap_warn, warn=log.warn, wall=cfg.bed.wall)
         if self.n_bed and self.rank == 0:
             build.write_table(os.path.join(self.out, "bed.txt"), ids[fixed == 1], x[fixed == 1],
                               fixed=fixed[fixed == 1])
         self.n_mobile = int((fixed == 0).sum())
         # every rank holds the whole initial state (built identically); each keeps its slab
         whole = {"id": ids, "x": x, "v": v, "omega": omega, "fixed": fixed}
+        if cfg.bed.wall and getattr(self, "_initial_wall", None) is not None:
+            whole["wall_ds"] = self._initial_wall
         if slots is not None:
             whole.update(zip(("count", "partner", "ds"), slots))
         self.state = self.domain.scatter(whole, L_x, L_y)
@@ -236,13 +238,14 @@ class Run:
     def _read_initial(self, path, all_fixed=False):
         """Particles of a text table or state file; a state file's contact
         histories go to ``self._initial_slots`` (None for a table)."""
-        self._initial_slots = None
+        self._initial_slots = self._initial_wall = None
         if not os.path.exists(path):
             raise build.InputError(f"initial file {path}: no such file")
         if checkpoint.is_state_file(path):
             a, _ = checkpoint.read_state(path)
             ids, x, v, omega, fixed = a["id"], a["x"], a["v"], a["omega"], a["fixed"]
             self._initial_slots = (a["count"], a["partner"], a["ds"])
+            self._initial_wall = a.get("wall_ds")
         elif lammps.kind(path):
             t = getattr(self, "_lammps_initial", None)
             if t is None or all_fixed:
@@ -406,9 +409,10 @@ class Run:
             warned["overlap"] = st.step
             self.log.warn(f"step {st.step}: overlap {info.max_overlap:.4g} d exceeds "
                           f"checks.overlap_warn = {cfg.checks.overlap_warn:g}")
-        if self.n_bed and info.z_min < self.z_bed_mean:
+        if self.n_bed and info.z_min < self.z_bed_mean and not cfg.bed.wall:
             raise RunError(f"step {st.step}: a mobile sphere fell through the bed "
-                           f"(z = {info.z_min:.4g} below the mean bed height {self.z_bed_mean:.4g})")
+                           f"(z = {info.z_min:.4g} below the mean bed height {self.z_bed_mean:.4g}); "
+                           f"under a sparse bed, bed.wall = true puts a wall plane at z = 0 to rest on")
         if info.z_max > escape and not warned["escape"]:
             warned["escape"] = True
             self.log.warn(f"step {st.step}: a sphere escaped upwards to z = {info.z_max:.4g}")

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-ROW_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref")
+ROW_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "x_ref", "wall_ds")
 # what travels with a particle that changes rank (x_ref is reset at the rebuild)
-MOVE_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed")
+MOVE_FIELDS = ("ids", "x", "v", "omega", "f", "torque", "fixed", "wall_ds")
 
 
 def select_contacts(counts, partner, ds, rows):
@@ -80,8 +80,10 @@ class State:
         self.step, self.time = 0, 0.0
         self.ids = np.full(cap, -1, np.int64)
         self.fixed = np.zeros(cap, np.uint8)
-        for name in ("x", "v", "omega", "f", "torque", "x_ref"):
+        for name in ("x", "v", "omega", "f", "torque", "x_ref", "wall_ds"):
             setattr(self, name, np.zeros((cap, 3)))
+        # True when the run has the wall (bed.wall): then wall_ds is part of the state files
+        self.wall = False
         self.ids[:n] = ids
         self.x[:n] = x
         if v is not None:

@@ -345,3 +345,80 @@ def floor_forces(n_own, x, v, fixed, f, k_n, gamma_n):
         delta = R - x[i, 2]
         if delta > 0.0:
             f[i, 2] += k_n * delta - gamma_n * v[i, 2]
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, chunk_max):
+    """Add the contact of each owned mobile sphere with the wall plane z = 0 (``bed.wall``).
+
+    The wall is a partner of infinite mass at rest (m_eff = m = 1) with the
+    pile's contact law and a tangential history of its own per sphere, as
+    LAMMPS's ``wall/gran hooke/history ... zplane 0``: overlap delta = R - z,
+    n = +z. Added after the pair contacts, so the sum order does not depend
+    on ranks or threads. Out of contact the history is +0.0.
+
+    Parameters
+    ----------
+    x, v, omega : (n_rows, 3) float64
+        Position [d], half-step velocity [sqrt(g d)] and angular velocity [sqrt(g/d)].
+    wall_ds : (n_rows, 3) float64, in/out
+        Delta s of each sphere's wall contact [d].
+    f, torque : (n_rows, 3) float64, in/out
+        The wall's force [m g] and torque [m g d] are added.
+    law : Law
+    increment : bool
+        False on the set-up evaluation (no history increment).
+    chunk_max : (C,) float64, scratch
+        One slot per chunk of rows (any C gives the same result).
+
+    Returns
+    -------
+    float : the largest wall overlap [d] (0 if none).
+    """
+    nchunk = len(chunk_max)
+    for c in prange(nchunk):
+        deepest = 0.0
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            if fixed[i]:
+                continue
+            delta = R - x[i, 2]
+            if not delta > 0.0:
+                wall_ds[i, 0] = 0.0
+                wall_ds[i, 1] = 0.0
+                wall_ds[i, 2] = 0.0
+                continue
+            deepest = max(deepest, delta)
+            hertz = law.model == MODEL_HERTZ
+            vn = v[i, 2]
+            scale = 1.0
+            fn = law.k_n * delta - 1.0 * law.gamma_n * vn
+            if hertz:
+                scale = math.sqrt(delta)
+                fn = scale * fn
+            if law.limit_damping and fn < 0.0:
+                fn = 0.0
+            fz = fn
+            if law.mu > 0.0:
+                # the contact point moves with v + R omega x (-n); n = (0, 0, 1)
+                vtx = v[i, 0] - R * omega[i, 1]
+                vty = v[i, 1] + R * omega[i, 0]
+                vtz = 0.0
+                sx, sy, sz, ftx, fty, ftz = _tangential(
+                    wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2], vtx, vty, vtz, 0.0, 0.0, 1.0,
+                    hertz, scale, 1.0, abs(fn), law.k_t, law.gamma_t, law.mu, law.dt, increment,
+                    law.rescale_history)
+                wall_ds[i, 0] = sx + 0.0
+                wall_ds[i, 1] = sy + 0.0
+                wall_ds[i, 2] = sz + 0.0
+                f[i, 0] += ftx
+                f[i, 1] += fty
+                fz += ftz
+                # T = -R n x F_t with n = (0, 0, 1)
+                torque[i, 0] += R * fty
+                torque[i, 1] += -(R * ftx)
+            f[i, 2] += fz
+        chunk_max[c] = deepest
+    deepest = 0.0
+    for c in range(nchunk):
+        deepest = max(deepest, chunk_max[c])
+    return deepest
