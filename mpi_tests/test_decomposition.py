@@ -1,4 +1,4 @@
-"""The slab decomposition gives the one-rank result bit for bit (design.md 2.1).
+"""The slab decomposition gives the one-rank result bit for bit (ARCHITECTURE.md 2.1).
 
 Run under ``mpiexec -n K python -m pytest mpi_tests`` for K = 2, 3, 4: each
 test runs the same pile on COMM_WORLD and, on rank 0, on COMM_SELF (one
@@ -151,7 +151,7 @@ def stack_config(comm, base, mu):
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_frictionless_pile_matches_one_rank(comm, mu):
     """mu = 0 with gamma_t > 0: the stored Delta s are exact zeros (or, if
-    physics.md 2.4 is run with mu = 0, -m_eff gamma_t v_t / k_t); a zero must
+    docs/model.md 2.4 is run with mu = 0, -m_eff gamma_t v_t / k_t); a zero must
     be +0.0 whichever partner computed the pair, else its sign, hence the
     digest, depends on the ranks. mu = 0.5 is the control: the same stack
     with friction."""

@@ -1,4 +1,4 @@
-"""The analysis stage on structures with known answers (physics.md 6, issue 5).
+"""The analysis stage on structures with known answers (docs/model.md 6, issue 5).
 
 FCC and simple cubic crystals (z = 12 and 6, phi = pi/(3 sqrt 2) and pi/6),
 an ideal gas (g = 1), rattler removal on hand-built clusters, the fits on

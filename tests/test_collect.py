@@ -319,7 +319,7 @@ def test_a_run_analysed_again_keeps_its_analysis_settings(tmp_path):
 
 
 def test_development_size_verdicts_figures_inline_and_notes(tmp_path):
-    """Dev-size piles (N = 2000, 10d box) are judged against physics.md 7.1 with the project's
+    """Dev-size piles (N = 2000, 10d box) are judged against docs/model.md 7.1 with the project's
     acceptance (z +-0.05 at mu = 0, +-0.10 at mu = 0.5, phi +-0.01); the README shows the
     figures it made inline and carries OUT/NOTES.md."""
     rng = np.random.default_rng(7)
@@ -345,3 +345,11 @@ def test_development_size_verdicts_figures_inline_and_notes(tmp_path):
     made = [ln for ln in readme.splitlines() if ln.startswith("![")]
     assert all((out / ln.split("(")[-1].rstrip(")")).exists() for ln in made)
     assert "## Findings (from `NOTES.md`)" in readme and "a finite-size effect" in readme
+
+
+def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
+    from mpdem.analysis.collect import _physics_key
+    old = {"contact.mu": 0.5, "contact.k_n": 2e5}
+    new = dict(old, **{"bed.wall": False})
+    assert _physics_key(old) == _physics_key(new)
+    assert _physics_key(old) != _physics_key(dict(old, **{"bed.wall": True}))

@@ -1,4 +1,4 @@
-"""physics.md section 9, items 1, 2 and 6: binary collisions."""
+"""docs/model.md section 9, items 1, 2 and 6: binary collisions."""
 import math
 
 import numpy as np
@@ -56,13 +56,13 @@ PHASES = [k / 8 for k in range(8)]
 @pytest.mark.parametrize("k_n", [2e5, 2e9])
 @pytest.mark.parametrize("eps", [0.26, 0.5, 0.88])
 def test_head_on_restitution_and_duration(k_n, eps):
-    """physics.md 9.1, with what the scheme of 4.1 actually achieves.
+    """docs/model.md 9.1, with what the scheme of 4.1 actually achieves.
 
     Velocity Verlet with half-step velocities in the dashpot and contacts seen
     at whole steps has an O(gamma_n dt) error in epsilon that depends on where
     the contact starts within a step. At the default dt (t_col / dt ~ 50) it
     is up to 1.2e-2 for epsilon = 0.26 (phase mean 4e-3) and the duration is
-    off by up to 1.1%; physics.md's 1e-3 and 1% hold at every phase with
+    off by up to 1.1%; docs/model.md's 1e-3 and 1% hold at every phase with
     dt / 20. The default-dt bounds are asserted too, so a regression shows.
     """
     g = gamma_n_from_epsilon(eps, k_n)
@@ -90,7 +90,7 @@ def test_elastic_collision_restitution_one(k_n):
 
 
 def test_paper_damping_values():
-    # physics.md 3.2 worked values
+    # docs/model.md 3.2 worked values
     assert gamma_n_from_epsilon(0.88, 2e5) == pytest.approx(51.43, abs=0.01)
     assert gamma_n_from_epsilon(0.50, 2e5) == pytest.approx(272.5, abs=0.1)
     assert gamma_n_from_epsilon(0.26, 2e9) == pytest.approx(49848, rel=1e-4)
@@ -100,7 +100,7 @@ def test_paper_damping_values():
 
 @pytest.mark.parametrize("eps", [0.88, 0.5])
 def test_bed_impact_uses_full_mass(eps):
-    """physics.md 9.2: m_eff = m against a frozen sphere (0.835 for 0.88)."""
+    """docs/model.md 9.2: m_eff = m against a frozen sphere (0.835 for 0.88)."""
     g = gamma_n_from_epsilon(eps, 2e5)
     expect = restitution(g, 2e5, m_eff=1.0)
     if eps == 0.88:
@@ -153,6 +153,6 @@ def test_glancing_frictional_collision_bookkeeping():
     assert steps_in_contact > 20
     assert np.abs(momentum() - p0).max() < 1e-13
     dL = angmom() - L0
-    # the change of angular momentum is the O(delta) residual of physics.md 9.6
+    # the change of angular momentum is the O(delta) residual of docs/model.md 9.6
     assert np.linalg.norm(residual) > 0
     assert np.linalg.norm(dL - residual) < 0.05 * np.linalg.norm(residual) + 1e-12

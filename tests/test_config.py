@@ -105,10 +105,10 @@ def test_set_parses_toml_values_and_bare_strings():
         config.parse_set("contact.mu")
 
 
-def test_readme_config_reference_is_current():
+def test_docs_config_reference_is_current():
     from pathlib import Path
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    assert config.reference_markdown() in readme
+    doc = (Path(__file__).parents[1] / "docs" / "config.md").read_text()
+    assert config.reference_markdown() in doc
 
 
 def test_sections_are_built_once_and_read_only():

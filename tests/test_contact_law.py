@@ -1,4 +1,4 @@
-"""physics.md section 9, items 3 to 5, and the force kernel's invariants."""
+"""docs/model.md section 9, items 3 to 5, and the force kernel's invariants."""
 import math
 
 import numpy as np
@@ -208,7 +208,7 @@ def test_same_bits_for_any_thread_and_chunk_count():
 
 
 def test_hertz_scales_spring_and_dashpot_by_sqrt_overlap():
-    """physics.md 2.7: F = sqrt(delta/d) [k_n delta n - m_eff gamma_n v_n]."""
+    """docs/model.md 2.7: F = sqrt(delta/d) [k_n delta n - m_eff gamma_n v_n]."""
     from mpdem.kernels.forces import MODEL_HERTZ
     x = [[5.0, 5.0, 5.998], [5.0, 5.0, 5.0]]
     v = [[0, 0, -0.3], [0, 0, 0]]
@@ -238,3 +238,15 @@ def test_rotate_history_keeps_its_length():
     assert res[0][2] == 0.0 and res[1][2] == 0.0
     assert np.linalg.norm(res[0]) == pytest.approx(1e-4, rel=1e-12)          # projection only
     assert np.linalg.norm(res[1]) == pytest.approx(np.linalg.norm(s_old), rel=1e-12)
+
+
+def test_rotate_history_grows_with_the_sliding_like_the_projection():
+    """Rescaling keeps the length of the incremented history: with the history already in the
+    tangent plane both schemes add v_t dt (a rescale to the length before the increment would
+    keep |Delta s| from ever growing)."""
+    s_old = np.array([1e-4, 0.0, 0.0])
+    x = [[5.0, 5.0, 5.999], [5.0, 5.0, 5.0]]
+    v = [[0.3, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    res = [pair_kernel(x, v, np.zeros((2, 3)), s_old, mu=10.0, rotate=r)[3][0] for r in (False, True)]
+    assert res[0][0] == pytest.approx(1e-4 + 0.3 * 1e-4, rel=1e-12)
+    assert np.array_equal(res[0], res[1])

@@ -1,8 +1,8 @@
 """The stored contact history is canonical: an exact zero is +0.0, never -0.0.
 
-With mu = 0 Delta s is zero (physics.md 2.6; running 2.4 with mu = 0 leaves
+With mu = 0 Delta s is zero (docs/model.md 2.6; running 2.4 with mu = 0 leaves
 -m_eff gamma_t v_t / k_t, zero when gamma_t = 0), and the mirror slot of a
-pair holds the negation of its partner's (design.md 2.2). -(+0.0) is -0.0,
+pair holds the negation of its partner's (ARCHITECTURE.md 2.2). -(+0.0) is -0.0,
 and which partner computes the pair depends on the row order, hence on the
 ranks: a non-canonical zero changes the digest with the rank count
 (mpi_tests/test_decomposition.py, test_frictionless_pile_matches_one_rank).
@@ -25,7 +25,7 @@ def gathered_slots(eng):
 def test_frictionless_history_has_no_negative_zeros(engine_factory, gamma_t):
     """mu = 0: four layers of 25 spheres, stacked loosely over the hollows of
     a bed in a 6 d box, land in 1000 steps; then no stored Delta s component
-    is -0.0 (with gamma_t = 0, physics.md 2.4 makes every Delta s exactly 0)."""
+    is -0.0 (with gamma_t = 0, docs/model.md 2.4 makes every Delta s exactly 0)."""
     n, L, layers = 5, 6.0, 4
     a = L / n
     grid = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * a

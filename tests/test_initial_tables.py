@@ -23,7 +23,7 @@ def test_check_initial_accepts_a_settled_overlap_and_names_the_largest():
     x[3, 1] = 3.9
     with pytest.raises(build.InputError, match=r"particles 9 and 4 overlap by 0\.1\d* d .*overlap_warn = 0\.05"):
         build.check_initial(ids, x, fixed, 5.0, 5.0, 0.0, overlap_warn=0.05, warn=said.append)
-    # the default refuses any overlap, as physics.md 8 says
+    # the default refuses any overlap, as docs/model.md 8 says
     x[3, 1] = 3.996
     with pytest.raises(build.InputError, match=r"particles 9 and 4 overlap by 0\.004"):
         build.check_initial(ids, x, fixed, 5.0, 5.0, 0.0)

@@ -1,4 +1,4 @@
-"""physics.md 9.7: a frictionless pile settles to rest with bulk z near 6.1.
+"""docs/model.md 9.7: a frictionless pile settles to rest with bulk z near 6.1.
 
 N = 2000 in a 10 d x 10 d cell, mu = 0, k_n = 2e5 (epsilon 0.88, the
 defaults otherwise). About 1.3 million steps: a few minutes on one core.
@@ -22,12 +22,12 @@ def test_frictionless_pile_settles_to_z_near_6(tmp_path):
     summary = run.finish()
     assert summary["E_k_per_particle"] < 1e-8
     bulk = summary["bulk"]
-    # physics.md: within a few per cent of 6.1 (reference 6.140 at this size)
+    # docs/model.md: within a few per cent of 6.1 (reference 6.140 at this size)
     assert abs(bulk["z"] - 6.1) < 0.03 * 6.1, bulk
     assert 0.62 < bulk["phi"] < 0.66, bulk
     assert bulk["n_bulk"] > 500
     assert json.loads((tmp_path / "pile" / "summary.json").read_text())["converged"] is True
-    # mpdem analyze on the run directory: the same bulk, and the rest of physics.md 6
+    # mpdem analyze on the run directory: the same bulk, and the rest of docs/model.md 6
     s, out = report.analyze(str(tmp_path / "pile"), log=lambda m: None)
     assert out == str(tmp_path / "pile" / "analysis")
     for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "z1", "z2"):

@@ -1,7 +1,8 @@
 """mpdem: MPI-parallel discrete-element simulator for sphere packings.
 
 Reduced units throughout: particle diameter d = 1, mass m = 1, gravity g = 1.
-The model is specified in shared/physics.md; the invariants in shared/design.md.
+The model is described in docs/model.md; the code map and its invariants in
+ARCHITECTURE.md.
 """
 import hashlib
 import os

@@ -337,7 +337,7 @@ def threads_wanted(args):
 
 def parser():
     from . import __version__
-    p = argparse.ArgumentParser(prog="mpdem", description="Discrete-element sphere packings (physics.md).")
+    p = argparse.ArgumentParser(prog="mpdem", description="Discrete-element sphere packings (docs/model.md).")
     p.add_argument("--version", action="version", version=f"mpdem {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run a pile (the built-in example without CONFIG)")
@@ -387,7 +387,7 @@ def parser():
                    help="time `mpdem analyze` of an N-sphere snapshot (copies of the landed pile side by "
                         "side, written by all ranks); use with --N 1000000")
     b.add_argument("--repeat", type=int, default=3, help="repetitions of the IO and analysis benchmarks (default 3)")
-    an = sub.add_parser("analyze", help="measure a packing: z, phi, g(r), alpha, P(zeta) (physics.md 6)")
+    an = sub.add_parser("analyze", help="measure a packing: z, phi, g(r), alpha, P(zeta) (docs/model.md 6)")
     an.add_argument("target", metavar="RUN_DIR|STATE_FILE",
                     help="a finished run (its final.h5) or a snapshot, checkpoint or final state")
     an.add_argument("--out", help="output directory (default RUN/analysis, or RUN/analysis/snap-NNNNN)")

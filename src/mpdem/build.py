@@ -63,7 +63,7 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000):
 
 
 def insertion_height(n, L_x, L_y, phi_i):
-    """H = N pi d^3 / (6 L_x L_y phi_i) [d] (physics.md 5.3)."""
+    """H = N pi d^3 / (6 L_x L_y phi_i) [d] (docs/model.md 5.3)."""
     return n * SPHERE_VOLUME / (L_x * L_y * phi_i)
 
 
@@ -93,7 +93,7 @@ class Bed:
 
 
 def make_bed(cfg, progress=None):
-    """Build the rough bed by the recipe of physics.md 5.2.
+    """Build the rough bed by the recipe of docs/model.md 5.2.
 
     Settles ``settle_density * L_x * L_y`` frictionless spheres onto a flat
     frictionless floor at z = 0, cuts the slab of centres in
@@ -255,7 +255,7 @@ def tile_table(table, L_x, L_y, nx, ny):
 
 def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap_warn=0.0, warn=None,
                   wall=False):
-    """physics.md section 8, initial-state checks; raises InputError naming the problem.
+    """docs/model.md section 8, initial-state checks; raises InputError naming the problem.
 
     Parameters
     ----------

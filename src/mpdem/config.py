@@ -1,10 +1,10 @@
 """Run configuration: TOML in reduced units -> one frozen, validated Config.
 
-Every parameter has a documented default here (the README's config reference
+Every parameter has a documented default here (docs/config.md's reference
 is generated from ``SCHEMA``). A few defaults are derived from other values
-(physics.md): k_t = 2 k_n / 7, gamma_n from epsilon (eq. 4-5),
+(docs/model.md): k_t = 2 k_n / 7, gamma_n from epsilon (eq. 4-5),
 dt = 1e-4 sqrt(2e5 / k_n), E_stop = 1e-8 (k_n / 2e5)^(-3/4). Validation
-(physics.md section 8) happens here, before any work starts: an error names
+(docs/model.md section 8) happens here, before any work starts: an error names
 the key, the value and what is accepted.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ SCHEMA = (
     _k("box", "L_y", 20.0, "periodic box length in y [d]"),
     _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
     _k("pour", "N", 20000, "number of mobile spheres", int),
-    _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (physics.md 5.3)"),
+    _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)"),
     _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest"),
     _k("contact", "model", "hooke", "normal/tangential force law", str, ("hooke", "hertz")),
     _k("contact", "k_n", 2e5, "normal spring constant [m g / d]"),
@@ -63,7 +63,7 @@ SCHEMA = (
     _k("contact", "history", "project", "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|", str, ("project", "rotate")),
     _k("bed", "file", "", "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
     _k("bed", "wall", False, "a plane at z = 0 under the bed with the pile's contact law and a tangential history of its own (LAMMPS wall/gran hooke/history zplane 0): a backstop under a sparse bed; without it a mobile sphere below the bed is an error", bool),
-    _k("bed", "thickness", 1.0, "thickness of the slab cut from the settled packing [d]; physics.md 5.2 says 1.2, which holds ~1.34 per d^2 of a dense packing, above the 1.0-1.3 check"),
+    _k("bed", "thickness", 1.0, "thickness of the slab cut from the settled packing [d]; docs/model.md 5.2 says 1.2, which holds ~1.34 per d^2 of a dense packing, above the 1.0-1.3 check"),
     _k("bed", "gap", 4.0, "height of the cut slab's bottom above the temporary floor [d] (>= 2; the floor layers the packing up to ~3 d)"),
     _k("bed", "settle_density", 8.0, "spheres settled per unit floor area to make the bed [1/d^2]"),
     _k("bed", "settle_k_n", 2e3, "spring constant of the bed-making settle [m g / d]"),
@@ -92,7 +92,7 @@ SCHEMA = (
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
     _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
     _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]"),
-    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (physics.md 6.1)"),
+    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)"),
     _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]"),
     _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box"),
     _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)"),
@@ -460,7 +460,7 @@ def as_dict(cfg):
 
 
 def reference_markdown():
-    """The config reference table of the README, generated from SCHEMA."""
+    """The config reference table of docs/config.md, generated from SCHEMA."""
     rows = ["| key | default | meaning |", "|---|---|---|"]
     for k in SCHEMA:
         d = ("required" if k.default is REQUIRED else "derived" if k.default is DERIVED

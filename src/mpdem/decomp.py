@@ -1,6 +1,6 @@
 """Slab decomposition along z: where particles live and how ranks agree.
 
-The only module that moves particles between ranks (design.md, invariant 3).
+The only module that moves particles between ranks (ARCHITECTURE.md).
 Rank r owns the particles with z in [b_r, b_{r+1}), b_0 = -inf, b_P = +inf.
 At neighbour-list rebuilds (``rebuild``):
 

@@ -1,4 +1,4 @@
-"""One velocity-Verlet time step over a rank's particles (design.md section 3).
+"""One velocity-Verlet time step over a rank's particles (ARCHITECTURE.md).
 
 The engine is arrays and kernels only: no files, no logging, no stop rules
 (those are in ``simulation``). It is used for the pile, for the bed-making
@@ -153,7 +153,7 @@ class Engine:
         history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs,
                                  s.slot_offsets(), s.slot_id, s.slot_ds, self.hist, self.touch, self.nchunk)
         if self.law.mu == 0.0:
-            # frictionless: Delta s is 0 (physics.md 2.6), whatever an initial file held
+            # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
         s.drop_slots()
 

@@ -1,7 +1,7 @@
 """The contact list of a snapshot: every contact once, with its forces.
 
 Computed from the contact slots after a step, with the contact law of
-physics.md 2 evaluated as the step did: positions of the step, velocities of
+docs/model.md 2 evaluated as the step did: positions of the step, velocities of
 the half step (owned rows: v - f dt / 2; ghost rows already hold the half-step
 values they were sent with), the slot's Delta s. The forces are those the
 step applied, to rounding (the sum over a particle's pairs plus gravity gives

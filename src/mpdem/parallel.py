@@ -1,4 +1,4 @@
-"""Every collective and exchange of the run, on numpy buffers (design.md, invariant 3).
+"""Every collective and exchange of the run, on numpy buffers (ARCHITECTURE.md).
 
 ``Channel`` wraps the communicator handed down by the CLI (or None for one
 rank without MPI) and times every call into ``seconds``. ``decomp`` decides

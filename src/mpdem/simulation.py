@@ -1,7 +1,7 @@
 """A pile run: prepare or resume, step with monitors and schedules, finish.
 
 Owns the run directory (``rundir`` gives its layout) and everything that
-happens between steps: run-time checks (physics.md section 8), kinetic-energy
+happens between steps: run-time checks (docs/model.md section 8), kinetic-energy
 sampling and the stop rule (5.4), checkpoints and snapshots on their
 schedules, wall-time and signal stops, progress lines. The arithmetic of a
 step is ``engine``'s; files are written by ``checkpoint``.
@@ -70,7 +70,7 @@ def _fmt_seconds(s):
 
 
 class StopRule:
-    """Kinetic-energy stop rule of physics.md 5.4 on samples every n_sample steps."""
+    """Kinetic-energy stop rule of docs/model.md 5.4 on samples every n_sample steps."""
 
     def __init__(self, E_stop, rule, window, sample_interval, dt):
         self.E_stop, self.rule = E_stop, rule

@@ -5,7 +5,7 @@ read-only ghost copies (filled by ``decomp``). Arrays have a capacity larger
 than ``n_rows`` so ghosts and arriving particles fit without reallocation;
 ``grow`` enlarges them.
 
-Contact history (design.md, invariant 2) has two homes. Between neighbour
+Contact history (ARCHITECTURE.md) has two homes. Between neighbour
 list rebuilds it lives in the engine, aligned with the list entries and
 updated in place. At a rebuild, a migration and a checkpoint it is here, as
 compact slots of the owned rows in row order: ``slot_n[i]`` partners of row

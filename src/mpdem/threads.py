@@ -1,7 +1,7 @@
 """Threads within a rank: numba's parallel loops (``--threads T``).
 
 Results do not depend on the thread count: threads split the particles,
-never a sum (design.md, invariant 1), and reductions are max or integer sums.
+never a sum (ARCHITECTURE.md), and reductions are max or integer sums.
 """
 from __future__ import annotations
 

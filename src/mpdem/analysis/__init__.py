@@ -1,4 +1,4 @@
-"""The analysis stage: measurements of physics.md section 6 on static packings.
+"""The analysis stage: measurements of docs/model.md section 6 on static packings.
 
 One file: ``bulk`` (bulk region, contacts, z, phi_f), ``gofr`` (g(r) in the
 slab), ``forces`` (P(zeta)), ``fits`` (eqs. 6, 7, 9), ``report`` (``mpdem

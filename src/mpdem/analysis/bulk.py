@@ -1,4 +1,4 @@
-"""Bulk region, contacts, coordination and packing fraction (physics.md 6.1-6.3).
+"""Bulk region, contacts, coordination and packing fraction (docs/model.md 6.1-6.3).
 
 Every run reports these at its end (``bulk_summary``); ``mpdem analyze``
 builds the rest of section 6 on them.
@@ -93,7 +93,7 @@ def remove_rattlers(n_rows, pairs, removable, n_min):
 
 
 def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profile_bin=0.5, tall_pile=40.0):
-    """The bulk slab [z1, z2] of a pile (physics.md 6.1).
+    """The bulk slab [z1, z2] of a pile (docs/model.md 6.1).
 
     Parameters
     ----------
@@ -113,7 +113,7 @@ def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profil
     top = float(zm.max()) + 1.0
     edges, phi = phi_profile(zm, L_x, L_y, z_bed, top, profile_bin)
     centres = 0.5 * (edges[:-1] + edges[1:])
-    # plateau window of physics.md 6.1, shrunk for piles shorter than the paper's
+    # plateau window of docs/model.md 6.1, shrunk for piles shorter than the paper's
     h_nominal = zm.size * math.pi / 6 / (L_x * L_y * 0.6)
     lo, hi = z_bed + min(10.0, 0.25 * h_nominal), z_bed + min(30.0, 0.75 * h_nominal)
     win = (centres >= lo) & (centres <= hi)

@@ -6,7 +6,7 @@
     OUT/sets.csv      one row per parameter set: mean and standard error over its seeds
     OUT/fits.json     eq. 7 per family of k_n, eq. 9 per family of phi_i (or why not)
     OUT/fig*.png      Figs. 2-9 of the paper, its values drawn as open markers / dashes
-    OUT/README.md     sets, seeds, numbers next to the paper's and physics.md 7's acceptance
+    OUT/README.md     sets, seeds, numbers next to the paper's and docs/model.md 7's acceptance
     OUT/collect.json  the runs used and skipped, the figures made and not made, and why
 
 This module finds and loads the runs (analysing those that need it), groups
@@ -127,7 +127,7 @@ def load_run(path, analyze_missing=True, log=print):
     -------
     (Run, None), or (None, reason) when the run cannot be used: unfinished,
     not analysed (with ``analyze_missing`` False), analysis failed, summary
-    unreadable or incomplete, or not converged (physics.md 5.4: a run at the
+    unreadable or incomplete, or not converged (docs/model.md 5.4: a run at the
     step cap is not used for comparisons).
     """
     summ, final = os.path.join(path, "analysis", SUMMARY), rundir.final_path(path)
@@ -163,17 +163,28 @@ def load_run(path, analyze_missing=True, log=print):
         return None, f"{summ}: params lack {', '.join(missing)}"
     if not s.get("converged"):
         return None, (f"not converged (stopped at step {s.get('step', '?')} without reaching the kinetic-energy "
-                      f"threshold; physics.md 5.4: not used for comparisons)")
+                      f"threshold; docs/model.md 5.4: not used for comparisons)")
     run = Run(os.path.normpath(path), s)
     if not (math.isfinite(run.q["z"]) and math.isfinite(run.q["phi"])):
         return None, f"{summ}: no bulk z or phi"
     return run, None
 
 
+def _physics_key(physics):
+    """A run's physics keys as a hashable, canonical tuple. A key a summary lacks (written
+    before the key existed) takes its default, so old and new runs of one physics agree."""
+    from ..config import DERIVED, KEYS, REQUIRED
+    from .report import NOT_PHYSICS
+    full = {k: spec.default for k, spec in KEYS.items()
+            if not k.startswith(NOT_PHYSICS) and spec.default is not REQUIRED and spec.default is not DERIVED}
+    full.update(physics)
+    return tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in full.items()))
+
+
 def group(runs):
     """Sets of runs with equal parameters; a repeated seed in a set is a duplicate.
 
-    A run is a pure function of its parameters and seed (design.md 2), so two
+    A run is a pure function of its parameters and seed (ARCHITECTURE.md 2), so two
     runs of one set with one seed are one sample: the later is skipped.
 
     Returns
@@ -184,7 +195,7 @@ def group(runs):
     by_key, skipped = {}, []
     for r in runs:
         # PARAMS name the set; every other physics key of the config must agree as well
-        other = tuple(sorted((r.s.get("physics") or {}).items()))
+        other = _physics_key(r.s.get("physics") or {})
         by_key.setdefault((set_key(r.params), other), []).append(r)
     sets = []
     for key in sorted(by_key, key=lambda k: (_set_order(dict(k[0])), repr(k[1]))):
@@ -247,10 +258,10 @@ def _alpha_check(e, members):
         chk.update(difference=d, difference_err=err, n_sigma=abs(d) / err if err > 0 else NAN)
     if e["family"]["mu"] == 0:
         chk["paper"] = {k: paper.EQ7_MU0[k] for k in ("z_inf", "z_inf_err", "alpha_n", "alpha_n_err", "a_tilde")}
-        chk["paper"]["note"] = "eq. 8, alpha_n = 1 - alpha, holds for mu = 0 (physics.md 6.6)"
+        chk["paper"]["note"] = "eq. 8, alpha_n = 1 - alpha, holds for mu = 0 (docs/model.md 6.6)"
     else:
         chk["paper"] = {"alpha_n": paper.EQ7_FRICTIONAL_ALPHA_N,
-                        "note": "mu > 0: z - z_inf ~ k_n^(-1/4), z_inf > 4; eq. 8 does not hold (physics.md 6.6)"}
+                        "note": "mu > 0: z - z_inf ~ k_n^(-1/4), z_inf > 4; eq. 8 does not hold (docs/model.md 6.6)"}
     return chk
 
 

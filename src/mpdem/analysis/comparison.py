@@ -2,7 +2,7 @@
 
 ``comparisons`` sets this work's numbers (set means with standard errors
 over seeds, the eq. 7 and eq. 9 fits) next to the paper's values and, where
-physics.md 7 gives one, its acceptance range, with a verdict (within /
+docs/model.md 7 gives one, its acceptance range, with a verdict (within /
 outside / n/a). ``write_readme`` writes OUT/README.md: the parameter sets
 and seeds, that comparison table, the fits, the figures made and not made,
 and the runs skipped.
@@ -47,7 +47,7 @@ def _verdict(value, accept):
 
 def comparisons(sets, fit_res):
     """Rows of the README's comparison table (dicts: quantity, conditions, set, value, err, n_seeds,
-    paper, paper_err, accept, verdict, source). Verdicts only for physics.md 7's acceptance list."""
+    paper, paper_err, accept, verdict, source). Verdicts only for docs/model.md 7's acceptance list."""
     rows = []
 
     def add(quantity, cond, sid, value, err, n, p_value, p_err, accept, source, note=""):
@@ -158,7 +158,7 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
          f"Made by `mpdem collect` on {info['date']} from {info['n_runs']} run(s) in {info['n_sets']} parameter "
          f"set(s); {len(skipped)} skipped (below). Inputs: {', '.join(f'`{t}`' for t in info['inputs'])}.", "",
          "`±` is the standard error of the mean over the seeds (runs) of a set; a set with one seed has no error "
-         "bar and is marked `(1 seed)`. Paper: " + paper.SOURCE + ". Acceptance ranges: physics.md 7, "
+         "bar and is marked `(1 seed)`. Paper: " + paper.SOURCE + ". Acceptance ranges: docs/model.md 7, "
          "\"Suggested acceptance\" (a choice of this project, not the paper's).", "",
          "## Parameter sets", "",
          "Every run parameter but the seed is equal within a set (`sets.csv` has them all; runs in `runs.csv`).", ""]
@@ -177,9 +177,9 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
                        "—" if r["accept"] is None else f"{r['accept'][0]!r} … {r['accept'][1]!r}",
                        r["verdict"] + (f" ({r['note']})" if r["note"] else "")] for r in rows]), "",
               "Paper values without an error were quoted without one. 7.1 rows: the reference implementation at "
-              "development size (physics.md 7.1), not the paper.", ""]
+              "development size (docs/model.md 7.1), not the paper.", ""]
     else:
-        L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of physics.md 7).", ""]
+        L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of docs/model.md 7).", ""]
     L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
           "(fit weights 1/σ², σ the standard error over seeds):", ""]
     L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]

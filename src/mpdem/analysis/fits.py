@@ -15,7 +15,7 @@ K_REF = 2e5    # k_n of the paper's softest runs; eq. 7 is fitted in k_n / K_REF
 
 
 def fit_window(k_n, overlap_median, xi_hi=5e-2, xi_lo=-1.0):
-    """The default window of the eq. 6 fit (physics.md 6.5): (xi_lo, xi_hi)."""
+    """The default window of the eq. 6 fit (docs/model.md 6.5): (xi_lo, xi_hi)."""
     if xi_lo < 0:
         xi_lo = max(1e-3 * math.sqrt(K_REF / k_n), 20.0 * overlap_median)
     return float(xi_lo), float(xi_hi)

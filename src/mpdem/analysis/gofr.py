@@ -1,4 +1,4 @@
-"""g(r) of the bulk slab, normalised without edge corrections (physics.md 6.4).
+"""g(r) of the bulk slab, normalised without edge corrections (docs/model.md 6.4).
 
 Reference spheres are the mobile ones whose centres lie at least r_max inside
 the bulk slab [z1, z2], so every shell up to r_max is complete; partners are

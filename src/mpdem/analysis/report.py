@@ -1,4 +1,4 @@
-"""``mpdem analyze``: every measurement of physics.md section 6 on one state file.
+"""``mpdem analyze``: every measurement of docs/model.md section 6 on one state file.
 
 ::
 
@@ -33,8 +33,8 @@ SUMMARY = "summary.json"
 PARAMS = ("contact.mu", "contact.epsilon", "contact.k_n", "contact.k_t", "contact.gamma_n",
           "contact.gamma_t", "contact.model", "pour.phi_i", "pour.N", "pour.K0", "run.seed",
           "box.L_x", "box.L_y", "integration.dt")
-# config keys that cannot change a run's result (design.md 2.1) or are not the run's physics
-NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "output.", "decomp.", "checks.", "analysis.",
+# config keys that cannot change a run's result (ARCHITECTURE.md 2.1) or are not the run's physics
+NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "run.fixed_types", "output.", "decomp.", "checks.", "analysis.",
                "integration.skin", "integration.contact_slots")
 
 
@@ -150,7 +150,7 @@ def measure(arrays, attrs, cfg):
 
     Returns
     -------
-    summary : dict (JSON-ready, see README "Analysis")
+    summary : dict (JSON-ready, see docs/analysis.md)
     tables : dict of arrays for the CSV files and plots
     """
     a, c = cfg.analysis, cfg.contact
@@ -162,7 +162,7 @@ def measure(arrays, attrs, cfg):
     s = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     s["n_min"] = pk.n_min
     s.update(pk.measure(z1, z2))
-    # physics.md 6.1.4: the same with both margins halved
+    # docs/model.md 6.1.4: the same with both margins halved
     half = bulk.bulk_region(pk.x[pk.mobile, 2], pk.z_bed, L_x, L_y, 0.5 * reg["margin_bottom"],
                             0.5 * reg["margin_top"], a.profile_bin)
     s["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])

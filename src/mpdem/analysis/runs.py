@@ -18,7 +18,7 @@ import numpy as np
 from .report import PARAMS
 
 SHORT = {k: k.split(".", 1)[1] for k in PARAMS}   # contact.mu -> mu, run.seed -> seed, ...
-# k_t, gamma_n, gamma_t and dt follow k_n in a stiffness sweep (physics.md 3, 4.2)
+# k_t, gamma_n, gamma_t and dt follow k_n in a stiffness sweep (docs/model.md 3, 4.2)
 FOLLOW_K_N = ("contact.k_n", "contact.k_t", "contact.gamma_n", "contact.gamma_t", "integration.dt")
 NAN = float("nan")
 

@@ -1,8 +1,8 @@
-"""Contact forces and torques (physics.md section 2).
+"""Contact forces and torques (docs/model.md section 2).
 
 Each owned mobile particle computes every one of its contacts itself, from a
 full neighbour list sorted by partner id, and sums them in that order
-(design.md, invariant 1). The operations are arranged so that the two
+(ARCHITECTURE.md). The operations are arranged so that the two
 partners' views of a pair are exact negatives in IEEE arithmetic (raw
 difference, then minimum image; symmetric sums of partner quantities), so
 the partner of row i, on this rank or another, holds the mirror of i's
@@ -47,7 +47,7 @@ class Law(NamedTuple):
     k_n, k_t : spring constants [m g / d]; gamma_n, gamma_t : damping rates
     [sqrt(g/d)]; mu : Coulomb coefficient; gravity [g]; dt : time step [tau];
     model : MODEL_HOOKE or MODEL_HERTZ; limit_damping, rescale_history : the
-    options of physics.md 2.2 and 2.4 (off in the reference model).
+    options of docs/model.md 2.2 and 2.4 (off in the reference model).
     """
     k_n: float
     k_t: float
@@ -273,17 +273,18 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
 @njit(cache=True, inline="always")
 def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, hertz, scale, meff, fn_mag, k_t, gamma_t, mu, dt,
                 increment, rescale_history):
-    """History update, projection and Coulomb truncation of physics.md 2.4.
+    """History update, projection and Coulomb truncation of docs/model.md 2.4.
 
     Returns the new Delta s (3) and the tangential force on i (3).
     """
-    s_old = 0.0
-    if rescale_history:
-        s_old = math.sqrt(sx * sx + sy * sy + sz * sz)
     if increment:
         sx += vtx * dt
         sy += vty * dt
         sz += vtz * dt
+    s_old = 0.0
+    if rescale_history:
+        # the length the projection must not change: that of the incremented history
+        s_old = math.sqrt(sx * sx + sy * sy + sz * sz)
     sn = sx * nx + sy * ny + sz * nz
     sx -= sn * nx
     sy -= sn * ny

@@ -5,7 +5,7 @@ neighbour-list entry k of that pair: ``touch[k]``, and Delta s in the slot
 ``hist[link[k]]``, which the two entries of a pair within a chunk share
 (``neighbours.link_entries``). At a rebuild,
 a migration or a checkpoint it is in compact per-row slots (partner ids
-ascending, Delta s), which travel with the particle (design.md, invariant 2).
+ascending, Delta s), which travel with the particle (ARCHITECTURE.md).
 Both are sorted by partner id, so each direction is one merge per row.
 """
 from numba import njit, prange

@@ -1,4 +1,4 @@
-"""Velocity Verlet for translation and rotation (physics.md section 4.1)."""
+"""Velocity Verlet for translation and rotation (docs/model.md section 4.1)."""
 import math
 
 import numpy as np
