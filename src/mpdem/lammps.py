@@ -286,18 +286,14 @@ def _to_mpdem(raw, fixed_types, path, what):
     ids, types = ids.astype(np.int64), types.astype(np.int64)
     if len(np.unique(ids)) != n:
         raise InputError(f"{path}: duplicate atom ids")
-    if "diameter" in raw:
-        off = np.abs(raw["diameter"] - 1.0) > DIAMETER_RTOL
+    for name, rtol, what in (("diameter", DIAMETER_RTOL, "the unit of length"),
+                             ("mass", MASS_RTOL, f"the unit of mass; density {RHO!r} for diameter 1")):
+        off = np.abs(raw[name] - 1.0) > rtol if name in raw else np.zeros(n, bool)
         if off.any():
             k = int(np.argmax(off))
-            raise InputError(f"{path}: atom {ids[k]} has diameter {float(raw['diameter'][k])!r}; mpdem's spheres all "
-                             f"have diameter 1 (the unit of length)")
-    if "mass" in raw:
-        off = np.abs(raw["mass"] - 1.0) > MASS_RTOL
-        if off.any():
-            k = int(np.argmax(off))
-            raise InputError(f"{path}: atom {ids[k]} has mass {float(raw['mass'][k])!r} (4/3 pi r^3 rho); mpdem's "
-                             f"spheres all have mass 1 (the unit of mass; density {RHO!r} for diameter 1)")
+            raise InputError(f"{path}: atom {ids[k]} has {name} {float(raw[name][k])!r}"
+                             + (" (4/3 pi r^3 rho)" if name == "mass" else "")
+                             + f"; mpdem's spheres all have {name} 1 ({what})")
     if not all(raw["periodic"]):
         raise InputError(f"{path}: the box is not periodic in x and y; mpdem's is")
     present = sorted(set(types.tolist()))
