@@ -120,3 +120,12 @@ def test_sections_are_built_once_and_read_only():
         c.no_such_section
     assert c.replace(**{"contact.k_n": 3e5}).contact.k_n == 3e5 and c.contact.k_n == 2e5
     assert c == cfg()
+
+
+def test_every_error_said_as_one_line_is_an_mpdem_error():
+    from mpdem import build, checkpoint, simulation, sweep, threads
+    from mpdem.analysis import report
+    from mpdem.errors import MpdemError
+    for err in (config.ConfigError, config.AgreedError, build.InputError, checkpoint.StateFileError,
+                simulation.RunError, report.AnalysisError, threads.ThreadsError, sweep.SweepError):
+        assert issubclass(err, MpdemError), err

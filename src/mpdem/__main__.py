@@ -475,11 +475,8 @@ def _main(argv):
     if n_threads and comm.Get_rank() == 0:
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
-    from .build import InputError
-    from .checkpoint import StateFileError
-    from .config import AgreedError, ConfigError
-    from .simulation import RunError
-    from .analysis.report import AnalysisError
+    from .config import AgreedError
+    from .errors import MpdemError
     handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
@@ -489,7 +486,7 @@ def _main(argv):
             sys.stderr.write(f"mpdem: error: {e}\n")
             sys.stderr.flush()
         sys.exit(EXIT_ERROR)
-    except (ConfigError, InputError, StateFileError, RunError, AnalysisError, NotImplementedError) as e:
+    except (MpdemError, NotImplementedError) as e:
         _fail(comm, f"mpdem: error: {e}")
     except KeyboardInterrupt:
         _fail(comm, "mpdem: interrupted")

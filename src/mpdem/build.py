@@ -15,6 +15,7 @@ import numpy as np
 from .config import gamma_n_from_epsilon
 from .decomp import Domain
 from .engine import Engine, Physics
+from .errors import MpdemError
 from .kernels.insert import rsa_insert
 from .state import State
 
@@ -22,7 +23,7 @@ STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
 SPHERE_VOLUME = math.pi / 6.0
 
 
-class InputError(ValueError):
+class InputError(MpdemError, ValueError):
     """An initial configuration that cannot be run."""
 
 

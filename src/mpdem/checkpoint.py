@@ -38,6 +38,8 @@ import signal
 import h5py
 import numpy as np
 
+from .errors import MpdemError
+
 FORMAT = "mpdem-state"
 VERSION = 2
 KINDS = ("checkpoint", "snapshot", "final")
@@ -57,7 +59,7 @@ KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
 _writes = 0
 
 
-class StateFileError(ValueError):
+class StateFileError(MpdemError, ValueError):
     """A state file that cannot be used (named, with the reason)."""
 
 

@@ -14,11 +14,13 @@ import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
+from .errors import MpdemError
+
 REQUIRED = object()   # marks a key with no default
 DERIVED = object()    # marks a default computed from other keys
 
 
-class ConfigError(ValueError):
+class ConfigError(MpdemError, ValueError):
     """A configuration value that cannot be run."""
 
 
@@ -450,15 +452,6 @@ def resolve(raw):
     return Config(MappingProxyType(vals), tuple(warns), frozenset(derived), frozenset(raw))
 
 
-def as_dict(cfg):
-    """Nested {'section': {'key': value}} of a Config."""
-    out = {s: {} for s in SECTIONS}
-    for k, v in cfg.values.items():
-        s, n = k.split(".", 1)
-        out[s][n] = v
-    return out
-
-
 def reference_markdown():
     """The config reference table of docs/config.md, generated from SCHEMA."""
     rows = ["| key | default | meaning |", "|---|---|---|"]
@@ -471,5 +464,5 @@ def reference_markdown():
 
 
 __all__ = ["Config", "ConfigError", "load", "resolve", "parse_set", "SCHEMA",
-           "gamma_n_from_epsilon", "restitution", "collision_time", "as_dict",
+           "gamma_n_from_epsilon", "restitution", "collision_time",
            "reference_markdown"]

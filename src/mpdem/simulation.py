@@ -21,6 +21,7 @@ import numpy as np
 from . import analysis, build, checkpoint, lammps, rundir
 from .config import collision_time
 from .decomp import Domain
+from .errors import MpdemError
 from .engine import Engine, Physics
 from .pairs import contact_pairs
 
@@ -30,7 +31,7 @@ EXIT_RESTART = 75
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
 
-class RunError(RuntimeError):
+class RunError(MpdemError, RuntimeError):
     """The run cannot go on (NaN, excessive overlap, a particle under the bed)."""
 
 

@@ -8,8 +8,10 @@ from __future__ import annotations
 import os
 import sys
 
+from .errors import MpdemError
 
-class ThreadsError(ValueError):
+
+class ThreadsError(MpdemError, ValueError):
     """A thread count that cannot be used."""
 
 

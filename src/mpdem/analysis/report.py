@@ -26,6 +26,7 @@ import numpy as np
 
 from .. import checkpoint, config, rundir
 from ..checkpoint import StateFileError
+from ..errors import MpdemError
 from . import bulk, fits, forces, gofr
 
 SUMMARY = "summary.json"
@@ -38,7 +39,7 @@ NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "run.fixed_types
                "integration.skin", "integration.contact_slots")
 
 
-class AnalysisError(ValueError):
+class AnalysisError(MpdemError, ValueError):
     """A file or a setting the analysis cannot use."""
 
 

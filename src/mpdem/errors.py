@@ -1,0 +1,10 @@
+"""The base of every error mpdem reports to its user as one line (no traceback)."""
+
+
+class MpdemError(Exception):
+    """An input, file or run problem, said in one line naming what and why.
+
+    Subclasses: ``config.ConfigError`` (and ``AgreedError``, ``sweep.SweepError``),
+    ``build.InputError``, ``checkpoint.StateFileError``, ``simulation.RunError``,
+    ``analysis.report.AnalysisError``, ``threads.ThreadsError``.
+    """
