@@ -9,7 +9,7 @@ from mpi4py import MPI
 from mpdem import checkpoint, config
 from mpdem.analysis import bulk, report
 
-from test_decomposition import shared_dir
+from mpi_helpers import shared_dir
 
 # per-run bookkeeping that differs between the two files by design
 VOLATILE = ("source", "written_by_ranks", "seconds")

@@ -1,41 +1,18 @@
-"""The slab decomposition gives the one-rank result bit for bit (ARCHITECTURE.md 2.1).
+"""The slab decomposition gives the one-rank result bit for bit (ARCHITECTURE.md, "Invariants").
 
 Run under ``mpiexec -n K python -m pytest mpi_tests`` for K = 2, 3, 4: each
 test runs the same pile on COMM_WORLD and, on rank 0, on COMM_SELF (one
 rank), and compares digests of the state sorted by id.
 """
 import os
-import tempfile
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
-from mpdem import build, checkpoint, config
+from mpdem import build, config
 from mpdem.simulation import Run
 
-PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
-        "output.progress_every=100000", "stop.sample_interval=0.01"]
-
-
-def shared_dir(comm):
-    return comm.bcast(tempfile.mkdtemp() if comm.Get_rank() == 0 else None)
-
-
-def run(cfg, out, comm):
-    r = Run(cfg, out, comm, quiet=True)
-    r.prepare()
-    r.run()
-    return r, r.finish()
-
-
-def serial_digest(cfg, out, comm):
-    """The one-rank digest, computed on rank 0 and shared."""
-    d = None
-    if comm.Get_rank() == 0:
-        _, s = run(cfg, out, MPI.COMM_SELF)
-        d = s["digest"]
-    return comm.bcast(d)
+from mpi_helpers import PILE, run, serial_digest, shared_dir
 
 
 def test_pour_and_landing_match_one_rank(comm):

@@ -12,7 +12,7 @@ from mpdem import checkpoint, config, rundir
 from mpdem.checkpoint import StateFileError
 from mpdem.decomp import Domain
 
-from test_decomposition import PILE, run, shared_dir
+from mpi_helpers import PILE, run, shared_dir
 
 
 @pytest.fixture(scope="module")

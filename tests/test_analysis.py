@@ -18,9 +18,7 @@ from mpdem import checkpoint, config
 from mpdem.analysis import bulk, fits, forces, gofr, report
 from mpdem.kernels import pairdist
 
-# nearest-neighbour distance of the crystals: a hair below d, so neighbours overlap (contact is delta > 0)
-SQUEEZE = 1.0 - 1e-7
-
+from helpers import SQUEEZE, fcc, simple_cubic, write_crystal
 
 def brute_pairs(x, L_x, L_y, r_c):
     d = x[:, None, :] - x[None, :, :]
@@ -29,19 +27,6 @@ def brute_pairs(x, L_x, L_y, r_c):
     r = np.sqrt((d ** 2).sum(-1))
     i, j = np.nonzero(np.triu(r < r_c, 1))
     return set(zip(i.tolist(), j.tolist())), r
-
-
-def fcc(cells_xy, cells_z, a):
-    """FCC with cubic cell a, cells_xy^2 x cells_z cells; (n, 3) positions and the box side."""
-    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
-    g = np.array([[i, j, k] for k in range(cells_z) for j in range(cells_xy) for i in range(cells_xy)], float)
-    x = ((g[:, None, :] + basis[None, :, :]).reshape(-1, 3) + 0.25) * a
-    return x, cells_xy * a
-
-
-def simple_cubic(nxy, nz, a):
-    g = np.array([[i, j, k] for k in range(nz) for j in range(nxy) for i in range(nxy)], float)
-    return (g + 0.5) * a, nxy * a
 
 
 # ---- kernels -----------------------------------------------------------------
@@ -302,25 +287,6 @@ def test_eq9_fit_recovers_the_paper_parameters():
 
 
 # ---- mpdem analyze end to end --------------------------------------------------
-
-def write_crystal(path, x, fixed, L, sets=(), converged=False):
-    """A state file of a hand-built packing, as a run would write it."""
-    n = len(x)
-    cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}",
-                             f"pour.N={int((fixed == 0).sum())}"] + list(sets))
-    a = {"id": np.arange(n), "x": x, "fixed": fixed.astype(np.uint8), "count": np.zeros(n, np.int64),
-         "partner": np.zeros(0, np.int64), "ds": np.zeros((0, 3))}
-    for f in ("v", "omega", "f", "torque"):
-        a[f] = np.zeros((n, 3))
-    pairs, r = bulk.find_contacts(x, L, L)
-    F_n = cfg.contact.k_n * (1 - r)
-    F_t = np.zeros((len(r), 3))
-    F_t[:, 0] = 0.5 * cfg.contact.mu * F_n
-    a.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=1 - r, F_n=F_n, F_t=F_t, ds_i=np.zeros((len(r), 3)))
-    checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
-                                    "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
-                                    "converged": converged, "config": cfg.to_toml()})
-
 
 def test_analyze_a_crystal_file_writes_summary_tables_and_plots(tmp_path):
     a = math.sqrt(2.0) * SQUEEZE

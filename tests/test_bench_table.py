@@ -9,7 +9,7 @@ import pytest
 
 from mpdem import bench
 
-from conftest import settled_table
+from helpers import settled_table
 
 BOX = ["--set", "box.L_x=6.0", "--set", "box.L_y=6.0"]
 

@@ -300,7 +300,7 @@ def test_sweep_tables_pass_the_sweep_helper(tmp_path):
 
 
 def test_a_run_analysed_again_keeps_its_analysis_settings(tmp_path):
-    from test_analysis import SQUEEZE, simple_cubic, write_crystal
+    from helpers import SQUEEZE, simple_cubic, write_crystal
     run = tmp_path / "runs" / "sc"
     run.mkdir(parents=True)
     x, L = simple_cubic(6, 24, SQUEEZE)

@@ -6,7 +6,7 @@ import pytest
 
 from mpdem.config import collision_time, gamma_n_from_epsilon, restitution
 
-from conftest import make_engine
+from helpers import make_engine
 
 
 def collide(k_n, eps, bed=False, speed=1.0, dt_factor=1.0, phase=0.0):

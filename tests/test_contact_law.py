@@ -8,7 +8,7 @@ from mpdem.analysis import find_contacts
 from mpdem.build import insert_random, rng
 from mpdem.kernels.forces import contact_forces
 
-from conftest import make_engine
+from helpers import make_engine
 
 
 def total_energy(eng):

@@ -2,7 +2,7 @@
 
 With mu = 0 Delta s is zero (docs/model.md 2.6; running 2.4 with mu = 0 leaves
 -m_eff gamma_t v_t / k_t, zero when gamma_t = 0), and the mirror slot of a
-pair holds the negation of its partner's (ARCHITECTURE.md 2.2). -(+0.0) is -0.0,
+pair holds the negation of its partner's (ARCHITECTURE.md, "Invariants"). -(+0.0) is -0.0,
 and which partner computes the pair depends on the row order, hence on the
 ranks: a non-canonical zero changes the digest with the rank count
 (mpi_tests/test_decomposition.py, test_frictionless_pile_matches_one_rank).

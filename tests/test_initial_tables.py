@@ -8,7 +8,7 @@ import pytest
 from mpdem import build, config
 from mpdem.simulation import Run
 
-from conftest import settled_table
+from helpers import settled_table
 
 
 def test_check_initial_accepts_a_settled_overlap_and_names_the_largest():

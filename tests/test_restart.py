@@ -1,4 +1,4 @@
-"""Exact restart (ARCHITECTURE.md 2.1): a run split into segments, on any rank counts,
+"""Exact restart (ARCHITECTURE.md, "Invariants"): a run split into segments, on any rank counts,
 gives the digest of the straight run; signals, wall time and a crash in the
 middle of a checkpoint write lose nothing.
 

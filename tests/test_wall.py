@@ -11,7 +11,7 @@ import pytest
 from mpdem import config, lammps
 from mpdem.config import gamma_n_from_epsilon, restitution
 
-from conftest import make_engine
+from helpers import make_engine
 
 K_N = 2e5
 

@@ -184,7 +184,7 @@ def _physics_key(physics):
 def group(runs):
     """Sets of runs with equal parameters; a repeated seed in a set is a duplicate.
 
-    A run is a pure function of its parameters and seed (ARCHITECTURE.md 2), so two
+    A run is a pure function of its parameters and seed (ARCHITECTURE.md, "Invariants"), so two
     runs of one set with one seed are one sample: the later is skipped.
 
     Returns

@@ -34,7 +34,7 @@ SUMMARY = "summary.json"
 PARAMS = ("contact.mu", "contact.epsilon", "contact.k_n", "contact.k_t", "contact.gamma_n",
           "contact.gamma_t", "contact.model", "pour.phi_i", "pour.N", "pour.K0", "run.seed",
           "box.L_x", "box.L_y", "integration.dt")
-# config keys that cannot change a run's result (ARCHITECTURE.md 2.1) or are not the run's physics
+# config keys that cannot change a run's result (ARCHITECTURE.md, "Invariants") or are not the run's physics
 NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "run.fixed_types", "output.", "decomp.", "checks.", "analysis.",
                "integration.skin", "integration.contact_slots")
 

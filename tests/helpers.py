@@ -1,0 +1,73 @@
+"""Helpers shared by the serial tests (imported as ``helpers``; fixtures stay in conftest)."""
+import numpy as np
+
+from mpdem import build, checkpoint, config
+from mpdem.analysis import bulk
+from mpdem.config import gamma_n_from_epsilon
+from mpdem.decomp import Domain
+from mpdem.engine import Engine, Physics
+from mpdem.state import State
+
+
+def make_engine(x, v=None, omega=None, fixed=None, L=10.0, **phys):
+    """An Engine over the given particles (ids 0..n-1) with set-up done."""
+    k_n = phys.pop("k_n", 2e5)
+    eps = phys.pop("epsilon", 0.88)
+    defaults = dict(k_n=k_n, k_t=2 * k_n / 7, gamma_n=gamma_n_from_epsilon(eps, k_n),
+                    gamma_t=0.0, mu=0.0, dt=1e-4 * np.sqrt(2e5 / k_n), gravity=0.0)
+    defaults.update(phys)
+    x = np.asarray(x, float)
+    st = State(np.arange(len(x)), x, v, omega, fixed, L, L)
+    eng = Engine(st, Physics(**defaults), Domain(None))
+    eng.setup()
+    return eng
+
+
+def settled_table(path, depth=1e-3):
+    """A 6 d x 6 d bed (36 spheres on a unit grid at z = 0) with a column of
+    6 mobile spheres on each, each sphere overlapping the one below by ``depth`` [d].
+
+    Returns the numbers of mobile (216) and bed (36) spheres."""
+    g = np.arange(6) + 0.5
+    bed = np.array([[i, j, 0.0] for j in g for i in g])
+    mob = np.array([[i, j, (1 - depth) * k] for k in range(1, 7) for j in g for i in g])
+    x = np.concatenate([mob, bed])
+    fixed = np.r_[np.zeros(len(mob)), np.ones(len(bed))].astype(np.uint8)
+    build.write_table(path, np.arange(1, len(x) + 1), x, fixed=fixed)
+    return len(mob), len(bed)
+
+
+# nearest-neighbour distance of the crystals: a hair below d, so neighbours overlap (contact is delta > 0)
+SQUEEZE = 1.0 - 1e-7
+
+
+def fcc(cells_xy, cells_z, a):
+    """FCC with cubic cell a, cells_xy^2 x cells_z cells; (n, 3) positions and the box side."""
+    basis = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    g = np.array([[i, j, k] for k in range(cells_z) for j in range(cells_xy) for i in range(cells_xy)], float)
+    x = ((g[:, None, :] + basis[None, :, :]).reshape(-1, 3) + 0.25) * a
+    return x, cells_xy * a
+
+
+def simple_cubic(nxy, nz, a):
+    g = np.array([[i, j, k] for k in range(nz) for j in range(nxy) for i in range(nxy)], float)
+    return (g + 0.5) * a, nxy * a
+
+
+def write_crystal(path, x, fixed, L, sets=(), converged=False):
+    """A state file of a hand-built packing, as a run would write it."""
+    n = len(x)
+    cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}",
+                             f"pour.N={int((fixed == 0).sum())}"] + list(sets))
+    a = {"id": np.arange(n), "x": x, "fixed": fixed.astype(np.uint8), "count": np.zeros(n, np.int64),
+         "partner": np.zeros(0, np.int64), "ds": np.zeros((0, 3))}
+    for f in ("v", "omega", "f", "torque"):
+        a[f] = np.zeros((n, 3))
+    pairs, r = bulk.find_contacts(x, L, L)
+    F_n = cfg.contact.k_n * (1 - r)
+    F_t = np.zeros((len(r), 3))
+    F_t[:, 0] = 0.5 * cfg.contact.mu * F_n
+    a.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=1 - r, F_n=F_n, F_t=F_t, ds_i=np.zeros((len(r), 3)))
+    checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
+                                    "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
+                                    "converged": converged, "config": cfg.to_toml()})
