@@ -1,4 +1,8 @@
 """Helpers shared by the serial tests (imported as ``helpers``; fixtures stay in conftest)."""
+import os
+import subprocess
+import sys
+
 import numpy as np
 
 from mpdem import build, checkpoint, config
@@ -71,3 +75,14 @@ def write_crystal(path, x, fixed, L, sets=(), converged=False):
     checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
                                     "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
                                     "converged": converged, "config": cfg.to_toml()})
+
+
+def mpdem(*args, cwd):
+    """``python -m mpdem ARGS`` in a real process, as users run it: (exit code, stdout + stderr).
+
+    The child gets this process's environment as Python sees it (``os.environ``), not the C
+    environment an in-process MPI singleton may have changed.
+    """
+    p = subprocess.run([sys.executable, "-m", "mpdem", *args], cwd=cwd, capture_output=True, text=True,
+                       env=dict(os.environ), timeout=600)
+    return p.returncode, p.stdout + p.stderr

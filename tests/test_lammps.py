@@ -2,8 +2,6 @@
 import json
 import os
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -11,16 +9,11 @@ import pytest
 from mpdem import build, checkpoint, config, export, lammps
 from mpdem.build import InputError
 
+from helpers import mpdem
+
 DATA = os.path.join(os.path.dirname(__file__), "data")
 LMP_DATA = os.path.join(DATA, "lammps_sphere.data")
 LMP_DUMP = os.path.join(DATA, "lammps_sphere.dump.gz")
-
-
-def mpdem(*args, cwd):
-    """``python -m mpdem ARGS`` (a real process, as users run it); (exit code, stdout + stderr)."""
-    p = subprocess.run([sys.executable, "-m", "mpdem", *args], cwd=cwd, capture_output=True, text=True,
-                       env=dict(os.environ), timeout=600)
-    return p.returncode, p.stdout + p.stderr
 
 
 def test_files_are_recognised_by_their_content(tmp_path):

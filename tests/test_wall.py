@@ -2,16 +2,16 @@
 import json
 import math
 import os
-import subprocess
-import sys
+import shutil
 
+import h5py
 import numpy as np
 import pytest
 
-from mpdem import config, lammps
+from mpdem import lammps
 from mpdem.config import gamma_n_from_epsilon, restitution
 
-from helpers import make_engine
+from helpers import make_engine, mpdem
 
 K_N = 2e5
 
@@ -53,12 +53,6 @@ def test_a_sliding_sphere_ends_rolling_at_five_sevenths_of_its_speed():
     assert abs(v[1]) < 1e-12 and abs(w[0]) < 1e-12
 
 
-def mpdem(*args, cwd):
-    p = subprocess.run([sys.executable, "-m", "mpdem", *args], cwd=cwd, capture_output=True, text=True,
-                       env=dict(os.environ), timeout=600)
-    return p.returncode, p.stdout + p.stderr
-
-
 def under_the_bed(tmp_path):
     """The LAMMPS test state with three mobile spheres moved under its bed, onto the wall plane,
     where the spheres in their way (bed and pile) are taken out: a sparse bed with holes."""
@@ -87,14 +81,12 @@ def test_a_state_with_spheres_under_the_bed_runs_with_the_wall_and_is_refused_wi
                      "--set", "output.checkpoint_every=1000", *base, cwd=tmp_path)
     assert rc == 3, said
     s = json.load(open(tmp_path / "wall" / "summary.json"))
-    import h5py
     with h5py.File(tmp_path / "wall" / "final.h5") as f:
         z = dict(zip(f["particles/id"][:], f["particles/x"][:, 2]))
         assert "wall" in f and f["wall/wall_ds"].shape == f["particles/x"].shape
     # the three rest on the wall (in 0.3 tau they have sagged into it by about m g / k_n)
     assert all(0.49 < z[i] < 0.5 for i in low)
     # restart from the middle checkpoint gives the straight run's digest (the wall history is saved)
-    import shutil
     shutil.copytree(tmp_path / "wall", tmp_path / "again")
     rc, said = mpdem("restart", os.path.join("again", "checkpoints", "ckpt-00001.h5"), cwd=tmp_path)
     assert rc == 3, said

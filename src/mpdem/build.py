@@ -187,12 +187,7 @@ def read_table(path):
     col = {n: data[:, i] for i, n in enumerate(names)}
     if not np.all(np.isfinite(data)):
         raise InputError(f"{path}: non-finite values in the particle table")
-    ids = col["id"]
-    if np.any(ids != np.round(ids)) or np.any(ids < 0):
-        raise InputError(f"{path}: ids must be non-negative integers")
-    ids = ids.astype(np.int64)
-    if len(np.unique(ids)) != len(ids):
-        raise InputError(f"{path}: duplicate particle ids")
+    ids = particle_ids(col["id"], path)
     n = len(ids)
     v = np.zeros((n, 3))
     omega = np.zeros((n, 3))
@@ -206,6 +201,16 @@ def read_table(path):
         raise InputError(f"{path}: column fixed must be 0 or 1")
     return {"ids": ids, "x": np.stack([col["x"], col["y"], col["z"]], axis=1), "v": v, "omega": omega,
             "fixed": fixed.astype(np.uint8)}
+
+
+def particle_ids(values, path):
+    """Particle ids read as floats, checked: non-negative integers, each once. (N,) int64."""
+    if np.any(values != np.round(values)) or np.any(values < 0):
+        raise InputError(f"{path}: ids must be non-negative integers")
+    ids = values.astype(np.int64)
+    if len(np.unique(ids)) != len(ids):
+        raise InputError(f"{path}: duplicate particle ids")
+    return ids
 
 
 def write_table(path, ids, x, v=None, fixed=None, omega=None):

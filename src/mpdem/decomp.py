@@ -28,10 +28,11 @@ import math
 import numpy as np
 
 from .parallel import Channel
+from .checkpoint import PARTICLE_FIELDS, WALL_FIELDS
 from .state import MOVE_FIELDS, select_contacts
 
 # the per-particle arrays of a state-array dict (``checkpoint.read``); wall_ds only with the wall
-ROW_KEYS = ("id", "x", "v", "omega", "f", "torque", "fixed", "wall_ds")
+ROW_KEYS = PARTICLE_FIELDS + WALL_FIELDS
 
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11

@@ -195,9 +195,8 @@ class Engine:
         Only when the history is in the compact slots (``sync_slots``).
         """
         s = self.state
-        first = np.zeros((2, self.nchunk + 1), np.int64)
         n_pairs, n_other = link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk,
-                                        self.link, first)
+                                        self.link)
         self._n_pairs = int(n_pairs)
         self.hist = np.empty((int(n_pairs + n_other), 3))
 

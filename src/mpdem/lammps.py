@@ -20,7 +20,7 @@ import re
 
 import numpy as np
 
-from .build import InputError, _open_text
+from .build import InputError, _open_text, particle_ids
 
 # LAMMPS's density of a d = 1 sphere of mass exactly 1.0 (4.0 * pi / 3.0 * 0.5^3 * RHO == 1.0)
 RHO = 1.9098593171027443
@@ -280,12 +280,10 @@ def _to_mpdem(raw, fixed_types, path, what):
     n = len(raw["ids"])
     if not np.all(np.isfinite(raw["x"])):
         raise InputError(f"{path}: non-finite positions")
-    ids, types = raw["ids"], raw["types"]
-    if np.any(ids != np.round(ids)) or np.any(types != np.round(types)):
-        raise InputError(f"{path}: atom ids and types must be integers")
-    ids, types = ids.astype(np.int64), types.astype(np.int64)
-    if len(np.unique(ids)) != n:
-        raise InputError(f"{path}: duplicate atom ids")
+    ids, types = particle_ids(raw["ids"], path), raw["types"]
+    if np.any(types != np.round(types)):
+        raise InputError(f"{path}: atom types must be integers")
+    types = types.astype(np.int64)
     for name, rtol, what in (("diameter", DIAMETER_RTOL, "the unit of length"),
                              ("mass", MASS_RTOL, f"the unit of mass; density {RHO!r} for diameter 1")):
         off = np.abs(raw[name] - 1.0) > rtol if name in raw else np.zeros(n, bool)

@@ -134,7 +134,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
     linked lower row of the chunk (done earlier by this thread) takes the
     force and torque that row left; any other is computed in full.
     """
-    k_n, k_t, gamma_n, gamma_t, mu = law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu
+    k_t, gamma_t, mu = law.k_t, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
     friction = mu > 0.0
     dt = law.dt
@@ -213,14 +213,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
             vry = viy - v[j, 1]
             vrz = viz - v[j, 2]
             vn = vrx * nx + vry * ny + vrz * nz
-            # Hooke's scale is 1: 1.0 * y == y and -1.0 * y == -y, so it is left out
-            scale = 1.0
-            fn = k_n * delta - meff * gamma_n * vn
-            if hertz:
-                scale = math.sqrt(delta)
-                fn = scale * fn
-            if law.limit_damping and fn < 0.0:
-                fn = 0.0
+            fn, scale = _normal(delta, vn, meff, law)
             fcx = fn * nx
             fcy = fn * ny
             fcz = fn * nz
@@ -268,6 +261,23 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
         torque[i, 1] = ty
         torque[i, 2] = tz
     return max_overlap, n_contacts
+
+
+@njit(cache=True, inline="always")
+def _normal(delta, vn, meff, law):
+    """Normal force of docs/model.md 2.2 (Hooke) or 2.7 (Hertz), and the Hertz scale sqrt(delta).
+
+    fn = k_n delta - m_eff gamma_n v_n, times sqrt(delta) for Hertz (1 for Hooke:
+    1.0 * y == y, so the multiplication is left out); clipped at 0 with ``limit_damping``.
+    """
+    scale = 1.0
+    fn = law.k_n * delta - meff * law.gamma_n * vn
+    if law.model == MODEL_HERTZ:
+        scale = math.sqrt(delta)
+        fn = scale * fn
+    if law.limit_damping and fn < 0.0:
+        fn = 0.0
+    return fn, scale
 
 
 @njit(cache=True, inline="always")
@@ -389,15 +399,7 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
                 wall_ds[i, 2] = 0.0
                 continue
             deepest = max(deepest, delta)
-            hertz = law.model == MODEL_HERTZ
-            vn = v[i, 2]
-            scale = 1.0
-            fn = law.k_n * delta - 1.0 * law.gamma_n * vn
-            if hertz:
-                scale = math.sqrt(delta)
-                fn = scale * fn
-            if law.limit_damping and fn < 0.0:
-                fn = 0.0
+            fn, scale = _normal(delta, v[i, 2], 1.0, law)
             fz = fn
             if law.mu > 0.0:
                 # the contact point moves with v + R omega x (-n); n = (0, 0, 1)
@@ -406,7 +408,7 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
                 vtz = 0.0
                 sx, sy, sz, ftx, fty, ftz = _tangential(
                     wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2], vtx, vty, vtz, 0.0, 0.0, 1.0,
-                    hertz, scale, 1.0, abs(fn), law.k_t, law.gamma_t, law.mu, law.dt, increment,
+                    law.model == MODEL_HERTZ, scale, 1.0, abs(fn), law.k_t, law.gamma_t, law.mu, law.dt, increment,
                     law.rescale_history)
                 wall_ds[i, 0] = sx + 0.0
                 wall_ds[i, 1] = sy + 0.0

@@ -168,7 +168,7 @@ def chunk_of(i, n, nchunk):
 
 
 @njit(cache=True, inline="always")
-def mirror_entry(nbr_start, nbr_list, ids, j, idi):
+def _mirror_entry(nbr_start, nbr_list, ids, j, idi):
     """The entry of row j's list (sorted by id) whose partner has id ``idi``."""
     lo = nbr_start[j]
     hi = nbr_start[j + 1]
@@ -188,7 +188,7 @@ def _linked(j, n_own, fixed, nchunk, c):
 
 
 @njit(cache=True, parallel=True)
-def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, first):
+def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link):
     """Give each entry its history slot: one per pair within a chunk, one per other entry.
 
     Rows of a chunk are done in ascending order by one thread, so of a pair of
@@ -205,14 +205,14 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, first):
     Parameters
     ----------
     link : (len(nbr_list),) int32, out
-    first : (2, nchunk + 1) int64, out
-        Chunk c's pair slots start at ``first[0, c]``, its other slots at ``P + first[1, c]``.
 
     Returns
     -------
     P, U : int
         Pairs, and other entries.
     """
+    # chunk c's pair slots start at first[0, c], its other slots at P + first[1, c]
+    first = np.zeros((2, nchunk + 1), np.int64)
     for c in prange(nchunk):
         mp = 0
         mo = 0
@@ -225,8 +225,6 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, first):
                     mp += 1
         first[0, c + 1] = mp
         first[1, c + 1] = mo
-    first[0, 0] = 0
-    first[1, 0] = 0
     for c in range(nchunk):
         first[0, c + 1] += first[0, c]
         first[1, c + 1] += first[1, c]
@@ -244,6 +242,6 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, first):
                 elif j > i:
                     # the higher row's entry of this pair is set here, before that row is reached
                     link[k] = p
-                    link[mirror_entry(nbr_start, nbr_list, ids, j, idi)] = p
+                    link[_mirror_entry(nbr_start, nbr_list, ids, j, idi)] = p
                     p += 1
     return n_pairs, first[1, nchunk]
