@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
 
-.PHONY: setup run test test-serial test-mpi bench reproduce collect-dev clean
+.PHONY: setup run test test-fast test-serial test-mpi test-validation bench reproduce collect-dev clean
 
 setup:
 	@bash tools/setup.sh
@@ -15,8 +15,12 @@ run: setup
 	$(MPIEXEC) -n $(RANKS) $(PY) -m mpdem run --out runs/example --force
 	$(PY) -m mpdem analyze runs/example
 
-test: setup test-serial test-mpi
+# Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
+test: setup test-serial test-mpi test-validation
 
+test-fast: setup test-serial test-mpi
+
+# the default selection: pyproject.toml's addopts deselect -m validation
 test-serial:
 	$(PY) -m pytest -q -rs tests
 
@@ -27,6 +31,14 @@ test-mpi:
 	    timeout 600 $(MPIEXEC) -n $$n $(PY) -m pytest -q --color=no -p no:cacheprovider mpi_tests || exit 1; \
 	  done; \
 	else echo "== no mpi_tests yet"; fi
+
+# the long runs alone (physics to convergence, real Slurm jobs); MPI ones, if any is marked, on 2 ranks
+test-validation:
+	$(PY) -m pytest -q -rs -m validation tests
+	@if grep -qs "mark.validation" mpi_tests/test_*.py; then \
+	  echo "== mpi_tests -m validation under mpiexec -n 2"; \
+	  timeout 1800 $(MPIEXEC) -n 2 $(PY) -m pytest -q --color=no -p no:cacheprovider -m validation mpi_tests || exit 1; \
+	fi
 
 # The LAMMPS side-by-side case from a particle table: make bench TABLE=path/to/landed20k.txt.gz
 bench: setup

@@ -1,5 +1,5 @@
 """Helpers shared by the MPI tests (imported as ``mpi_helpers``)."""
-import os
+import hashlib
 import tempfile
 
 from mpi4py import MPI
@@ -8,6 +8,9 @@ from mpdem.simulation import Run
 
 PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
         "output.progress_every=100000", "stop.sample_interval=0.01"]
+
+# one-rank digests already computed in this pytest session, by reference_key (rank 0 only)
+REFERENCES = {}
 
 
 def shared_dir(comm):
@@ -21,10 +24,40 @@ def run(cfg, out, comm):
     return r, r.finish()
 
 
+def reference_key(cfg):
+    """All that a one-rank run's result depends on: every config value, with each input file
+    (``run.initial_file``, ``bed.file``) named by its bytes rather than by its path, which
+    differs from test to test (each writes its files in its own directory)."""
+    values = dict(cfg.values)
+    for k, v in values.items():
+        if k.endswith("file") and v:
+            with open(v, "rb") as fh:
+                values[k] = "sha256:" + hashlib.sha256(fh.read()).hexdigest()
+    return repr(sorted(values.items()))
+
+
 def serial_digest(cfg, out, comm):
-    """The one-rank digest, computed on rank 0 and shared."""
-    d = None
+    """The one-rank digest of ``cfg``, computed on rank 0 (in ``out``) once per pytest session and
+    shared with every rank; a test that asks again for the same run gets the stored digest.
+
+    Collective-safe: only rank 0 looks in ``REFERENCES`` and runs, every other rank just receives
+    (one bcast on every path), so all ranks take the same collective calls whether the reference
+    is new or not. A failure on rank 0 fails the test on every rank instead of leaving them waiting.
+    The reference runs with the threads in force on rank 0 (one: tests that configure more restore
+    it before asking)."""
+    digest = error = None
     if comm.Get_rank() == 0:
-        _, s = run(cfg, out, MPI.COMM_SELF)
-        d = s["digest"]
-    return comm.bcast(d)
+        try:
+            key = reference_key(cfg)
+            if key not in REFERENCES:
+                _, s = run(cfg, out, MPI.COMM_SELF)
+                REFERENCES[key] = s["digest"]
+            digest = REFERENCES[key]
+        except BaseException as e:
+            error = e
+    digest, failed = comm.bcast((digest, None if error is None else repr(error)))
+    if error is not None:
+        raise error
+    if failed is not None:
+        raise RuntimeError(f"the one-rank reference failed on rank 0: {failed}")
+    return digest

@@ -5,6 +5,7 @@ test runs the same pile on COMM_WORLD and, on rank 0, on COMM_SELF (one
 rank), and compares digests of the state sorted by id.
 """
 import os
+import tempfile
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ import pytest
 from mpdem import build, config
 from mpdem.simulation import Run
 
-from mpi_helpers import PILE, run, serial_digest, shared_dir
+from mpi_helpers import PILE, reference_key, run, serial_digest, shared_dir
 
 
 def test_pour_and_landing_match_one_rank(comm):
@@ -219,3 +220,23 @@ def test_a_pile_on_the_wall_under_a_sparse_bed_matches_one_rank(comm, mu):
     assert on_wall >= 8
     if comm.Get_rank() == 0:
         assert s["digest"] == ref
+
+
+def test_a_reference_is_known_by_its_inputs_not_their_paths():
+    """serial_digest computes each one-rank reference once per session, keyed by reference_key:
+    the same bytes under another path are the same run; one byte or one config value more is another."""
+    d = tempfile.mkdtemp()          # this rank's own: no collective call
+    paths = [os.path.join(d, name) for name in ("a.txt", "b.txt", "c.txt")]
+    for p in paths[:2]:
+        write_stack(p)
+    write_stack(paths[2], gap=0.002)
+
+    def key(p, *sets):
+        return reference_key(config.load(None, ["run.max_steps=10", "box.L_x=6.0", "box.L_y=6.0",
+                                                 f'run.initial_file="{p}"', *sets]))
+
+    assert key(paths[0]) == key(paths[1])
+    assert key(paths[0]) != key(paths[2])
+    assert key(paths[0]) != key(paths[1], "contact.mu=0.25")
+    pile = [*PILE, "run.max_steps=10"]
+    assert reference_key(config.load(None, pile)) != reference_key(config.load(None, pile + ["run.max_steps=7"]))

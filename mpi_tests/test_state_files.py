@@ -26,7 +26,7 @@ def landed(tmp_path_factory):
 
 def gathered_digest(dom, st):
     arrays = dom.gather_arrays(checkpoint.gather_state(st))
-    return dom.comm.bcast(checkpoint.digest(arrays) if dom.rank == 0 else None)
+    return dom.net.bcast(checkpoint.digest(arrays) if dom.rank == 0 else None)
 
 
 def test_written_by_all_read_by_all(comm, landed):

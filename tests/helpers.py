@@ -2,6 +2,7 @@
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -11,6 +12,11 @@ from mpdem.config import gamma_n_from_epsilon
 from mpdem.decomp import Domain
 from mpdem.engine import Engine, Physics
 from mpdem.state import State
+
+ROOT = Path(__file__).resolve().parents[1]
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+# the variables of the job helper and the schedulers, which a child must not inherit by accident
+CLUSTER_VARS = ("MPDEM_", "SLURM_", "PBS_")
 
 
 def make_engine(x, v=None, omega=None, fixed=None, L=10.0, **phys):
@@ -23,7 +29,7 @@ def make_engine(x, v=None, omega=None, fixed=None, L=10.0, **phys):
     x = np.asarray(x, float)
     st = State(np.arange(len(x)), x, v, omega, fixed, L, L)
     eng = Engine(st, Physics(**defaults), Domain(None))
-    eng.setup()
+    eng.start()
     return eng
 
 
@@ -77,12 +83,43 @@ def write_crystal(path, x, fixed, L, sets=(), converged=False):
                                     "converged": converged, "config": cfg.to_toml()})
 
 
-def mpdem(*args, cwd):
-    """``python -m mpdem ARGS`` in a real process, as users run it: (exit code, stdout + stderr).
+class Ran(subprocess.CompletedProcess):
+    """A finished ``python -m mpdem``: ``returncode``, ``stdout``, ``stderr``, and ``out`` (both)."""
 
-    The child gets this process's environment as Python sees it (``os.environ``), not the C
-    environment an in-process MPI singleton may have changed.
+    @property
+    def out(self):
+        return self.stdout + self.stderr
+
+
+def child_env(add=None, clean=False):
+    """The environment of a child process.
+
+    This process's environment as Python sees it (``os.environ``), not the C environment an
+    in-process MPI singleton may have changed (its PMIx variables confuse a child mpiexec, which
+    then exits 1 without a word); this tree's ``src`` first on PYTHONPATH; with ``clean``, without
+    the ``MPDEM_*``, ``SLURM_*`` and ``PBS_*`` variables of a shell or job the tests run in (the job
+    helper and the sweep read them); then ``add``.
     """
-    p = subprocess.run([sys.executable, "-m", "mpdem", *args], cwd=cwd, capture_output=True, text=True,
-                       env=dict(os.environ), timeout=600)
-    return p.returncode, p.stdout + p.stderr
+    env = {k: v for k, v in os.environ.items() if not (clean and k.startswith(CLUSTER_VARS))}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src")] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    env.update(add or {})
+    return env
+
+
+def mpdem_argv(*args, n=1):
+    """``python -m mpdem ARGS``, under ``mpiexec -n n`` (the venv's) when n > 1."""
+    return ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [sys.executable, "-m", "mpdem", *map(str, args)]
+
+
+def mpdem(*args, n=1, cwd=None, env=None, clean=False, timeout=600, check=None):
+    """``python -m mpdem ARGS`` in a real process (on ``n`` ranks), as users run it: a ``Ran``.
+
+    ``env``: variables added to ``child_env(clean=clean)``. ``check``: the exit code expected
+    (asserted, with the ends of the output). Every test that runs the command line goes through here.
+    """
+    p = subprocess.run(mpdem_argv(*args, n=n), cwd=cwd, capture_output=True, text=True,
+                       env=child_env(env, clean), timeout=timeout)
+    p = Ran(p.args, p.returncode, p.stdout, p.stderr)
+    if check is not None:
+        assert p.returncode == check, p.stdout[-3000:] + p.stderr[-3000:]
+    return p

@@ -6,19 +6,16 @@ synthetic data with known parameters, and the kernels against brute force.
 """
 import json
 import math
-import os
-import subprocess
-import sys
 
 import numba
 import numpy as np
 import pytest
 
 from mpdem import checkpoint, config
-from mpdem.analysis import bulk, fits, forces, gofr, report
+from mpdem.analysis import bulk, fits, gofr, mobilisation, report
 from mpdem.kernels import pairdist
 
-from helpers import SQUEEZE, fcc, simple_cubic, write_crystal
+from helpers import SQUEEZE, fcc, mpdem, simple_cubic, write_crystal
 
 def brute_pairs(x, L_x, L_y, r_c):
     d = x[:, None, :] - x[None, :, :]
@@ -204,7 +201,7 @@ def test_rattlers_found_from_positions():
     assert pk.kept.tolist() == [True, True, True, True, False]
 
 
-# ---- forces --------------------------------------------------------------------
+# ---- mobilisation --------------------------------------------------------------
 
 def test_force_ratios_histogram_and_mobilised_fraction():
     mu = 0.5
@@ -212,11 +209,11 @@ def test_force_ratios_histogram_and_mobilised_fraction():
     zeta = np.array([0.1, 0.55, 1.0, 0.995, 0.3])
     F_t = np.zeros((5, 3))
     F_t[:, 1] = zeta * mu * np.abs(F_n)
-    fr = forces.force_ratios(F_n, F_t, mu, bins=10, mobilised=0.99)
+    fr = mobilisation.force_ratios(F_n, F_t, mu, bins=10, mobilised=0.99)
     assert fr["n_contacts"] == 4 and fr["n_tensile"] == 1 and fr["n_above_one"] == 0
     assert fr["count"].tolist() == [0, 1, 0, 0, 0, 1, 0, 0, 0, 2]
     assert fr["P_zeta"].max() == 1.0 and fr["mobilised_fraction"] == pytest.approx(0.5)
-    big = forces.force_ratios(F_n, F_t * 10, 5.0, bins=10)      # mu >= 1: F_t / F_n as well
+    big = mobilisation.force_ratios(F_n, F_t * 10, 5.0, bins=10)      # mu >= 1: F_t / F_n as well
     # F_t/F_n = 10 zeta mu = 0.5, 2.75, 5, 4.975: one on [0, 1), three beyond it (counted)
     assert big["count_ratio"].tolist() == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0] and big["n_ratio_above_one"] == 3
 
@@ -224,7 +221,7 @@ def test_force_ratios_histogram_and_mobilised_fraction():
 def test_bulk_contacts_select_by_midpoint():
     ids = np.array([3, 7, 9])
     z = np.array([1.0, 2.0, 4.0])
-    sel = forces.bulk_contacts({"id_i": np.array([3, 7, 3]), "id_j": np.array([7, 9, 9])}, ids, z, 1.4, 2.6)
+    sel = mobilisation.bulk_contacts({"id_i": np.array([3, 7, 3]), "id_j": np.array([7, 9, 9])}, ids, z, 1.4, 2.6)
     assert sel.tolist() == [True, False, True]
 
 
@@ -378,16 +375,12 @@ def test_analyze_cli_on_a_run_directory(tmp_path):
     fixed = (x[:, 2] < a).astype(np.uint8)
     write_crystal(run / "final.h5", x, fixed, L)
     write_crystal(run / "snapshots" / "snap-00002.h5", x, fixed, L)
-    env = dict(os.environ)
-    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(run), "--no-plots"],
-                       capture_output=True, text=True, env=env)
+    p = mpdem("analyze", run, "--no-plots")
     assert p.returncode == 0, p.stderr
     assert "z = 12.000" in p.stdout
     assert json.loads((run / "analysis" / "summary.json").read_text())["z"] == 12.0
-    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(run / "snapshots" / "snap-00002.h5"),
-                        "--no-plots", "--quiet"], capture_output=True, text=True, env=env)
+    p = mpdem("analyze", run / "snapshots" / "snap-00002.h5", "--no-plots", "--quiet")
     assert p.returncode == 0 and p.stdout == ""
     assert (run / "analysis" / "snap-00002" / "summary.json").exists()
-    p = subprocess.run([sys.executable, "-m", "mpdem", "analyze", str(tmp_path)],
-                       capture_output=True, text=True, env=env)
+    p = mpdem("analyze", tmp_path)
     assert p.returncode == 1 and "no final.h5" in p.stderr

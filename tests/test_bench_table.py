@@ -1,22 +1,14 @@
 """bench --table: LAMMPS's settings, the phase report, the CLI's output, tiling and errors."""
 import argparse
-import os
 import re
-import subprocess
-import sys
 
 import pytest
 
 from mpdem import bench
 
-from helpers import settled_table
+from helpers import mpdem, settled_table
 
 BOX = ["--set", "box.L_x=6.0", "--set", "box.L_y=6.0"]
-
-
-def cli(*args):
-    return subprocess.run([sys.executable, "-m", "mpdem", *args], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ))
 
 
 def test_table_config_has_lammps_settings():
@@ -39,7 +31,7 @@ def test_cli_bench_table_output_and_tiling(tmp_path):
     n_mob, n_bed = settled_table(tmp_path / "t.txt")
     atoms = []
     for extra in ([], ["--tile", "2x1"]):
-        p = cli("bench", "--table", str(tmp_path / "t.txt"), "--steps", "20", *BOX, *extra)
+        p = mpdem("bench", "--table", str(tmp_path / "t.txt"), "--steps", "20", *BOX, *extra)
         assert p.returncode == 0, p.stderr
         out = p.stdout.strip().splitlines()
         assert re.fullmatch(r"ns_per_atom_step=[0-9.eE+-]+", out[-1]) and float(out[-1].split("=")[1]) > 0
@@ -54,16 +46,16 @@ def test_cli_bench_table_output_and_tiling(tmp_path):
 @pytest.mark.parametrize("cmd", [["bench", "--table", "t.txt"], ["run"], ["restart", "somewhere"]])
 @pytest.mark.parametrize("bad", ["0", "two"])
 def test_cli_bad_threads_is_a_usage_error(cmd, bad):
-    p = cli(*cmd, "--threads", bad)
+    p = mpdem(*cmd, "--threads", bad)
     assert p.returncode == 2 and "--threads" in p.stderr and "integer >= 1" in p.stderr
 
 
 def test_cli_bench_needs_a_mode():
-    p = cli("bench")
+    p = mpdem("bench")
     assert p.returncode == 2 and "--table FILE" in p.stderr
-    p = cli("bench", "--table", "t.txt", "--analysis")
+    p = mpdem("bench", "--table", "t.txt", "--analysis")
     assert p.returncode == 2 and "one of --table, --analysis" in p.stderr
-    p = cli("bench", "--table", "t.txt", "--tile", "2")
+    p = mpdem("bench", "--table", "t.txt", "--tile", "2")
     assert p.returncode == 2 and "--tile '2'" in p.stderr
 
 

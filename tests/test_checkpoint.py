@@ -174,7 +174,7 @@ def test_contact_list_reproduces_the_step_forces(engine_factory, model, gamma_t)
     omega = np.where(fixed[:, None] == 0, spin, 0.0)
     eng = engine_factory(x, omega=omega, fixed=fixed, L=6.0, mu=0.5, gravity=1.0, model=model,
                          gamma_t=gamma_t)
-    eng.run(20)
+    eng.advance(20)
     st, phys = eng.state, eng.phys
     pairs = contact_pairs(st, phys)
     mobile = st.fixed[:st.n_own] == 0

@@ -11,7 +11,6 @@ import math
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,8 @@ from mpdem import config, rundir
 from mpdem.analysis import collect as co
 from mpdem.analysis import fits, report
 from mpdem.analysis.report import AnalysisError
+
+from helpers import mpdem
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -37,7 +38,7 @@ def params(**kw):
             "seed": "run.seed", "N": "pour.N"}
     raw = {"run.max_steps": 1, **{full[k]: v for k, v in kw.items()}}
     vals = config.resolve(raw).values
-    return {k: vals[k] for k in report.PARAMS}
+    return {k: vals[k] for k in config.PARAM_KEYS}
 
 
 def write_csv(path, head, cols):
@@ -178,6 +179,18 @@ def test_set_mean_and_standard_error_match_numpy(tree):
     assert any(r["n_seeds"] == "1" for r in rows)
 
 
+def test_table_columns_are_those_of_the_committed_results(tree):
+    """runs.csv and sets.csv keep their columns (the parameters in config.PARAM_KEYS's order)."""
+    for name in ("runs.csv", "sets.csv"):
+        with open(tree["out"] / name) as fh:
+            head = fh.readline()
+        with open(ROOT / "analysis" / "results" / "dev" / name) as fh:
+            assert head == fh.readline(), name
+    assert config.PARAM_KEYS == ("contact.mu", "contact.epsilon", "contact.k_n", "contact.k_t", "contact.gamma_n",
+                                 "contact.gamma_t", "contact.model", "pour.phi_i", "pour.N", "pour.K0", "run.seed",
+                                 "box.L_x", "box.L_y", "integration.dt")
+
+
 def test_tables_and_figures_written(tree):
     out, res = tree["out"], tree["res"]
     for f in ("runs.csv", "sets.csv", "fits.json", "README.md", "collect.json"):
@@ -251,16 +264,12 @@ def test_missing_analysis_runs_analyze_or_is_skipped(tmp_path, monkeypatch):
 
 
 def test_cli(tree, tmp_path):
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     out = tmp_path / "cli"
-    p = subprocess.run([sys.executable, "-m", "mpdem", "collect", str(tree["root"] / "kn"), "--out", str(out),
-                        "--no-analyze"], env=env, capture_output=True, text=True, timeout=300)
+    p = mpdem("collect", tree["root"] / "kn", "--out", out, "--no-analyze", timeout=300)
     assert p.returncode == 0, p.stderr
     assert "wrote" in p.stdout and (out / "fig7_z_vs_kn.png").read_bytes()[:8] == PNG
     assert "fig9: not made" in p.stdout
-    p = subprocess.run([sys.executable, "-m", "mpdem", "collect", str(tree["root"] / "bad" / "notconv"),
-                        "--out", str(tmp_path / "none"), "--quiet"], env=env, capture_output=True, text=True,
-                       timeout=300)
+    p = mpdem("collect", tree["root"] / "bad" / "notconv", "--out", tmp_path / "none", "--quiet", timeout=300)
     assert p.returncode == 1 and "no usable runs" in p.stderr and p.stdout == ""
 
 

@@ -1,5 +1,7 @@
 """Configuration: defaults, derivations, validation, round trip, --set."""
 
+import re
+
 import pytest
 
 from mpdem import config
@@ -109,6 +111,49 @@ def test_docs_config_reference_is_current():
     from pathlib import Path
     doc = (Path(__file__).parents[1] / "docs" / "config.md").read_text()
     assert config.reference_markdown() in doc
+
+
+def test_docs_config_lists_the_parameter_keys():
+    from pathlib import Path
+    doc = (Path(__file__).parents[1] / "docs" / "config.md").read_text()
+    assert ", ".join(f"`{k}`" for k in config.PARAM_KEYS) in doc
+
+
+def _section(*names):
+    return {k for k in config.KEYS if k.split(".")[0] in names}
+
+
+def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
+    # a restart may change the step cap, the stop rule, the checks, the decomposition, the output
+    # and the analysis settings: none of them alters a step's arithmetic
+    assert set(config.RESTART_KEYS) == {"run.max_steps"} | _section("stop", "checks", "decomp", "output", "analysis")
+    # physics: the box, the pour, the contact law, the bed, dt and the stop rule; not the seed, the step
+    # cap, the input files, the skin and slots (they leave a run's result alone), nor the settings
+    assert set(config.PHYSICS_KEYS) == _section("box", "pour", "contact", "bed", "stop") | {"integration.dt"}
+    # the parameter set's columns: numbered 1..n, each once, the seed among them though it is not physics
+    cols = sorted(k.param for k in config.SCHEMA if k.param)
+    assert cols == list(range(1, len(config.PARAM_KEYS) + 1))
+    assert "run.seed" in config.PARAM_KEYS and set(config.PARAM_KEYS) - {"run.seed"} <= set(config.PHYSICS_KEYS)
+    assert config.key_summary(config.RESTART_KEYS) == "run.max_steps, stop.*, checks.*, decomp.*, output.*, analysis.*"
+
+
+@pytest.mark.parametrize("item,allowed", [
+    ("run.max_steps=200", True), ("stop.window=2.0", True), ("stop.rule=instantaneous", True),
+    ("checks.escape_margin=50.0", True), ("decomp.balance_damping=0.3", True),
+    ("output.checkpoint_keep=5", True), ("analysis.g_dr=0.02", True),
+    ("contact.mu=0.2", False), ("contact.k_n=3e5", False), ("box.gravity=0.5", False), ("pour.N=100", False),
+    ("bed.thickness=1.2", False), ("integration.dt=5e-5", False), ("integration.skin=0.3", False),
+    ("run.seed=2", False), ("run.initial_file=x.h5", False),
+])
+def test_a_restart_set_may_change_only_restart_keys(tmp_path, item, allowed):
+    from mpdem import rundir
+    attrs = {"config": cfg().to_toml()}
+    if allowed:
+        key, value = config.parse_set(item)
+        assert rundir.restart_config(attrs, "ck.h5", str(tmp_path), [item]).values[key] == value
+    else:
+        with pytest.raises(ConfigError, match=re.escape("a restart can change only run.max_steps, stop.*, checks.*")):
+            rundir.restart_config(attrs, "ck.h5", str(tmp_path), [item])
 
 
 def test_sections_are_built_once_and_read_only():

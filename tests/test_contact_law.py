@@ -30,7 +30,7 @@ def test_elastic_energy_conservation():
     e0 = total_energy(eng)
     collisions = 0
     for _ in range(100):
-        eng.run(1000)
+        eng.advance(1000)
         collisions += eng.contacts()
     e1 = total_energy(eng)
     assert collisions > 100           # the particles did collide
@@ -162,7 +162,7 @@ def test_pile_contacts_are_mirror_exact():
     # a floor keeps the pile together
     import dataclasses
     eng.phys = dataclasses.replace(eng.phys, floor=True)
-    eng.run(80000)
+    eng.advance(80000)
     st = eng.state
     slots = {}
     for i in range(st.n_own):
@@ -182,6 +182,7 @@ def test_pile_contacts_are_mirror_exact():
         assert np.all(np.diff(st.slots_of(i)[0]) > 0)
 
 
+@pytest.mark.validation    # 4 x 40000 steps; by default mpi_tests checks ranks x threads
 def test_same_bits_for_any_thread_and_chunk_count():
     """Rows split over threads and chunks change no bit of the trajectory
     (frictional, with tangential damping, so every term of the law is used)."""
@@ -199,7 +200,7 @@ def test_same_bits_for_any_thread_and_chunk_count():
             eng = make_engine(x, L=L, mu=0.5, gravity=1.0, gamma_t=10.0)
             eng.set_chunks(nchunk)
             eng.phys = dataclasses.replace(eng.phys, floor=True)
-            eng.run(40000)
+            eng.advance(40000)
             assert eng.contacts() > n
             digests.append(digest(gather_state(eng.state)))
         finally:

@@ -36,7 +36,7 @@ def test_frictionless_history_has_no_negative_zeros(engine_factory, gamma_t):
     x[:n_mobile, :2] = (x[:n_mobile, :2] + 0.0002 * np.random.default_rng(3).uniform(-1, 1, (n_mobile, 2))) % L
     fixed = np.r_[np.zeros(n_mobile, np.uint8), np.ones(n * n, np.uint8)]
     eng = engine_factory(x, fixed=fixed, L=L, mu=0.0, gamma_t=gamma_t, gravity=1.0)
-    eng.run(1000)
+    eng.advance(1000)
     owner, partner, ds = gathered_slots(eng)
     # the stack has landed: many mobile-mobile pairs, each in two mirror slots
     assert np.sum(partner < n_mobile) > 100

@@ -1,15 +1,13 @@
 """Initial files, initial-state checks and the run directory."""
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mpdem import build, checkpoint, config
 from mpdem.simulation import Run
+
+from helpers import mpdem
 
 SMALL = ["run.max_steps=300", "box.L_x=5.0", "box.L_y=5.0", "pour.N=60", "pour.phi_i=0.2",
          "bed.settle_time=2.0", "output.progress_every=100", "stop.sample_interval=0.005"]
@@ -123,25 +121,20 @@ def test_progress_before_the_first_energy_sample_shows_a_dash(tmp_path):
     assert "E_k/N 0." in lines[-1] or "e-" in lines[-1].split("E_k/N")[1].split()[0]
 
 
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "mpdem", *args], capture_output=True, text=True,
-                          timeout=600, cwd=cwd, env=dict(os.environ))
-
-
 def test_cli_reports_bad_values_before_work(tmp_path):
-    p = cli("run", "--set", "contact.mu=-1", "--out", str(tmp_path / "x"))
+    p = mpdem("run", "--set", "contact.mu=-1", "--out", str(tmp_path / "x"))
     assert p.returncode == 1
     assert "contact.mu = -1" in p.stderr and "0 <= mu" in p.stderr
     assert not (tmp_path / "x").exists()
-    p = cli("run", str(tmp_path / "missing.toml"))
+    p = mpdem("run", str(tmp_path / "missing.toml"))
     assert p.returncode == 1 and "missing.toml" in p.stderr
 
 
 def test_cli_info_and_digest(tmp_path):
     out, r, s = run_small(tmp_path, "d")
-    p = cli("info", str(out / "final.h5"), "--digest")
+    p = mpdem("info", str(out / "final.h5"), "--digest")
     assert p.returncode == 0 and p.stdout.strip() == s["digest"]
-    p = cli("info", str(out / "final.h5"))
+    p = mpdem("info", str(out / "final.h5"))
     assert "step 300" in p.stdout and "mobile" in p.stdout
 
 
@@ -167,18 +160,18 @@ def test_runtime_checks_stop_the_run(tmp_path):
 
 def test_version_and_nearest_key(tmp_path):
     from mpdem import __version__
-    p = cli("--version")
+    p = mpdem("--version")
     assert p.returncode == 0 and p.stdout.strip() == f"mpdem {__version__}"
     for given, near in (("contact.kn", "contact.k_n"), ("k_n", "contact.k_n"), ("pour.phi", "pour.phi_i"),
                         ("stop.Estop", "stop.E_stop")):
-        p = cli("run", "--set", f"{given}=1", "--out", str(tmp_path / "x"))
+        p = mpdem("run", "--set", f"{given}=1", "--out", str(tmp_path / "x"))
         assert p.returncode == 1 and f"--set {given}: unknown key (did you mean {near}?)" in p.stderr, p.stderr
     toml = tmp_path / "c.toml"
     toml.write_text("[contakt]\nk_n = 1\n")
-    p = cli("run", str(toml))
+    p = mpdem("run", str(toml))
     assert p.returncode == 1 and "unknown section [contakt] (did you mean contact?)" in p.stderr
     toml.write_text("[contact]\nepsilom = 0.5\n")
-    p = cli("run", str(toml))
+    p = mpdem("run", str(toml))
     assert p.returncode == 1 and "unknown key contact.epsilom (did you mean contact.epsilon?)" in p.stderr
     assert not (tmp_path / "x").exists()
 
@@ -187,11 +180,8 @@ def test_version_and_nearest_key(tmp_path):
 def test_an_out_directory_that_cannot_be_made_is_one_line(tmp_path, ranks):
     """A path under /proc, or under a regular file: one line naming it and why, before any work."""
     (tmp_path / "file").write_text("")
-    mpiexec = [str(Path(sys.executable).parent / "mpiexec"), "-n", str(ranks)] if ranks > 1 else []
     for out in ("/proc/mpdem-cannot/run", str(tmp_path / "file" / "run")):
-        # env: os.environ, not the C environment of a process an earlier test made an MPI singleton
-        p = subprocess.run(mpiexec + [sys.executable, "-m", "mpdem", "run", "--out", out, "--set", "pour.N=10"],
-                           capture_output=True, text=True, timeout=300, env=dict(os.environ))
+        p = mpdem("run", "--out", out, "--set", "pour.N=10", n=ranks, timeout=300)
         assert p.returncode != 0
         lines = [ln for ln in p.stderr.splitlines() if ln.startswith("mpdem: error: --out")]
         assert len(lines) == 1, p.stderr          # every rank stops; rank 0 says why, once

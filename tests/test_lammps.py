@@ -122,13 +122,13 @@ def test_a_run_from_the_lammps_data_file_has_the_digest_of_the_same_state_as_a_t
     t = lammps.read(LMP_DATA, (2,))
     build.write_table(tmp_path / "same.txt", t["ids"], t["x"], t["v"], t["fixed"], omega=t["omega"])
     common = ["--set", "run.max_steps=400", "--set", f"contact.mu={mu}", "--set", "output.progress_every=100"]
-    rc, said = mpdem("run", "--out", "from_data", "--set", f'run.initial_file="{LMP_DATA}"',
-                     "--set", "run.fixed_types=[2]", *common, cwd=tmp_path)
-    assert rc == 3, said
-    assert "LAMMPS data file" in said and "263 mobile + 106 bed spheres, box 10 x 10" in said
-    rc, said = mpdem("run", "--out", "from_table", "--set", f'run.initial_file="{tmp_path / "same.txt"}"',
-                     "--set", "box.L_x=10.0", "--set", "box.L_y=10.0", *common, cwd=tmp_path)
-    assert rc == 3, said
+    p = mpdem("run", "--out", "from_data", "--set", f'run.initial_file="{LMP_DATA}"',
+              "--set", "run.fixed_types=[2]", *common, cwd=tmp_path)
+    assert p.returncode == 3, p.out
+    assert "LAMMPS data file" in p.out and "263 mobile + 106 bed spheres, box 10 x 10" in p.out
+    p = mpdem("run", "--out", "from_table", "--set", f'run.initial_file="{tmp_path / "same.txt"}"',
+              "--set", "box.L_x=10.0", "--set", "box.L_y=10.0", *common, cwd=tmp_path)
+    assert p.returncode == 3, p.out
     digests = [json.load(open(tmp_path / d / "summary.json"))["digest"] for d in ("from_data", "from_table")]
     assert digests[0] == digests[1]
     # the box the file gave is in the run's config, so a restart needs no file
@@ -148,7 +148,7 @@ def test_lammps_inputs_that_do_not_fit_stop_before_any_work(tmp_path):
         (["--set", "run.fixed_types=2"], r"run.fixed_types = 2: expected a list of integers >= 1"),
     ]
     for args, message in cases:
-        rc, said = mpdem("run", "--out", "r", "--force", "--set", "run.max_steps=10", *args, cwd=tmp_path)
-        assert rc == 1 and said.count("mpdem: error:") == 1, said
-        assert __import__("re").search(message, said), said
+        p = mpdem("run", "--out", "r", "--force", "--set", "run.max_steps=10", *args, cwd=tmp_path)
+        assert p.returncode == 1 and p.out.count("mpdem: error:") == 1, p.out
+        assert __import__("re").search(message, p.out), p.out
         assert not (tmp_path / "r" / "log.txt").exists()

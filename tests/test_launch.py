@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from helpers import mpdem
+
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
 # os.environ, not the C environment: tests that call mpdem's main() in this
 # process have made it an MPI singleton, whose PMIx variables would confuse a
@@ -13,18 +15,15 @@ ENV = dict(os.environ)
 
 def test_mpi4py_of_another_mpi_is_detected(tmp_path):
     # what a process started by a foreign mpiexec sees: a launcher size > 1, a world of 1
-    env = dict(os.environ, OMPI_COMM_WORLD_SIZE="2", PMI_SIZE="2")
-    p = subprocess.run([sys.executable, "-m", "mpdem", "run", "--set", "run.max_steps=1",
-                        "--out", str(tmp_path / "r")], env=env, capture_output=True, text=True, timeout=120)
+    p = mpdem("run", "--set", "run.max_steps=1", "--out", tmp_path / "r",
+              env={"OMPI_COMM_WORLD_SIZE": "2", "PMI_SIZE": "2"}, timeout=120)
     assert p.returncode == 1
     assert "mpi4py sees a world of size 1" in p.stderr
 
 
 def test_error_on_ranks_exits_all_ranks(tmp_path):
     # several ranks with a bad value: every rank reports and the job ends (no hang)
-    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, "-m", "mpdem", "run",
-                        "--set", "contact.mu=-1", "--out", str(tmp_path / "r")],
-                       capture_output=True, text=True, timeout=120, env=ENV)
+    p = mpdem("run", "--set", "contact.mu=-1", "--out", tmp_path / "r", n=2, timeout=120)
     assert p.returncode != 0
     assert "contact.mu = -1" in p.stderr
 
@@ -35,10 +34,10 @@ def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
     script.write_text(
         "import sys\n"
         "import mpdem.__main__ as cli\n"
-        "def handler(args, comm):\n"
-        "    if comm.Get_rank() == 1:\n"
+        "def handler(args, net):\n"
+        "    if net.rank == 1:\n"
         "        raise RuntimeError('boom on rank 1')\n"
-        "    comm.Barrier()  # without the abort, rank 0 would wait here for ever\n"
+        "    net.barrier()  # without the abort, rank 0 would wait here for ever\n"
         "    return 0\n"
         "cli.cmd_info = handler\n"
         "sys.exit(cli.main(['info', 'nothing.h5']))\n")

@@ -5,33 +5,28 @@ middle of a checkpoint write lose nothing.
 The pile (200 spheres, K0 = 5, 5 x 5 box) lands, bounces and converges at a
 stop rule with a 10-sample window; checkpoints at K = 40000 steps fall before
 convergence (about 90 000 steps), so the window straddles each restart.
+
+By default (``pytest``) the straight run, its restart on 2 ranks, the wall-time stops (three
+segments on one rank) and the stricter stop rule; the rest (3 ranks, a final state, the signals,
+the kill in a checkpoint write) takes minutes and is marked ``validation`` (``pytest -m
+validation``, ``make test``).
 """
 import json
 import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-MPIEXEC = Path(sys.executable).parent / "mpiexec"
+from helpers import child_env, mpdem, mpdem_argv
+
 K = 40000
 PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
         "stop.sample_interval=0.01", "stop.window=0.1", "stop.E_stop=0.05",
         "run.max_steps=400000", f"output.checkpoint_every={K}", "output.progress_every=2000"]
-
-
-def mpdem(*args, n=1, env=None, timeout=600, check=None):
-    """Run ``python -m mpdem`` on n ranks; returns the CompletedProcess."""
-    cmd = ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [sys.executable, "-m", "mpdem", *map(str, args)]
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
-                       env=dict(os.environ, **(env or {})))
-    if check is not None:
-        assert p.returncode == check, p.stdout[-3000:] + p.stderr[-3000:]
-    return p
 
 
 def sets(*extra):
@@ -79,7 +74,7 @@ def straight(tmp_path_factory):
     return run, s["digest"], s["steps"]
 
 
-@pytest.mark.parametrize("n_first,n_second", [(1, 2), (3, 1)])
+@pytest.mark.parametrize("n_first,n_second", [(1, 2), pytest.param(3, 1, marks=pytest.mark.validation)])
 def test_restart_on_other_rank_counts_gives_the_straight_digest(straight, tmp_path, n_first, n_second):
     run, ref, steps = straight
     first = tmp_path / "first"
@@ -105,6 +100,7 @@ def test_restart_on_other_rank_counts_gives_the_straight_digest(straight, tmp_pa
     assert (again / "checkpoints" / "ckpt-00001.h5").exists()
 
 
+@pytest.mark.validation
 def test_restart_from_a_final_state_with_more_steps(straight, tmp_path):
     """2 ranks stop at run.max_steps = K (exit 3); 3 ranks continue with a larger cap."""
     run, ref, steps = straight
@@ -153,14 +149,13 @@ def _wait_for(path, text, timeout=120):
     raise AssertionError(f"{text!r} never appeared in {path}")
 
 
+@pytest.mark.validation
 @pytest.mark.parametrize("sig,n,rank", [(signal.SIGUSR1, 2, 1), (signal.SIGTERM, 1, 0)])
 def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, sig, n, rank):
     run, ref, steps = straight
     out = tmp_path / "sig"
-    cmd = ([str(MPIEXEC), "-n", str(n)] if n > 1 else []) + [
-        sys.executable, "-m", "mpdem", "run", *sets(), "--out", str(out)]
-    # env: os.environ, not the C environment of this process (see tests/test_launch.py)
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    proc = subprocess.Popen(mpdem_argv("run", *sets(), "--out", out, n=n), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=child_env())
     _wait_for(out / "log.txt", "step      2000")
     pids = _pids_of(out, n)
     assert len(pids) == n
@@ -193,6 +188,7 @@ def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path
     assert s["segments"] >= 2
 
 
+@pytest.mark.validation
 def test_kill_during_checkpoint_write_then_restart(straight, tmp_path):
     """SIGKILL in the middle of writing the second checkpoint: no file under its real
     name is half-written, and the restart falls back to the first and finishes right."""

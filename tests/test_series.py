@@ -3,33 +3,26 @@ the same numbers as ``mpdem analyze`` of final.h5, E_k the same as thermo.csv's.
 import csv
 import json
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from helpers import mpdem
+
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
-def mpdem(*args):
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    return subprocess.run([sys.executable, "-m", "mpdem", *map(str, args)], env=env, capture_output=True,
-                          text=True, timeout=900)
-
-
+@pytest.mark.validation
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_series_of_a_settling_pile(tmp_path, mu):
     run = tmp_path / "run"
     p = mpdem("run", "--out", run, "--quiet", "--set", "pour.N=300", "--set", "box.L_x=4", "--set", "box.L_y=4",
-              "--set", f"contact.mu={mu}", "--set", "run.max_steps=400000", "--set", "output.snapshot_every=50000")
+              "--set", f"contact.mu={mu}", "--set", "run.max_steps=400000", "--set", "output.snapshot_every=50000",
+              timeout=900)
     assert p.returncode in (0, 3), p.stderr
     snaps = sorted((run / "snapshots").glob("snap-*.h5"))
     assert len(snaps) >= 4
-    p = mpdem("analyze", run, "--series")
+    p = mpdem("analyze", run, "--series", timeout=900)
     assert p.returncode == 0, p.stderr
     with open(run / "analysis" / "series.csv") as fh:
         rows = list(csv.DictReader(fh))

@@ -16,7 +16,10 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.slurm
+from helpers import mpdem
+
+# minutes of real jobs: run with -m validation (make test-validation), not by default
+pytestmark = [pytest.mark.slurm, pytest.mark.validation]
 ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT / "tools" / "local-slurm.sh"
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -61,10 +64,7 @@ def jobs_log_until(path, words, timeout, env):
 
 
 def digest(path):
-    p = subprocess.run([sys.executable, "-m", "mpdem", "info", "--digest", str(path)], capture_output=True,
-                       text=True, timeout=120, env=dict(os.environ))
-    assert p.returncode == 0, p.stderr
-    return p.stdout.strip()
+    return mpdem("info", "--digest", path, timeout=120, check=0).stdout.strip()
 
 
 def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_path):
@@ -76,10 +76,9 @@ def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_pat
     assert p.returncode == 0, p.stderr
     # meanwhile, the straight run on one rank
     ref = {}
-    straight = threading.Thread(target=lambda: ref.update(p=subprocess.run(
-        [sys.executable, "-m", "mpdem", "run", "--out", str(tmp_path / "straight"), "--quiet"]
-        + sum((["--set", kv] for kv in PILE.split()), []), capture_output=True, text=True, timeout=1800,
-        env=dict(os.environ))))
+    straight = threading.Thread(target=lambda: ref.update(p=mpdem(
+        "run", "--out", tmp_path / "straight", "--quiet", *sum((["--set", kv] for kv in PILE.split()), []),
+        timeout=1800)))
     straight.start()
     log = jobs_log_until(sub / "runs/chain/jobs.log", ENDS, 1800, slurm)
     straight.join()

@@ -12,7 +12,7 @@ from mpdem.analysis import report
 from mpdem.simulation import Run
 
 
-@pytest.mark.slow
+@pytest.mark.validation
 def test_frictionless_pile_settles_to_z_near_6(tmp_path):
     cfg = config.load(None, ["run.max_steps=3000000", "box.L_x=10.0", "box.L_y=10.0", "pour.N=2000",
                              "contact.mu=0.0", "output.progress_every=200000"])

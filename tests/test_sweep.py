@@ -1,10 +1,8 @@
 """``mpdem sweep``: tables read as the cluster helper reads them, bad input refused
 before any run, and real rows run, stopped, resumed bit-identically and skipped."""
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -13,21 +11,12 @@ import pytest
 from mpdem import config, sweep
 from mpdem.checkpoint import digest, read_state
 
+from helpers import child_env, mpdem, mpdem_argv
+
 ROOT = Path(__file__).resolve().parents[1]
 DEV = ROOT / "analysis" / "sweeps" / "dev"
 # a small pile that settles in seconds and still has a bulk region to analyse
 SMALL = ["pour.N=300", "box.L_x=4", "box.L_y=4", "run.max_steps=2000000"]
-
-
-def env():
-    e = {k: v for k, v in os.environ.items() if not k.startswith(("MPDEM_", "SLURM_", "PBS_"))}
-    e["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + e.get("PYTHONPATH", "")
-    return e
-
-
-def mpdem(*args, cwd=None, timeout=600):
-    return subprocess.run([sys.executable, "-m", "mpdem", *map(str, args)], env=env(), cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
 
 
 def tables():
@@ -39,8 +28,7 @@ def test_rows_are_named_and_set_as_the_cluster_helper_does(tmp_path):
     ``jobs/mpdem-segment.sh --sweep``, so a sweep moves between cluster and laptop."""
     fake = tmp_path / "fake-mpdem.sh"
     fake.write_text('printf "%s\\n" "$*" >> "$FAKE_LOG"\n')
-    e = env()
-    e.update(MPDEM_CMD=f"bash {fake}", FAKE_LOG=str(tmp_path / "calls"))
+    e = child_env({"MPDEM_CMD": f"bash {fake}", "FAKE_LOG": str(tmp_path / "calls")}, clean=True)
     for t in tables():
         rows = sweep.read_table(str(t))
         (tmp_path / "calls").write_text("")
@@ -93,7 +81,7 @@ def test_bad_tables_are_refused_before_any_run(tmp_path, text, match):
     import re
     t = tmp_path / "t.tsv"
     t.write_text(text)
-    p = mpdem("sweep", t, "--out", tmp_path / "out")
+    p = mpdem("sweep", t, "--out", tmp_path / "out", clean=True)
     assert p.returncode == 1
     assert p.stderr.startswith("mpdem: error: sweep") and re.search(match, p.stderr), p.stderr
     assert str(t) in p.stderr
@@ -112,6 +100,7 @@ def wait_for(pred, timeout, what):
         time.sleep(0.2)
 
 
+@pytest.mark.validation
 def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     """Two real frictional rows and one that fails (a missing initial file): the failure is
     reported with its reason while the others go on; SIGINT stops a running row with a
@@ -122,12 +111,12 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     broken = tmp_path / "broken.tsv"
     broken.write_text("mu\tseed\trun.initial_file\n0.5\t2\tmissing.txt\n")
     out = tmp_path / "runs"
-    argv = [sys.executable, "-m", "mpdem", "sweep", str(t), str(broken), "--out", str(out), "--jobs", "1",
-            "--progress", "1", "--collect", str(tmp_path / "collect")]
+    args = ["sweep", t, broken, "--out", out, "--jobs", "1", "--progress", "1", "--collect", tmp_path / "collect"]
     for s in SMALL:
-        argv += ["--set", s]
+        args += ["--set", s]
     run1 = out / "mu0.5_s1"
-    p = subprocess.Popen(argv, env=env(), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    p = subprocess.Popen(mpdem_argv(*args), env=child_env(clean=True), cwd=tmp_path, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
     try:
         # the sweep runs cheapest first (equal cost: table order), one at a time
         wait_for(lambda: (run1 / "thermo.csv").exists() and len((run1 / "thermo.csv").read_text().splitlines()) > 3,
@@ -142,7 +131,7 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     assert not (out / "mu0.5_s2_initial_filemissing.txt").exists()   # never started
     assert not (tmp_path / "collect").exists()                     # a stopped sweep does not collect
 
-    q = subprocess.run(argv, env=env(), cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    q = mpdem(*args, clean=True, cwd=tmp_path, timeout=900)
     assert q.returncode == 1, q.stdout + q.stderr              # a row failed; the other finished
     assert "mu0.5_s1: restart from its checkpoint" in q.stdout
     fail = [ln for ln in q.stdout.splitlines() if ln.startswith("sweep: failed: mu0.5_s2_initial_filemissing.txt")]
@@ -153,12 +142,13 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     assert (tmp_path / "collect" / "runs.csv").exists()
 
     ref = tmp_path / "ref"
-    r = mpdem("run", "--out", ref, "--quiet", *sum((["--set", s] for s in SMALL + ["contact.mu=0.5", "run.seed=1"]), []))
+    r = mpdem("run", "--out", ref, "--quiet", *sum((["--set", s] for s in SMALL + ["contact.mu=0.5", "run.seed=1"]), []),
+              clean=True)
     assert r.returncode == 0, r.stderr
     assert digest(read_state(str(run1 / "final.h5"))[0]) == digest(read_state(str(ref / "final.h5"))[0])
 
     # everything finished (the broken row fails again, and alone)
     before = (run1 / "sweep.log").read_text()
-    s = subprocess.run(argv[:5] + argv[6:], env=env(), cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    s = mpdem(*args[:2], *args[3:], clean=True, cwd=tmp_path, timeout=300)   # without the broken table
     assert "1 already finished" in s.stdout, s.stdout
     assert (run1 / "sweep.log").read_text() == before

@@ -19,7 +19,7 @@ K_N = 2e5
 def test_a_sphere_at_rest_on_the_wall_overlaps_it_by_m_g_over_k_n():
     for mu in (0.0, 0.5):
         eng = make_engine([[2.0, 2.0, 0.5]], L=5.0, gravity=1.0, mu=mu, wall=True)
-        eng.run(30000)                      # 3 tau: the bounce is damped out (rate gamma_n / 2 = 26 per tau)
+        eng.advance(30000)                      # 3 tau: the bounce is damped out (rate gamma_n / 2 = 26 per tau)
         assert abs(eng.state.v[0, 2]) < 1e-12
         assert eng.state.x[0, 2] == pytest.approx(0.5 - 1.0 / K_N, rel=0, abs=1e-12)
 
@@ -46,7 +46,7 @@ def test_a_sliding_sphere_ends_rolling_at_five_sevenths_of_its_speed():
     k_t = 2 * K_N / 7
     eng = make_engine([[2.0, 2.0, 0.5 - 1.0 / K_N]], v=[[1.0, 0.0, 0.0]], L=5.0, gravity=1.0, mu=0.2,
                       wall=True, k_t=k_t, gamma_t=gamma_n_from_epsilon(0.88, K_N) / 2)
-    eng.run(40000)
+    eng.advance(40000)
     v, w = eng.state.v[0], eng.state.omega[0]
     assert v[0] == pytest.approx(5 / 7, rel=2e-3)
     assert 0.5 * w[1] == pytest.approx(v[0], rel=2e-3)     # rolling: v = R omega_y
@@ -75,11 +75,11 @@ def under_the_bed(tmp_path):
 def test_a_state_with_spheres_under_the_bed_runs_with_the_wall_and_is_refused_without(tmp_path, mu):
     path, low = under_the_bed(tmp_path)
     base = ["--set", f'run.initial_file="{path}"', "--set", "run.fixed_types=[2]", "--set", f"contact.mu={mu}"]
-    rc, said = mpdem("run", "--out", "nowall", "--set", "run.max_steps=10", *base, cwd=tmp_path)
-    assert rc == 1 and "is not above" in said and "bed.wall = true" in said, said
-    rc, said = mpdem("run", "--out", "wall", "--set", "run.max_steps=3000", "--set", "bed.wall=true",
-                     "--set", "output.checkpoint_every=1000", *base, cwd=tmp_path)
-    assert rc == 3, said
+    p = mpdem("run", "--out", "nowall", "--set", "run.max_steps=10", *base, cwd=tmp_path)
+    assert p.returncode == 1 and "is not above" in p.out and "bed.wall = true" in p.out, p.out
+    p = mpdem("run", "--out", "wall", "--set", "run.max_steps=3000", "--set", "bed.wall=true",
+              "--set", "output.checkpoint_every=1000", *base, cwd=tmp_path)
+    assert p.returncode == 3, p.out
     s = json.load(open(tmp_path / "wall" / "summary.json"))
     with h5py.File(tmp_path / "wall" / "final.h5") as f:
         z = dict(zip(f["particles/id"][:], f["particles/x"][:, 2]))
@@ -88,6 +88,6 @@ def test_a_state_with_spheres_under_the_bed_runs_with_the_wall_and_is_refused_wi
     assert all(0.49 < z[i] < 0.5 for i in low)
     # restart from the middle checkpoint gives the straight run's digest (the wall history is saved)
     shutil.copytree(tmp_path / "wall", tmp_path / "again")
-    rc, said = mpdem("restart", os.path.join("again", "checkpoints", "ckpt-00001.h5"), cwd=tmp_path)
-    assert rc == 3, said
+    p = mpdem("restart", os.path.join("again", "checkpoints", "ckpt-00001.h5"), cwd=tmp_path)
+    assert p.returncode == 3, p.out
     assert json.load(open(tmp_path / "again" / "summary.json"))["digest"] == s["digest"]

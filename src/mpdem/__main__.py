@@ -14,8 +14,8 @@ Exit status: 0 finished (converged), 3 finished at run.max_steps without
 converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
 a checkpoint ("not finished, restart me"), 1 error, 2 usage error.
 
-MPI starts here and the communicator is passed down; an exception on any
-rank aborts all ranks with its message.
+MPI starts here (``parallel.world``) and its Channel is passed down; an
+exception on any rank aborts all ranks with its message.
 """
 from __future__ import annotations
 
@@ -72,22 +72,6 @@ def tile(text):
     raise argparse.ArgumentTypeError(f"--tile {text!r}: accepted NXxNY with integers NX, NY >= 1 (e.g. 2x2)")
 
 
-def start_mpi():
-    """COMM_WORLD, after checking the launcher and mpi4py agree."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD
-    launched = os.environ.get("OMPI_COMM_WORLD_SIZE") or os.environ.get("PMI_SIZE")
-    if launched and int(launched) > 1 and comm.Get_size() == 1:
-        # each process is a world of its own: Abort would stop only itself
-        sys.stderr.write(
-            f"mpdem: started by an mpiexec of {launched} processes, but mpi4py sees a world of "
-            f"size 1: mpi4py was built for a different MPI ({MPI.Get_library_version().strip(chr(0)).splitlines()[0]}).\n"
-            f"       Use the mpiexec of the MPI that mpi4py was built with (the .venv/bin/mpiexec "
-            f"wrapper), or rebuild mpi4py (tools/setup.sh).\n")
-        sys.exit(EXIT_ERROR)
-    return comm
-
-
 def seconds(flag):
     """argparse type: seconds >= 0, refused with a message naming ``flag``."""
     def parse(text):
@@ -124,7 +108,7 @@ def default_out():
     return os.path.join("runs", time.strftime("run-%Y%m%d-%H%M%S"))
 
 
-def cmd_run(args, comm):
+def cmd_run(args, net):
     from . import config, lammps
     from .build import InputError
     from .simulation import Run
@@ -135,14 +119,13 @@ def cmd_run(args, comm):
         raise config.AgreedError(str(e)) from None
     out = args.out or default_out()
     # rank 0 looks, before any rank can write there; every rank then stops with the same line
-    found = (os.path.exists(os.path.join(out, "config.toml")), writable(out)) if comm.Get_rank() == 0 else None
-    held, why = comm.bcast(found, root=0)
+    held, why = net.on_root(lambda: (os.path.exists(os.path.join(out, "config.toml")), writable(out)))
     if why:
         raise config.AgreedError(f"--out {out}: {why}")
     if held and not args.force:
         raise config.AgreedError(f"--out {out}: already holds a run (config.toml); "
                                  f"choose another directory or pass --force")
-    run = Run(cfg, out, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
+    run = Run(cfg, out, net, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
               t_start=T_START, signals=SIGNALS)
     run.prepare(lammps_initial=initial)
     return _go(run)
@@ -158,81 +141,31 @@ def _go(run):
     return EXIT_OK if run.converged else EXIT_NOT_CONVERGED
 
 
-def cmd_restart(args, comm):
-    from . import checkpoint, config, rundir
-    from .checkpoint import StateFileError
+def cmd_restart(args, net):
+    from . import restart
     from .simulation import Logger, Run
-    # rank 0 chooses the order; every rank then reads the same files collectively
-    found = _on_rank0(comm, rundir.candidates, args.target)
-    files, run_dir = found
-    skipped = []
-    for path in files:
-        try:
-            local, attrs = checkpoint.read(path, comm)
-            missing = [k for k in ("run_state", "n_mobile", "n_bed", "config") if k not in attrs]
-            if attrs.get("kind") not in ("checkpoint", "snapshot", "final") or missing:
-                raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
-                                     f"restart accepts the checkpoints, snapshots and final.h5 of a run")
-            cfg = rundir.restart_config(attrs, path, run_dir, args.set)
-            # the file's own config, to see which stop.* keys --set changed
-            old_cfg = config.resolve(config.raw_from_toml(attrs["config"], origin=path))
-            break
-        except StateFileError as e:
-            if not os.path.isdir(args.target):
-                raise
-            skipped.append(str(e))
-    else:
-        raise StateFileError(f"{run_dir}: no usable state file to restart from:\n  " + "\n  ".join(skipped))
-    say = Logger(os.path.join(run_dir, "log.txt"), args.quiet, comm.Get_rank())
-    for e in skipped:
-        say.warn(f"restart: skipping {e}")
-    if skipped:
-        say.warn(f"restart: falling back to {path} (step {attrs['step']})")
-    # a stricter stop rule given now may make a converged run go on
-    stop_changed = [k for k in cfg.values if k.startswith("stop.") and cfg.values[k] != old_cfg.values[k]]
-    if attrs.get("converged") and not stop_changed:
-        say(f"restart: {path}: the run converged at step {attrs['step']}; nothing to do")
-        return EXIT_OK
-    if attrs.get("converged"):
-        say(f"restart: {path} converged at step {attrs['step']}; going on under the changed stop rule "
-            f"({', '.join(f'{k} = {cfg.values[k]!r}' for k in stop_changed)})")
-    # a checkpoint at the cap still goes on, to write the final state
-    if attrs.get("kind") == "final" and int(attrs["step"]) >= cfg.run.max_steps:
-        say(f"restart: {path} is at step {attrs['step']} and run.max_steps = {cfg.run.max_steps}; "
-            f"raise it with --set run.max_steps=... to go on")
-        return EXIT_NOT_CONVERGED
+    t = restart.open_target(args.target, net, args.set)
+    say = Logger(os.path.join(t.run_dir, "log.txt"), args.quiet, net.rank)
+    status = restart.verdict(t, say)
     say.close()
-    run = Run(cfg, run_dir, comm, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
+    if status is not None:
+        return status
+    run = Run(t.cfg, t.run_dir, net, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
               t_start=T_START, signals=SIGNALS)
-    run.resume(path, local, attrs)
+    restart.resume(run, t)
     return _go(run)
 
 
-def _on_rank0(comm, fn, *args):
-    """fn(*args) on rank 0, its result (or its StateFileError) on every rank."""
-    from .checkpoint import StateFileError
-    res = None
-    if comm.Get_rank() == 0:
-        try:
-            res = fn(*args)
-        except StateFileError as e:
-            res = e
-    res = comm.bcast(res, root=0) if comm.Get_size() > 1 else res
-    if isinstance(res, StateFileError):
-        raise res
-    return res
-
-
-def cmd_export(args, comm):
+def cmd_export(args, net):
     from . import export
-    if comm.Get_rank() == 0:          # one writer, however it was launched
+    if net.rank == 0:          # one writer, however it was launched
         print(f"wrote {export.export_file(args.file, args.format, args.out)}")
     return EXIT_OK
 
 
-def cmd_info(args, comm):
+def cmd_info(args, net):
     from . import checkpoint
-    if comm.Get_rank() != 0:
+    if net.rank != 0:
         return EXIT_OK
     arrays, attrs = checkpoint.read_state(args.file, pairs=True)
     if args.digest:
@@ -244,7 +177,7 @@ def cmd_info(args, comm):
     print(f"  step {attrs.get('step')}, time {attrs.get('time')}, {n} particles "
           f"({attrs.get('n_mobile')} mobile, {attrs.get('n_bed')} bed), "
           f"{len(arrays['partner'])} contact slots, box {attrs.get('L_x')} x {attrs.get('L_y')}"
-          + (f", converged" if attrs.get("converged") else ""))
+          + (", converged" if attrs.get("converged") else ""))
     if "id_i" in arrays:
         print(f"  contact list: {len(arrays['id_i'])} contacts (F_n, F_t, Delta s)")
     try:
@@ -259,12 +192,12 @@ def cmd_info(args, comm):
     return EXIT_OK
 
 
-def cmd_analyze(args, comm):
+def cmd_analyze(args, net):
     from .analysis.report import analyze
-    if comm.Get_rank() != 0:
+    if net.rank != 0:
         return EXIT_OK
-    if comm.Get_size() > 1:
-        print(f"analyze: one process does the work (numba threads); {comm.Get_size() - 1} rank(s) idle")
+    if net.size > 1:
+        print(f"analyze: one process does the work (numba threads); {net.size - 1} rank(s) idle")
     if args.series:
         from .analysis.series import series
         series(args.target, args.set, args.out, plots=not args.no_plots, log=_quiet(args.quiet))
@@ -273,9 +206,9 @@ def cmd_analyze(args, comm):
     return EXIT_OK
 
 
-def cmd_collect(args, comm):
+def cmd_collect(args, net):
     from .analysis.collect import collect
-    if comm.Get_rank() != 0:
+    if net.rank != 0:
         return EXIT_OK
     collect(args.runs, args.out, analyze_missing=not args.no_analyze, log=_quiet(args.quiet))
     return EXIT_OK
@@ -309,9 +242,9 @@ def _quiet(quiet):
     return (lambda msg: None) if quiet else print
 
 
-def cmd_bench(args, comm):
+def cmd_bench(args, net):
     from .bench import run_analysis_bench, run_io_bench, run_table_bench
-    (run_io_bench if args.io else run_analysis_bench if args.analysis else run_table_bench)(args, comm)
+    (run_io_bench if args.io else run_analysis_bench if args.analysis else run_table_bench)(args, net)
     return EXIT_OK
 
 
@@ -463,7 +396,8 @@ def _main(argv):
         check_bench_mode(p, args)
     if args.cmd == "sweep":         # a manager of mpdem processes: no MPI, no kernels here
         return cmd_sweep(args)
-    comm = start_mpi()
+    from .parallel import world
+    net = world(EXIT_ERROR)
     # before anything imports the numba kernels (numba sizes its pool at import)
     from .threads import ThreadsError, configure, usable_cores
     n_threads = threads_wanted(args)
@@ -471,8 +405,8 @@ def _main(argv):
         if n_threads is not None:
             configure(n_threads)
     except ThreadsError as e:
-        _fail(comm, f"mpdem: error: {e}")
-    if n_threads and comm.Get_rank() == 0:
+        _fail(net, f"mpdem: error: {e}")
+    if n_threads and net.rank == 0:
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
     from .config import AgreedError
@@ -480,26 +414,25 @@ def _main(argv):
     handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
-        return handlers[args.cmd](args, comm)
+        return handlers[args.cmd](args, net)
     except AgreedError as e:       # every rank is here with the same message: one line, no abort
-        if comm.Get_rank() == 0:
+        if net.rank == 0:
             sys.stderr.write(f"mpdem: error: {e}\n")
             sys.stderr.flush()
         sys.exit(EXIT_ERROR)
     except (MpdemError, NotImplementedError) as e:
-        _fail(comm, f"mpdem: error: {e}")
+        _fail(net, f"mpdem: error: {e}")
     except KeyboardInterrupt:
-        _fail(comm, "mpdem: interrupted")
+        _fail(net, "mpdem: interrupted")
     except Exception:
         import traceback
-        _fail(comm, "mpdem: internal error on rank %d:\n%s" % (comm.Get_rank(), traceback.format_exc()))
+        _fail(net, "mpdem: internal error on rank %d:\n%s" % (net.rank, traceback.format_exc()))
 
 
-def _fail(comm, msg):
+def _fail(net, msg):
     sys.stderr.write(msg.rstrip() + "\n")
     sys.stderr.flush()
-    if comm.Get_size() > 1:
-        comm.Abort(EXIT_ERROR)
+    net.abort(EXIT_ERROR)
     sys.exit(EXIT_ERROR)
 
 

@@ -27,9 +27,10 @@ import time
 
 import numpy as np
 
-from . import build, checkpoint, config
+from . import build, checkpoint, config, initial
 from .decomp import Domain
 from .engine import Engine, Physics
+from .parallel import channel
 from .state import State
 
 LANDING_TIME = 25.0   # [tau] from the pour at phi_i = 0.3 to the landed pile
@@ -58,11 +59,11 @@ def landed_pile(cfg, cache, log=print):
     st = State(np.arange(N + nb), np.concatenate([xm, bed.x]),
                fixed=np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)]), L_x=L, L_y=L)
     eng = Engine(st, Physics.from_config(cfg), Domain(None))
-    eng.setup()
+    eng.start()
     t0 = time.perf_counter()
     steps = int(round(LANDING_TIME / cfg.integration.dt))
     for k in range(10):
-        eng.run(steps // 10)
+        eng.advance(steps // 10)
         et, er = eng.kinetic()
         log(f"bench:   t = {st.time:5.1f}: E_k/N = {(et + er) / N:.2e}, contacts per particle "
             f"{eng.contacts() / N:.2f}, {time.perf_counter() - t0:.0f} s")
@@ -122,8 +123,8 @@ def warm_up_kernels(phys, L_x, L_y):
     x = np.concatenate([mob, bed])
     fixed = np.concatenate([np.zeros(len(mob), np.uint8), np.ones(len(bed), np.uint8)])
     eng = Engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None))
-    eng.setup()
-    eng.run(WARMUP_STEPS)
+    eng.start()
+    eng.advance(WARMUP_STEPS)
     eng.kinetic()
     eng.contacts()
 
@@ -134,7 +135,8 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     Parameters
     ----------
     path : str
-        ``build.read_table`` file (plain or gzip).
+        A text table (``build.read_table``, plain or gzip), read as
+        ``run.initial_file`` is (``initial.particles``).
     cfg : Config
         Box (``box.L_x``, ``box.L_y``) and ``checks.overlap_warn``.
     tile : (int, int)
@@ -145,12 +147,13 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     Returns
     -------
     whole : dict of ``Domain.scatter``'s arrays id (N,), x (N, 3) [d],
-        v (N, 3), omega (N, 3) (zero), fixed (N,) uint8
+        v (N, 3), omega (N, 3) (zero unless the table has it), fixed (N,) uint8
     L_x, L_y : the (tiled) box [d]
     """
     if not os.path.isfile(path):
         raise build.InputError(f"--table {path}: no such file")
-    t = build.read_table(path)
+    # the reader of run.initial_file: a text table (or a state or LAMMPS file)
+    t = initial.particles(path, cfg, log=say)
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     fixed = t["fixed"]
     z_floor = float(t["x"][fixed == 1, 2].mean()) if fixed.any() else -np.inf
@@ -159,7 +162,7 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     nx, ny = tile
     if (nx, ny) != (1, 1):
         t = build.tile_table(t, L_x, L_y, nx, ny)
-    whole = {"id": t["ids"], "x": t["x"], "v": t["v"], "omega": np.zeros_like(t["x"]), "fixed": t["fixed"]}
+    whole = {"id": t["ids"], "x": t["x"], "v": t["v"], "omega": t["omega"], "fixed": t["fixed"]}
     return whole, nx * L_x, ny * L_y
 
 
@@ -188,7 +191,7 @@ def timed_loop(eng, dom, steps):
     return wall, eng.n_rebuilds - r0, before, phase_clock(eng, dom)
 
 
-def run_table_bench(args, comm):
+def run_table_bench(args, net):
     """Time ``args.steps`` steps from a particle table; print figures on rank 0.
 
     The last line rank 0 prints is ``ns_per_atom_step=X``: loop wall seconds
@@ -196,7 +199,8 @@ def run_table_bench(args, comm):
     counts them. Returns X.
     """
     cfg = table_config(args.set)
-    rank = comm.Get_rank() if comm is not None else 0
+    net = channel(net)
+    rank = net.rank
     say = print if rank == 0 else (lambda msg: None)
     phys = Physics.from_config(cfg)
     warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y)
@@ -205,13 +209,13 @@ def run_table_bench(args, comm):
     # every rank reads the same table, so a bad table stops every rank alike
     whole, L_x, L_y = load_table(args.table, cfg, args.tile, say=lambda msg: say(f"bench: warning: {msg}"))
     n_atoms, n_mobile = len(whole["id"]), int((whole["fixed"] == 0).sum())
-    dom = Domain(comm, r_list=1.0 + phys.skin, tolerance=cfg.decomp.balance_tolerance,
+    dom = Domain(net, r_list=1.0 + phys.skin, tolerance=cfg.decomp.balance_tolerance,
                  damping=cfg.decomp.balance_damping)
     st = dom.scatter(whole, L_x, L_y)
     del whole
     eng = Engine(st, phys, dom)
-    eng.setup()
-    eng.run(WARMUP_STEPS)
+    eng.start()
+    eng.advance(WARMUP_STEPS)
     wall, rebuilds, before, after = timed_loop(eng, dom, args.steps)
     fig = dict(table=args.table, tile=tuple(args.tile), n_atoms=n_atoms, n_mobile=n_mobile, L_x=L_x, L_y=L_y,
                cfg=cfg, ranks=dom.size, steps=args.steps, wall=wall, wall_max=dom.max(wall), rebuilds=rebuilds,
@@ -283,25 +287,26 @@ def synthetic_share(N, rank, size, slots=6, seed=0):
     return a
 
 
-def run_io_bench(args, comm):
+def run_io_bench(args, net):
     """Time a checkpoint write and read (with the split to slab owners) of N particles."""
     import tempfile
-    rank, size = comm.Get_rank(), comm.Get_size()
+    net = channel(net)
+    rank, size = net.rank, net.size
     a = synthetic_share(args.N, rank, size)
-    d = comm.bcast(tempfile.mkdtemp(prefix="mpdem-io-", dir=args.cache) if rank == 0 else None)
+    d = net.bcast(tempfile.mkdtemp(prefix="mpdem-io-", dir=args.cache) if rank == 0 else None)
     path = os.path.join(d, "ckpt.h5")
     attrs = {"kind": "checkpoint", "step": 0, "time": 0.0, "n": args.N, "L_x": 100.0, "L_y": 100.0}
     times = {"write": [], "read": []}
     for _ in range(args.repeat):
-        comm.Barrier()
+        net.barrier()
         t = time.perf_counter()
-        checkpoint.write(path, a, attrs, comm)
-        comm.Barrier()
+        checkpoint.write(path, a, attrs, net)
+        net.barrier()
         times["write"].append(time.perf_counter() - t)
         t = time.perf_counter()
-        local, _ = checkpoint.read(path, comm)
-        Domain(comm).distribute(local, 100.0, 100.0)
-        comm.Barrier()
+        local, _ = checkpoint.read(path, net)
+        Domain(net).distribute(local, 100.0, 100.0)
+        net.barrier()
         times["read"].append(time.perf_counter() - t)
     if rank == 0:
         mb = os.path.getsize(path) / 2**20
@@ -360,16 +365,17 @@ def tiled_pile(a, L, N, mu, k_n, seed=0):
     return out, nx, ny
 
 
-def run_analysis_bench(args, comm):
+def run_analysis_bench(args, net):
     """Write a tiled pile of N spheres with all ranks, then time ``mpdem analyze`` of it (rank 0)."""
     import shutil
     import tempfile
     from .analysis.report import analyze
-    rank, size = comm.Get_rank(), comm.Get_size()
+    net = channel(net)
+    rank, size = net.rank, net.size
     cfg = bench_config(20000, args.mu)
     cache = args.cache or os.path.join(os.path.expanduser("~"), ".cache", "mpdem", "bench")
     a, pile = landed_pile(cfg, cache) if rank == 0 else (None, None)
-    a = comm.bcast(a, root=0) if size > 1 else a
+    a = net.bcast(a)
     L = cfg.box.L_x
     t0 = time.perf_counter()
     whole, nx, ny = tiled_pile(a, L, args.N, cfg.contact.mu, cfg.contact.k_n)
@@ -380,13 +386,13 @@ def run_analysis_bench(args, comm):
     n_mob = int((whole["fixed"] == 0).sum())
     tcfg = config.load(None, ["run.max_steps=1", f"pour.N={n_mob}", f"box.L_x={nx * L}", f"box.L_y={ny * L}",
                               f"contact.mu={cfg.contact.mu}"])
-    d = comm.bcast(tempfile.mkdtemp(prefix="mpdem-analysis-", dir=args.cache) if rank == 0 else None)
+    d = net.bcast(tempfile.mkdtemp(prefix="mpdem-analysis-", dir=args.cache) if rank == 0 else None)
     path = os.path.join(d, "snap.h5")
     attrs = {"kind": "snapshot", "step": 0, "time": 0.0, "n": n, "n_mobile": n_mob, "n_bed": n - n_mob,
              "L_x": nx * L, "L_y": ny * L, "config": tcfg.to_toml()}
     t_make = time.perf_counter() - t0
     t0 = time.perf_counter()
-    checkpoint.write(path, share, attrs, comm)
+    checkpoint.write(path, share, attrs, net)
     t_write = time.perf_counter() - t0
     del whole, share
     if rank != 0:

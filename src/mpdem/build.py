@@ -111,11 +111,11 @@ def make_bed(cfg, progress=None):
                    gravity=1.0, floor=True)
     state = State(np.arange(n), x, L_x=L_x, L_y=L_y)
     eng = Engine(state, phys, Domain(None))
-    eng.setup()
+    eng.start()
     steps = int(math.ceil(b.settle_time / phys.dt))
     chunk = max(1, steps // 10)
     for done in range(0, steps, chunk):
-        eng.run(min(chunk, steps - done))
+        eng.advance(min(chunk, steps - done))
         if progress:
             progress(f"bed: settling {n} spheres, step {min(done + chunk, steps)}/{steps}")
     xs = state.x[:n]
@@ -256,6 +256,7 @@ def tile_table(table, L_x, L_y, nx, ny):
     return {"ids": (table["ids"][None, :] + span * k[:, None]).reshape(-1),
             "x": (x0[None, :, :] + shift[:, None, :]).reshape(-1, 3),
             "v": np.tile(table["v"], (nx * ny, 1)),
+            "omega": np.tile(table.get("omega", np.zeros_like(table["x"])), (nx * ny, 1)),
             "fixed": np.tile(table["fixed"], nx * ny)}
 
 

@@ -39,6 +39,7 @@ import h5py
 import numpy as np
 
 from .errors import MpdemError
+from .parallel import channel
 
 FORMAT = "mpdem-state"
 VERSION = 2
@@ -142,40 +143,15 @@ def gather_state(state):
     return out
 
 
-# -- collective helpers (comm None or size 1: serial) --
-def _size(comm):
-    return 1 if comm is None else comm.Get_size()
-
-
-def _allgather(comm, obj):
-    return [obj] if _size(comm) == 1 else comm.allgather(obj)
-
-
-def _agree(comm, err):
-    """Raise the same StateFileError on every rank if any rank had one."""
-    errs = [e for e in _allgather(comm, err) if e]
-    if errs:
-        raise StateFileError(errs[0])
-
-
-def _sum_u64(comm, values):
-    a = np.array(values, np.uint64)
-    if _size(comm) == 1:
-        return a
-    from mpi4py import MPI
-    out = np.empty_like(a)
-    comm.Allreduce(a, out, op=MPI.SUM)
-    return out
-
-
-def _open(path, mode, comm):
-    if _size(comm) > 1:
-        return h5py.File(path, mode, driver="mpio", comm=comm)
+def _open(path, mode, net):
+    """The file, opened by every rank of ``net`` with parallel HDF5 (one rank: plainly)."""
+    if net.parallel:
+        return h5py.File(path, mode, driver="mpio", comm=net.comm)
     return h5py.File(path, mode)
 
 
 # -- writing --
-def write(path, local, attrs, comm=None):
+def write(path, local, attrs, net=None):
     """Write a state file collectively: each rank gives its own rows.
 
     Parameters
@@ -189,24 +165,25 @@ def write(path, local, attrs, comm=None):
         of a snapshot.
     attrs : dict
         Attributes, identical on every rank.
-    comm : mpi4py communicator or None
+    net : parallel.Channel, mpi4py communicator or None
     """
     global _writes
+    net = channel(net)
     groups = [g for g in GROUPS if ROWS_OF[g] in local]
     lengths = np.array([len(local[ROWS_OF[g]]) for g in groups], np.int64)
-    all_len = np.array(_allgather(comm, lengths)).reshape(-1, len(groups))
-    rank = 0 if comm is None else comm.Get_rank()
+    all_len = np.array(net.allgather(lengths)).reshape(-1, len(groups))
+    rank = net.rank
     start, total = all_len[:rank].sum(axis=0), all_len.sum(axis=0)
-    sums = _sum_u64(comm, [checksums(local)[g] for g in groups])
+    sums = net.sum_u64([checksums(local)[g] for g in groups])
     tmp = f"{path}.tmp"
     _writes += attrs.get("kind") == "checkpoint"
-    with _open(tmp, "w", comm) as f:
+    with _open(tmp, "w", net) as f:
         f.attrs["format"] = FORMAT
         f.attrs["version"] = VERSION
         for k, v in attrs.items():
             f.attrs[k] = v
         # how many ranks wrote the file is a fact of this write, not of the caller
-        f.attrs["ranks"] = _size(comm)
+        f.attrs["ranks"] = net.size
         for gi, g in enumerate(groups):
             grp = f.create_group(g)
             f.attrs[f"checksum_{g}"] = sums[gi]
@@ -221,15 +198,13 @@ def write(path, local, attrs, comm=None):
             if g == "particles" and os.environ.get(KILL_ENV) == str(_writes) and attrs.get("kind") == "checkpoint":
                 f.flush()
                 os.kill(os.getpid(), signal.SIGKILL)
-    if comm is not None and _size(comm) > 1:
-        comm.Barrier()
+    net.barrier()
     if rank == 0:
         fd = os.open(tmp, os.O_RDONLY)
         os.fsync(fd)
         os.close(fd)
         os.replace(tmp, path)
-    if comm is not None and _size(comm) > 1:
-        comm.Barrier()
+    net.barrier()
 
 
 # -- reading --
@@ -268,7 +243,7 @@ def _check_layout(f, path):
     return groups, None
 
 
-def read(path, comm=None, pairs=False):
+def read(path, net=None, pairs=False):
     """Read this rank's share of a state file (any rank count) and verify it.
 
     Rank r of P reads particle rows [r n / P, (r+1) n / P) and their contact
@@ -276,22 +251,30 @@ def read(path, comm=None, pairs=False):
     rank raises the same StateFileError if the file is unusable: not HDF5,
     another format or version, missing datasets, or a checksum mismatch.
 
+    Parameters
+    ----------
+    path : str
+    net : parallel.Channel, mpi4py communicator or None
+    pairs : bool
+        Read the pair list of a snapshot too.
+
     Returns
     -------
     local : dict of arrays (this rank's rows, file order)
     attrs : dict
     """
+    net = channel(net)
     err, f = None, None
     try:
-        f = _open(path, "r", comm)
+        f = _open(path, "r", net)
     except (OSError, ValueError) as e:
         err = f"{path}: cannot open as HDF5 ({e})"
-    _agree(comm, err)
+    net.agree(err, StateFileError)
     with f:
         groups, err = _check_layout(f, path)
-        _agree(comm, err)
+        net.agree(err, StateFileError)
         attrs = _attrs(f)
-        P, r = _size(comm), (0 if comm is None else comm.Get_rank())
+        P, r = net.size, net.rank
         local, err = {}, None
         try:
             n = f["particles"]["id"].shape[0]
@@ -303,9 +286,9 @@ def read(path, comm=None, pairs=False):
                 local["wall_ds"] = f["wall"]["wall_ds"][lo:hi]
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
-        _agree(comm, err)
+        net.agree(err, StateFileError)
         # every rank takes part in this gather: no rank may have left early
-        before = np.array(_allgather(comm, int(local["count"].sum())), np.int64)
+        before = np.array(net.allgather(int(local["count"].sum())), np.int64)
         try:
             a = int(before[:r].sum())
             b = a + int(before[r])
@@ -319,9 +302,9 @@ def read(path, comm=None, pairs=False):
                     local[name] = f["pairs"][name][r * m // P:(r + 1) * m // P]
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
-        _agree(comm, err)
+        net.agree(err, StateFileError)
     have = ["particles", "contacts"] + (["pairs"] if "id_i" in local else []) + (["wall"] if "wall_ds" in local else [])
-    sums = _sum_u64(comm, [checksums(local)[g] for g in have])
+    sums = net.sum_u64([checksums(local)[g] for g in have])
     bad = [g for g, s in zip(have, sums) if int(s) != int(attrs[f"checksum_{g}"])]
     if bad:
         raise StateFileError(f"{path}: checksum mismatch in /{', /'.join(bad)}; the file is damaged")

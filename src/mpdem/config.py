@@ -31,36 +31,49 @@ class AgreedError(ConfigError):
 
 @dataclass(frozen=True)
 class Key:
+    """One config key of ``SCHEMA``.
+
+    ``restart``: a restart may change it with --set (it does not alter a
+    step's arithmetic; ``RESTART_KEYS``). ``physics``: part of the run's
+    physics: summary.json lists it under "physics", and runs that differ in
+    it are never one parameter set (``PHYSICS_KEYS``). ``param``: its column
+    (1, 2, ...) among the keys that name a parameter set (summary.json
+    "params", the columns of collect's runs.csv and sets.csv; ``PARAM_KEYS``),
+    0 for none. A key without flags is physics fixed for the whole run.
+    """
     section: str
     name: str
     default: object
     doc: str
     kind: type = float
     choices: tuple = ()
+    restart: bool = False
+    physics: bool = True
+    param: int = 0
 
 
-def _k(section, name, default, doc, kind=float, choices=()):
-    return Key(section, name, default, doc, kind, choices)
+def _k(section, name, default, doc, kind=float, choices=(), *, restart=False, physics=True, param=0):
+    return Key(section, name, default, doc, kind, choices, restart, physics, param)
 
 
 SCHEMA = (
-    _k("run", "max_steps", REQUIRED, "hard cap on time steps (required); a run that hits it is 'not converged'", int),
-    _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int),
-    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text dump (recognised by their content)", str),
-    _k("run", "fixed_types", (), "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one", tuple),
-    _k("box", "L_x", 20.0, "periodic box length in x [d]"),
-    _k("box", "L_y", 20.0, "periodic box length in y [d]"),
+    _k("run", "max_steps", REQUIRED, "hard cap on time steps (required); a run that hits it is 'not converged'", int, restart=True, physics=False),
+    _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int, physics=False, param=11),
+    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text dump (recognised by their content)", str, physics=False),
+    _k("run", "fixed_types", (), "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one", tuple, physics=False),
+    _k("box", "L_x", 20.0, "periodic box length in x [d]", param=12),
+    _k("box", "L_y", 20.0, "periodic box length in y [d]", param=13),
     _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
-    _k("pour", "N", 20000, "number of mobile spheres", int),
-    _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)"),
-    _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest"),
-    _k("contact", "model", "hooke", "normal/tangential force law", str, ("hooke", "hertz")),
-    _k("contact", "k_n", 2e5, "normal spring constant [m g / d]"),
-    _k("contact", "k_t", DERIVED, "tangential spring constant [m g / d]; default 2 k_n / 7"),
-    _k("contact", "epsilon", 0.88, "coefficient of restitution of a free pair; sets gamma_n (eq. 4-5)"),
-    _k("contact", "gamma_n", DERIVED, "normal damping [sqrt(g/d)]; default from epsilon and k_n"),
-    _k("contact", "gamma_t", 0.0, "tangential damping [sqrt(g/d)]; 0 as in the method, gamma_n/2 the documented alternative"),
-    _k("contact", "mu", 0.5, "Coulomb friction coefficient (0 = frictionless)"),
+    _k("pour", "N", 20000, "number of mobile spheres", int, param=9),
+    _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)", param=8),
+    _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest", param=10),
+    _k("contact", "model", "hooke", "normal/tangential force law", str, ("hooke", "hertz"), param=7),
+    _k("contact", "k_n", 2e5, "normal spring constant [m g / d]", param=3),
+    _k("contact", "k_t", DERIVED, "tangential spring constant [m g / d]; default 2 k_n / 7", param=4),
+    _k("contact", "epsilon", 0.88, "coefficient of restitution of a free pair; sets gamma_n (eq. 4-5)", param=2),
+    _k("contact", "gamma_n", DERIVED, "normal damping [sqrt(g/d)]; default from epsilon and k_n", param=5),
+    _k("contact", "gamma_t", 0.0, "tangential damping [sqrt(g/d)]; 0 as in the method, gamma_n/2 the documented alternative", param=6),
+    _k("contact", "mu", 0.5, "Coulomb friction coefficient (0 = frictionless)", param=1),
     _k("contact", "limit_damping", False, "clip an attractive normal force to 0 (off in the reference model)", bool),
     _k("contact", "history", "project", "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|", str, ("project", "rotate")),
     _k("bed", "file", "", "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
@@ -73,41 +86,57 @@ SCHEMA = (
     _k("bed", "settle_time", 40.0, "simulated time of the bed-making settle [tau]"),
     _k("bed", "density_min", 1.0, "warn if the bed's areal density is below this [1/d^2]"),
     _k("bed", "density_max", 1.3, "warn if the bed's areal density is above this [1/d^2]"),
-    _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)"),
-    _k("integration", "skin", 0.2, "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2"),
-    _k("integration", "contact_slots", 16, "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints load)", int),
-    _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)"),
-    _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous")),
-    _k("stop", "window", 1.0, "averaging window of the stop rule [tau]"),
-    _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)"),
-    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one warning (a settled pile), deeper ones refused"),
-    _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]"),
-    _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]"),
-    _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this"),
-    _k("decomp", "balance_damping", 0.5, "fraction of the way the slab bounds move toward balance at a rebalance"),
-    _k("output", "progress_every", 10000, "steps between progress lines", int),
-    _k("output", "checkpoint_every", 0, "steps between checkpoints (RUN/checkpoints/ckpt-NNNNN.h5); 0 = none on a step schedule", int),
-    _k("output", "checkpoint_seconds", 1800.0, "wall-clock seconds between checkpoints; 0 = none on a clock schedule"),
-    _k("output", "checkpoint_keep", 3, "newest checkpoints kept; older ones are deleted", int),
-    _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int),
-    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 (h - z_bed), 3, 10)"),
-    _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom"),
-    _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int),
-    _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]"),
-    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)"),
-    _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]"),
-    _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box"),
-    _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)"),
-    _k("analysis", "xi_min", 1e-6, "smallest xi = r/d - 1 of the logarithmic near-contact bins"),
-    _k("analysis", "xi_per_decade", 10, "logarithmic bins per decade of xi (they run from xi_min to 1)", int),
-    _k("analysis", "fit_xi_hi", 5e-2, "upper end of the power-law fit window in xi (eq. 6)"),
-    _k("analysis", "fit_xi_lo", -1.0, "lower end of the fit window in xi; -1 = max(1e-3 sqrt(2e5 / k_n), 20 x median bulk overlap)"),
-    _k("analysis", "zeta_bins", 50, "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int),
-    _k("analysis", "mobilised", 0.99, "zeta above which a contact counts as fully mobilised"),
+    _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)", param=14),
+    _k("integration", "skin", 0.2, "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
+    _k("integration", "contact_slots", 16, "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints load)", int, physics=False),
+    _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
+    _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous"), restart=True),
+    _k("stop", "window", 1.0, "averaging window of the stop rule [tau]", restart=True),
+    _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)", restart=True),
+    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one warning (a settled pile), deeper ones refused", restart=True, physics=False),
+    _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]", restart=True, physics=False),
+    _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]", restart=True, physics=False),
+    _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this", restart=True, physics=False),
+    _k("decomp", "balance_damping", 0.5, "fraction of the way the slab bounds move toward balance at a rebalance", restart=True, physics=False),
+    _k("output", "progress_every", 10000, "steps between progress lines", int, restart=True, physics=False),
+    _k("output", "checkpoint_every", 0, "steps between checkpoints (RUN/checkpoints/ckpt-NNNNN.h5); 0 = none on a step schedule", int, restart=True, physics=False),
+    _k("output", "checkpoint_seconds", 1800.0, "wall-clock seconds between checkpoints; 0 = none on a clock schedule", restart=True, physics=False),
+    _k("output", "checkpoint_keep", 3, "newest checkpoints kept; older ones are deleted", int, restart=True, physics=False),
+    _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int, restart=True, physics=False),
+    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 (h - z_bed), 3, 10)", restart=True, physics=False),
+    _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom", restart=True, physics=False),
+    _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int, restart=True, physics=False),
+    _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]", restart=True, physics=False),
+    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)", restart=True, physics=False),
+    _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]", restart=True, physics=False),
+    _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box", restart=True, physics=False),
+    _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)", restart=True, physics=False),
+    _k("analysis", "xi_min", 1e-6, "smallest xi = r/d - 1 of the logarithmic near-contact bins", restart=True, physics=False),
+    _k("analysis", "xi_per_decade", 10, "logarithmic bins per decade of xi (they run from xi_min to 1)", int, restart=True, physics=False),
+    _k("analysis", "fit_xi_hi", 5e-2, "upper end of the power-law fit window in xi (eq. 6)", restart=True, physics=False),
+    _k("analysis", "fit_xi_lo", -1.0, "lower end of the fit window in xi; -1 = max(1e-3 sqrt(2e5 / k_n), 20 x median bulk overlap)", restart=True, physics=False),
+    _k("analysis", "zeta_bins", 50, "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
+    _k("analysis", "mobilised", 0.99, "zeta above which a contact counts as fully mobilised", restart=True, physics=False),
 )
 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
 KEYS = MappingProxyType({f"{k.section}.{k.name}": k for k in SCHEMA})
+# the flags of SCHEMA as tuples of 'section.key' names (schema order; PARAM_KEYS in column order)
+RESTART_KEYS = tuple(name for name, k in KEYS.items() if k.restart)
+PHYSICS_KEYS = tuple(name for name, k in KEYS.items() if k.physics)
+PARAM_KEYS = tuple(sorted((name for name, k in KEYS.items() if k.param), key=lambda name: KEYS[name].param))
+
+
+def key_summary(names):
+    """'run.max_steps, stop.*, ...': ``names`` (schema order) with a whole section as 'section.*'."""
+    names, out = set(names), []
+    for sec in SECTIONS:
+        keys = [n for n in KEYS if n.startswith(sec + ".")]
+        if all(n in names for n in keys):
+            out.append(f"{sec}.*")
+        else:
+            out += [n for n in keys if n in names]
+    return ", ".join(out)
 
 
 def gamma_n_from_epsilon(epsilon, k_n, m_eff=0.5):
@@ -453,16 +482,21 @@ def resolve(raw):
 
 
 def reference_markdown():
-    """The config reference table of docs/config.md, generated from SCHEMA."""
-    rows = ["| key | default | meaning |", "|---|---|---|"]
+    """The config reference table of docs/config.md, generated from SCHEMA.
+
+    Columns: key, default, the flags ``restart`` and ``physics`` (yes/no), meaning.
+    """
+    rows = ["| key | default | restart | physics | meaning |", "|---|---|---|---|---|"]
     for k in SCHEMA:
         d = ("required" if k.default is REQUIRED else "derived" if k.default is DERIVED
              else _toml_value(k.default))
         doc = k.doc + (f" (one of {', '.join(k.choices)})" if k.choices else "")
-        rows.append(f"| `{k.section}.{k.name}` | {d} | {doc} |")
+        flags = " | ".join("yes" if f else "no" for f in (k.restart, k.physics))
+        rows.append(f"| `{k.section}.{k.name}` | {d} | {flags} | {doc} |")
     return "\n".join(rows)
 
 
 __all__ = ["Config", "ConfigError", "load", "resolve", "parse_set", "SCHEMA",
+           "RESTART_KEYS", "PHYSICS_KEYS", "PARAM_KEYS", "key_summary",
            "gamma_n_from_epsilon", "restitution", "collision_time",
            "reference_markdown"]

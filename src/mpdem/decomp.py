@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from .parallel import Channel
+from .parallel import channel
 from .checkpoint import PARTICLE_FIELDS, WALL_FIELDS
 from .state import MOVE_FIELDS, select_contacts
 
@@ -41,11 +41,11 @@ TAG_HALO_ROWS = 23
 
 
 class Domain:
-    """Decomposition of the particles over the ranks of ``comm``.
+    """Decomposition of the particles over the ranks of a Channel (``parallel``).
 
     Parameters
     ----------
-    comm : mpi4py communicator or None
+    net : parallel.Channel, mpi4py communicator or None
         None runs on one rank without MPI.
     r_list : float
         Halo width: contact distance plus skin [d].
@@ -54,9 +54,8 @@ class Domain:
         fraction of the way to the balanced ones.
     """
 
-    def __init__(self, comm=None, r_list=1.2, tolerance=0.1, damping=0.5):
-        self.comm = comm
-        self.net = Channel(comm)
+    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5):
+        self.net = channel(net)
         self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
         self.bounds = np.array([-math.inf] + [math.inf] * self.size)

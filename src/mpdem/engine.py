@@ -105,10 +105,8 @@ class Engine:
         self.sort_every = 20
         self.info = StepInfo()
         self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
-        self._overlap = 0.0      # this rank's largest overlap of the last force evaluation
+        self.last_overlap = 0.0  # this rank's largest overlap of the last force evaluation
         self._contacts = 0       # this rank's contacts of the last force evaluation
-        # the driver's per-rank flags (signal, wall time), agreed by max in each step's allreduce
-        self.flags = []
 
     def set_chunks(self, nchunk):
         """Split the rows into ``nchunk`` chunks for the threads (more than threads
@@ -242,33 +240,42 @@ class Engine:
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c
 
-    def setup(self):
+    def start(self):
         """Neighbour lists and the set-up force evaluation (no history increment)."""
         self.rebuild()
-        self._overlap, self._contacts = self.forces(increment=False)
-        self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
+        self.last_overlap, self._contacts = self.forces(increment=False)
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
-    def resume(self, max_overlap=0.0):
-        """Set-up for a state read from a checkpoint: lists only.
+    def start_from_file(self, max_overlap=0.0, n_rebuilds=0):
+        """Set-up for a state read from a state file: lists only.
 
         Forces, torques and contact slots come from the file (they carry the
         half-step velocities of the damping terms), so nothing is recomputed
         and the next step is bit for bit the one the straight run takes.
+        ``max_overlap`` and ``n_rebuilds`` are the straight run's (this
+        set-up's rebuild is not counted).
         """
         s = self.state
         self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
         self.rebuild()
-        self._overlap = max_overlap
-        self.info = StepInfo(self.domain.max(self._overlap), self.contacts())
+        self.n_rebuilds = n_rebuilds
+        self.last_overlap = max_overlap
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
-    def step(self):
+    def step(self, flags=()):
         """One velocity-Verlet step; returns the StepInfo (reduced over ranks).
 
         ``info.max_overlap`` is that of the previous force evaluation: it
         travels in the one allreduce of the step, with the displacement that
         decides the rebuild. ``info.n_contacts`` is updated by ``contacts()``.
+
+        Parameters
+        ----------
+        flags : sequence of float
+            The driver's per-rank flags (signal, wall time, ...), agreed by
+            max in the same allreduce; ``info.flags`` holds the result.
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
@@ -277,17 +284,17 @@ class Engine:
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
         red = self._reduce
-        if len(red) != 4 + len(self.flags):
-            red = self._reduce = np.zeros(4 + len(self.flags))
-        red[0], red[1], red[2], red[3] = d2, self._overlap, -z_min, z_max
-        red[4:] = self.flags
+        if len(red) != 4 + len(flags):
+            red = self._reduce = np.zeros(4 + len(flags))
+        red[0], red[1], red[2], red[3] = d2, self.last_overlap, -z_min, z_max
+        red[4:] = flags
         d2, overlap, neg_z_min, z_max, *flags = dom.max_many(red)
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
         else:
             dom.refresh(s)
-        self._overlap, self._contacts = self.forces(increment=True)
+        self.last_overlap, self._contacts = self.forces(increment=True)
         t = time.perf_counter()
         kick(s.n_own, s.v, s.omega, s.f, s.torque, s.fixed, p.dt)
         self.timers["integration"] += time.perf_counter() - t
@@ -307,7 +314,7 @@ class Engine:
         self.info.n_contacts = n
         return n
 
-    def run(self, n):
+    def advance(self, n):
         """Advance n steps (no monitors); returns the last StepInfo."""
         info = self.info
         for _ in range(n):

@@ -5,6 +5,6 @@ class MpdemError(Exception):
     """An input, file or run problem, said in one line naming what and why.
 
     Subclasses: ``config.ConfigError`` (and ``AgreedError``, ``sweep.SweepError``),
-    ``build.InputError``, ``checkpoint.StateFileError``, ``simulation.RunError``,
+    ``build.InputError``, ``checkpoint.StateFileError``, ``schedule.RunError``,
     ``analysis.report.AnalysisError``, ``threads.ThreadsError``.
     """

@@ -11,20 +11,52 @@ what moves where and calls this module to move it:
   halo, at rebuilds);
 - ``GhostPlan``: the per-step refresh of ghost x, v, omega through
   persistent requests on buffers built at the rebuild;
-- pickled ``allgather``, ``alltoall`` and ``gather``, for the few exchanges
-  of whole state sets that run once per run or per checkpoint.
+- pickled ``allgather``, ``alltoall``, ``gather`` and ``bcast``, for the few
+  exchanges of whole state sets that run once per run or per checkpoint;
+- the agreement on errors (``agree``, ``on_root``), ``barrier`` and ``abort``.
 
+``world()`` starts MPI for the CLI. No other module but ``checkpoint`` (its
+parallel HDF5 open) touches the communicator: they take a Channel.
 mpi4py is imported when a Channel is made for a communicator, so one-rank
 runs without MPI never import it.
 """
 from __future__ import annotations
 
+import os
+import sys
 import time
 
 import numpy as np
 
 # point-to-point tags; every exchange is completed before the next one starts
 TAG_GHOSTS = 31
+
+
+def world(exit_status=1):
+    """A Channel on MPI's COMM_WORLD, after checking that the launcher and mpi4py agree.
+
+    A process started by an mpiexec of several processes that sees a world
+    of one (mpi4py built for another MPI) prints why and exits with
+    ``exit_status``: each such process is a world of its own, so an abort
+    would stop only itself.
+    """
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    launched = os.environ.get("OMPI_COMM_WORLD_SIZE") or os.environ.get("PMI_SIZE")
+    if launched and int(launched) > 1 and comm.Get_size() == 1:
+        lib = MPI.Get_library_version().strip(chr(0)).splitlines()[0]
+        sys.stderr.write(
+            f"mpdem: started by an mpiexec of {launched} processes, but mpi4py sees a world of "
+            f"size 1: mpi4py was built for a different MPI ({lib}).\n"
+            f"       Use the mpiexec of the MPI that mpi4py was built with (the .venv/bin/mpiexec "
+            f"wrapper), or rebuild mpi4py (tools/setup.sh).\n")
+        sys.exit(exit_status)
+    return Channel(comm)
+
+
+def channel(net):
+    """``net`` as a Channel: a Channel itself, or one made for a communicator or None."""
+    return net if isinstance(net, Channel) else Channel(net)
 
 
 class Channel:
@@ -194,6 +226,77 @@ class Channel:
         out = self.comm.gather(obj, root=root)
         self.seconds += time.perf_counter() - t
         return out
+
+    def bcast(self, obj, root=0):
+        """``root``'s ``obj`` on every rank."""
+        if not self.parallel:
+            return obj
+        t = time.perf_counter()
+        out = self.comm.bcast(obj, root=root)
+        self.seconds += time.perf_counter() - t
+        return out
+
+    def sum_u64(self, values):
+        """Element-wise global sum of unsigned 64-bit integers (checksums; wraps modulo 2**64).
+
+        Parameters
+        ----------
+        values : sequence of int
+
+        Returns
+        -------
+        (k,) uint64, a new array
+        """
+        a = np.array(values, np.uint64)
+        if self.parallel:
+            t = time.perf_counter()
+            self.comm.Allreduce(self.mpi.IN_PLACE, a, op=self.mpi.SUM)
+            self.seconds += time.perf_counter() - t
+        return a
+
+    def barrier(self):
+        """Wait until every rank is here."""
+        if self.parallel:
+            t = time.perf_counter()
+            self.comm.Barrier()
+            self.seconds += time.perf_counter() - t
+
+    # -- errors: the same outcome on every rank --
+    def agree(self, err, exc):
+        """Raise ``exc(message)`` on every rank if any rank has one (collective).
+
+        Parameters
+        ----------
+        err : str or None
+            This rank's error message, or None.
+        exc : type of Exception
+            Raised with the first rank's message.
+        """
+        errs = [e for e in self.allgather(err) if e]
+        if errs:
+            raise exc(errs[0])
+
+    def on_root(self, fn, *args, catch=()):
+        """``fn(*args)`` on rank 0 and its result on every rank (collective).
+
+        An exception of a type in ``catch`` raised on rank 0 is raised on
+        every rank; others stay rank 0's (the CLI aborts on them).
+        """
+        res = None
+        if self.rank == 0:
+            try:
+                res = fn(*args)
+            except catch as e:
+                res = e
+        res = self.bcast(res)
+        if catch and isinstance(res, catch):
+            raise res
+        return res
+
+    def abort(self, status):
+        """Stop every rank with exit ``status`` (MPI_Abort); returns on one rank."""
+        if self.parallel:
+            self.comm.Abort(status)
 
 
 class GhostPlan:

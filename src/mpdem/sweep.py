@@ -16,7 +16,6 @@ row writes a checkpoint and the sweep exits 75.
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 import signal

@@ -12,12 +12,13 @@
 This module finds and loads the runs (analysing those that need it), groups
 them into parameter sets, fits eqs. 7 and 9 and writes the CSV and JSON
 tables; the figures are drawn by ``figures``, the comparison with the paper
-and README.md by ``comparison`` (``Run``, ``Set`` and families: ``runs``).
+and README.md by ``comparison`` (``RunResult``, ``Set`` and families: ``runs``).
 
-A parameter set is every run parameter of ``report.PARAMS`` except the seed,
-compared exactly, and every other physics key of the run's config (the
-summary's ``physics``) equal as well. Error bars are the standard error of the mean over the
-runs (seeds) of a set; a set with one seed has none (empty in the tables).
+A parameter set is every run parameter of ``config.PARAM_KEYS`` except the
+seed, compared exactly, and every other physics key of the run's config
+(``config.PHYSICS_KEYS``, the summary's ``physics``) equal as well. Error
+bars are the standard error of the mean over the runs (seeds) of a set; a
+set with one seed has none (empty in the tables).
 Empty CSV cells mean "not available".
 """
 from __future__ import annotations
@@ -31,11 +32,12 @@ import warnings
 import numpy as np
 
 from .. import rundir
+from ..config import PARAM_KEYS
 from . import fits, paper
 from .comparison import comparisons, write_readme
 from .figures import make_figures
-from .report import PARAMS, SUMMARY, AnalysisError
-from .runs import NAN, SHORT, Run, Set, families, mean_sem
+from .report import SUMMARY, AnalysisError
+from .runs import NAN, SHORT, RunResult, Set, families, mean_sem
 
 SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mobilised_fraction",
                   "z_halved", "phi_halved", "overlap_median", "step")
@@ -45,7 +47,7 @@ SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mob
 
 def set_key(params):
     """The exact, tolerance-free key of a parameter set: every parameter but the seed."""
-    return tuple((k, params.get(k)) for k in PARAMS if k != "run.seed")
+    return tuple((k, params.get(k)) for k in PARAM_KEYS if k != "run.seed")
 
 
 def _order(v):
@@ -57,7 +59,7 @@ SORT = ("contact.model", "pour.N", "box.L_x", "box.L_y", "pour.K0", "contact.gam
 
 
 def _set_order(params):
-    rest = [k for k in PARAMS if k not in SORT]
+    rest = [k for k in PARAM_KEYS if k not in SORT]
     return tuple(_order(params.get(k)) for k in SORT + tuple(rest))
 
 
@@ -121,11 +123,11 @@ def _analyse(path, why, log, settings=None):
 
 
 def load_run(path, analyze_missing=True, log=print):
-    """One run directory as a Run, analysing it first if it needs it and may.
+    """One run directory as a RunResult, analysing it first if it needs it and may.
 
     Returns
     -------
-    (Run, None), or (None, reason) when the run cannot be used: unfinished,
+    (RunResult, None), or (None, reason) when the run cannot be used: unfinished,
     not analysed (with ``analyze_missing`` False), analysis failed, summary
     unreadable or incomplete, or not converged (docs/model.md 5.4: a run at the
     step cap is not used for comparisons).
@@ -158,13 +160,13 @@ def load_run(path, analyze_missing=True, log=print):
         return None, f"unreadable {summ}: {e}"
     if not isinstance(s, dict):
         return None, f"{summ}: not a JSON object"
-    missing = [k for k in PARAMS if k not in (s.get("params") or {})]
+    missing = [k for k in PARAM_KEYS if k not in (s.get("params") or {})]
     if missing:
         return None, f"{summ}: params lack {', '.join(missing)}"
     if not s.get("converged"):
         return None, (f"not converged (stopped at step {s.get('step', '?')} without reaching the kinetic-energy "
                       f"threshold; docs/model.md 5.4: not used for comparisons)")
-    run = Run(os.path.normpath(path), s)
+    run = RunResult(os.path.normpath(path), s)
     if not (math.isfinite(run.q["z"]) and math.isfinite(run.q["phi"])):
         return None, f"{summ}: no bulk z or phi"
     return run, None
@@ -174,9 +176,8 @@ def _physics_key(physics):
     """A run's physics keys as a hashable, canonical tuple. A key a summary lacks (written
     before the key existed) takes its default, so old and new runs of one physics agree."""
     from ..config import DERIVED, KEYS, REQUIRED
-    from .report import NOT_PHYSICS
     full = {k: spec.default for k, spec in KEYS.items()
-            if not k.startswith(NOT_PHYSICS) and spec.default is not REQUIRED and spec.default is not DERIVED}
+            if spec.physics and spec.default is not REQUIRED and spec.default is not DERIVED}
     full.update(physics)
     return tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in full.items()))
 
@@ -194,7 +195,7 @@ def group(runs):
     """
     by_key, skipped = {}, []
     for r in runs:
-        # PARAMS name the set; every other physics key of the config must agree as well
+        # PARAM_KEYS name the set; every other physics key of the config must agree as well
         other = _physics_key(r.s.get("physics") or {})
         by_key.setdefault((set_key(r.params), other), []).append(r)
     sets = []
@@ -290,20 +291,20 @@ RUN_COLUMNS = ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "alpha
 
 def write_runs_csv(path, sets):
     """runs.csv: one row per run."""
-    head = ["set", "path"] + [SHORT[k] for k in PARAMS] + ["converged", *RUN_COLUMNS, "n_warnings"]
-    rows = [[s.id, r.path] + [r.params[k] for k in PARAMS] + [True] + [r.q[c] for c in RUN_COLUMNS]
+    head = ["set", "path"] + [SHORT[k] for k in PARAM_KEYS] + ["converged", *RUN_COLUMNS, "n_warnings"]
+    rows = [[s.id, r.path] + [r.params[k] for k in PARAM_KEYS] + [True] + [r.q[c] for c in RUN_COLUMNS]
             + [len(r.s.get("warnings") or [])] for s in sets for r in s.runs]
     rundir.write_csv(path, head, rows)
 
 
 def write_sets_csv(path, sets):
     """sets.csv: one row per parameter set, mean and standard error over its seeds."""
-    head = ["set"] + [SHORT[k] for k in PARAMS if k != "run.seed"] + ["n_seeds", "seeds"]
+    head = ["set"] + [SHORT[k] for k in PARAM_KEYS if k != "run.seed"] + ["n_seeds", "seeds"]
     for q in SET_QUANTITIES:
         head += [f"{q}_mean", f"{q}_sem"] + ([f"{q}_count"] if q in ("alpha", "mobilised_fraction") else [])
     rows = []
     for s in sets:
-        row = [s.id] + [s.params[k] for k in PARAMS if k != "run.seed"] + [len(s.runs), " ".join(map(str, s.seeds))]
+        row = [s.id] + [s.params[k] for k in PARAM_KEYS if k != "run.seed"] + [len(s.runs), " ".join(map(str, s.seeds))]
         for q in SET_QUANTITIES:
             m, e, n = s.stat(q)
             row += [m, e] + ([n] if q in ("alpha", "mobilised_fraction") else [])

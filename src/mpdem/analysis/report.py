@@ -27,16 +27,9 @@ import numpy as np
 from .. import checkpoint, config, rundir
 from ..checkpoint import StateFileError
 from ..errors import MpdemError
-from . import bulk, fits, forces, gofr
+from . import bulk, fits, gofr, mobilisation
 
 SUMMARY = "summary.json"
-# run parameters copied into the summary: what the across-runs tables group by
-PARAMS = ("contact.mu", "contact.epsilon", "contact.k_n", "contact.k_t", "contact.gamma_n",
-          "contact.gamma_t", "contact.model", "pour.phi_i", "pour.N", "pour.K0", "run.seed",
-          "box.L_x", "box.L_y", "integration.dt")
-# config keys that cannot change a run's result (ARCHITECTURE.md, "Invariants") or are not the run's physics
-NOT_PHYSICS = ("run.seed", "run.max_steps", "run.initial_file", "run.fixed_types", "output.", "decomp.", "checks.", "analysis.",
-               "integration.skin", "integration.contact_slots")
 
 
 class AnalysisError(MpdemError, ValueError):
@@ -196,8 +189,8 @@ def measure(arrays, attrs, cfg):
     elif "id_i" not in arrays:
         s["zeta_note"] = f"no contact forces in a {attrs.get('kind', '?')} file (snapshots and final.h5 have them)"
     else:
-        sel = forces.bulk_contacts(arrays, arrays["id"], pk.x[:, 2], z1, z2)
-        fr = forces.force_ratios(arrays["F_n"][sel], arrays["F_t"][sel], c.mu, a.zeta_bins, a.mobilised)
+        sel = mobilisation.bulk_contacts(arrays, arrays["id"], pk.x[:, 2], z1, z2)
+        fr = mobilisation.force_ratios(arrays["F_n"][sel], arrays["F_t"][sel], c.mu, a.zeta_bins, a.mobilised)
         s["zeta"] = {k: fr[k] for k in ("n_contacts", "n_tensile", "n_above_one", "mobilised_fraction",
                                         "zeta_mean", "zeta_max", "n_ratio_above_one") if k in fr}
         tables["zeta"] = fr
@@ -244,8 +237,9 @@ def analyze(target, out=None, sets=(), plots=True, log=print):
     s = {"source": os.path.abspath(path), "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
          "time": float(attrs.get("time", 0.0)), "converged": bool(attrs.get("converged", False)),
          "written_by_ranks": int(attrs.get("ranks", 1)), "n": int(len(arrays["id"])),
-         "params": {k: cfg.values[k] for k in PARAMS},
-         "physics": {k: v for k, v in cfg.values.items() if not k.startswith(NOT_PHYSICS)},
+         # the parameter set (config.PARAM_KEYS, what the across-runs tables group by) and the physics
+         "params": {k: cfg.values[k] for k in config.PARAM_KEYS},
+         "physics": {k: cfg.values[k] for k in config.PHYSICS_KEYS},
          "settings": {k: v for k, v in cfg.values.items() if k.startswith("analysis.")}, **s}
     os.makedirs(out, exist_ok=True)
     write_tables(out, s, tables)

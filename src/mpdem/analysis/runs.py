@@ -1,12 +1,12 @@
 """Runs, parameter sets and families of sets, shared by ``collect``, ``figures`` and ``comparison``.
 
-A ``Run`` is one analysed run directory (its summary.json and the numbers
-read from it); a ``Set`` is the runs of one parameter set (every parameter
-of ``report.PARAMS`` but the seed equal), with the mean and standard error
-of a quantity over its seeds (``mean_sem``). ``families`` groups sets that
-differ in one parameter only (the curves of the figures, the eq. 7 and eq. 9
-fits). ``fmt_kn`` and ``fmt_pm`` are the number texts of the figures and
-README.md.
+A ``RunResult`` is one analysed run directory (its summary.json and the
+numbers read from it); a ``Set`` is the runs of one parameter set (every
+parameter of ``config.PARAM_KEYS`` but the seed equal), with the mean and
+standard error of a quantity over its seeds (``mean_sem``). ``families``
+groups sets that differ in one parameter only (the curves of the figures,
+the eq. 7 and eq. 9 fits). ``fmt_kn`` and ``fmt_pm`` are the number texts
+of the figures and README.md.
 """
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .report import PARAMS
+from ..config import PARAM_KEYS
 
-SHORT = {k: k.split(".", 1)[1] for k in PARAMS}   # contact.mu -> mu, run.seed -> seed, ...
+SHORT = {k: k.split(".", 1)[1] for k in PARAM_KEYS}   # contact.mu -> mu, run.seed -> seed, ...
 # k_t, gamma_n, gamma_t and dt follow k_n in a stiffness sweep (docs/model.md 3, 4.2)
 FOLLOW_K_N = ("contact.k_n", "contact.k_t", "contact.gamma_n", "contact.gamma_t", "integration.dt")
 NAN = float("nan")
@@ -26,7 +26,7 @@ NAN = float("nan")
 # ---------------------------------------------------------------- runs and sets
 
 @dataclass
-class Run:
+class RunResult:
     """One analysed run: its directory, its summary.json and the numbers read from it."""
     path: str
     s: dict
@@ -42,14 +42,14 @@ class Run:
 
 @dataclass
 class Set:
-    """The runs of one parameter set (all of ``PARAMS`` but the seed equal)."""
+    """The runs (``RunResult``) of one parameter set (all of ``PARAM_KEYS`` but the seed equal)."""
     id: str
     params: dict
     runs: list
 
     def p(self, short):
         """A parameter by its short name (mu, epsilon, k_n, phi_i, N, L_x, ...)."""
-        return self.params[next(k for k in PARAMS if SHORT[k] == short)]
+        return self.params[next(k for k in PARAM_KEYS if SHORT[k] == short)]
 
     @property
     def seeds(self):
@@ -97,7 +97,7 @@ def _sig(x):
 
 
 def family_key(params, vary):
-    """What a family of sets that differ only in ``vary`` (a PARAMS key) shares.
+    """What a family of sets that differ only in ``vary`` (a PARAM_KEYS key) shares.
 
     For ``contact.k_n`` the parameters that follow k_n enter as the scale-free
     k_t/k_n, gamma_n/sqrt(k_n) and gamma_t/gamma_n (10 significant digits) and
@@ -108,7 +108,7 @@ def family_key(params, vary):
     tuple of (name, value) pairs, short names.
     """
     skip = {"run.seed", vary} | (set(FOLLOW_K_N) if vary == "contact.k_n" else set())
-    key = [(SHORT[k], params[k]) for k in PARAMS if k not in skip]
+    key = [(SHORT[k], params[k]) for k in PARAM_KEYS if k not in skip]
     if vary == "contact.k_n":
         k, g_n, g_t = params["contact.k_n"], params["contact.gamma_n"], params["contact.gamma_t"]
         key += [("k_t/k_n", _sig(params["contact.k_t"] / k)), ("gamma_n/sqrt(k_n)", _sig(g_n / math.sqrt(k))),

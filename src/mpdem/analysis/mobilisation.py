@@ -1,4 +1,4 @@
-"""Force ratios of the contacts: P(zeta), zeta = |F_t| / (mu F_n) (docs/model.md 6.7)."""
+"""Mobilisation of friction at the contacts: P(zeta), zeta = |F_t| / (mu F_n) (docs/model.md 6.7)."""
 from __future__ import annotations
 
 import numpy as np

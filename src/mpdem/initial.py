@@ -1,0 +1,174 @@
+"""The initial state of a new run: poured onto a bed, or read from a file.
+
+``particles`` reads a particle file of any kind mpdem takes (a text table,
+an mpdem state file, a LAMMPS data file or dump); the runs and the bench
+share it. ``initial_state`` builds the whole state of a new run (every rank
+alike) with the pile's geometry, which the run keeps for its checks.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import build, checkpoint, lammps
+
+
+@dataclass
+class Pile:
+    """The pile's geometry, fixed at the start (a restart record of the run).
+
+    Attributes
+    ----------
+    z_bed : float
+        Highest bed centre [d] (-inf without a bed).
+    z_bed_mean : float
+        Mean bed height [d]: a mobile sphere below it fell through.
+    h_insert : float
+        Height of the insertion region [d] (escape check).
+    """
+    z_bed: float = -math.inf
+    z_bed_mean: float = -math.inf
+    h_insert: float = 0.0
+
+
+@dataclass
+class Initial:
+    """A new run's whole initial state (the same on every rank).
+
+    Attributes
+    ----------
+    whole : dict of arrays
+        ``Domain.scatter``'s input: id (N,), x, v, omega (N, 3), fixed (N,)
+        uint8; with contact slots count, partner, ds from a state file, and
+        wall_ds (N, 3) when it has them and the run has the wall.
+    pile : Pile
+    n_mobile, n_bed : int
+    """
+    whole: dict
+    pile: Pile
+    n_mobile: int
+    n_bed: int
+
+
+def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
+    """The particles of a file, whatever its kind.
+
+    Parameters
+    ----------
+    path : str
+        Text table (``build.read_table``), mpdem state file, or LAMMPS data
+        file or text dump (``lammps.read``, types from ``run.fixed_types``).
+    cfg : Config
+    all_fixed : bool
+        Every particle is a bed sphere (``bed.file``).
+    lammps_table : dict or None
+        The LAMMPS file, already read (``lammps.initial_for``).
+    log : callable
+        Takes a line about what was read.
+
+    Returns
+    -------
+    dict with ids (N,) int64, x, v, omega (N, 3) float64, fixed (N,) uint8,
+    slots (count, partner, ds) of a state file or None, wall_ds (N, 3) or None.
+    """
+    slots = wall_ds = None
+    if not os.path.exists(path):
+        raise build.InputError(f"initial file {path}: no such file")
+    if checkpoint.is_state_file(path):
+        a, _ = checkpoint.read_state(path)
+        t = {"ids": a["id"], "x": a["x"], "v": a["v"], "omega": a["omega"], "fixed": a["fixed"]}
+        slots, wall_ds = (a["count"], a["partner"], a["ds"]), a.get("wall_ds")
+    elif lammps.kind(path):
+        t = lammps_table
+        if t is None or all_fixed:
+            t = lammps.read(path, () if all_fixed else cfg.run.fixed_types,
+                            what="bed.file" if all_fixed else "run.initial_file")
+        log(f"read {path}: {t['note']}" if all_fixed else
+            f"read {path}: {t['note']}; {int(t['fixed'].sum())} bed spheres (types {list(cfg.run.fixed_types)})")
+    else:
+        t = build.read_table(path)
+    out = {k: t[k] for k in ("ids", "x", "v", "omega", "fixed")}
+    if all_fixed:
+        out["fixed"] = np.ones(len(out["ids"]), np.uint8)
+    out["slots"], out["wall_ds"] = slots, wall_ds
+    return out
+
+
+def bed(cfg, net, log):
+    """The frozen bed of a pour: from ``bed.file``, or made by rank 0 and sent to all.
+
+    Warns when its areal density is outside [bed.density_min, bed.density_max].
+    """
+    if cfg.bed.file:
+        b = build.Bed(particles(cfg.bed.file, cfg, all_fixed=True, log=log)["x"].copy(),
+                      note=f"from {cfg.bed.file}")
+    else:
+        b = net.bcast(build.make_bed(cfg, progress=log) if net.rank == 0 else None)
+    dens = len(b.x) / (cfg.box.L_x * cfg.box.L_y)
+    log(f"bed: {len(b.x)} frozen spheres, {dens:.3f} per d^2, z_bed = {b.z_top:.4f}; {b.note}")
+    if not cfg.bed.density_min <= dens <= cfg.bed.density_max:
+        log.warn(f"bed areal density {dens:.3f} per d^2 is outside "
+                 f"[{cfg.bed.density_min:g}, {cfg.bed.density_max:g}]")
+    return b
+
+
+def pour(cfg, b, log):
+    """Mobile spheres inserted at random above bed ``b`` (docs/model.md 5.3): whole-state arrays."""
+    N, L_x, L_y = cfg.pour.N, cfg.box.L_x, cfg.box.L_y
+    H = build.insertion_height(N, L_x, L_y, cfg.pour.phi_i)
+    z0 = b.z_top + 1.0
+    log(f"pour: inserting {N} spheres at phi_i = {cfg.pour.phi_i:g} in z in [{z0:.3f}, {z0 + H:.3f}]")
+    xm = build.insert_random(build.rng(cfg.run.seed, build.STREAM_POUR), N, L_x, L_y, z0, z0 + H, obstacles=b.x)
+    vm = build.initial_velocities(build.rng(cfg.run.seed, build.STREAM_VELOCITY), N, cfg.pour.K0)
+    nb = len(b.x)
+    x = np.concatenate([xm, b.x])
+    return {"ids": np.arange(N + nb, dtype=np.int64), "x": x, "v": np.concatenate([vm, np.zeros((nb, 3))]),
+            "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)]),
+            "slots": None, "wall_ds": None}, H
+
+
+def initial_state(cfg, net, log, lammps_table=None):
+    """A new run's initial state, checked (docs/model.md 8), identical on every rank.
+
+    Parameters
+    ----------
+    cfg : Config
+    net : parallel.Channel
+        Rank 0 makes the bed; the others receive it.
+    log : schedule.Logger
+    lammps_table : dict or None
+        A LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).
+
+    Returns
+    -------
+    Initial
+    """
+    L_x, L_y = cfg.box.L_x, cfg.box.L_y
+    if cfg.run.initial_file:
+        p = particles(cfg.run.initial_file, cfg, lammps_table=lammps_table, log=log)
+        fixed, x = p["fixed"], p["x"]
+        b = build.Bed(x[fixed == 1].copy(), note=f"from {cfg.run.initial_file}")
+        z_bed = float(x[fixed == 1, 2].max()) if fixed.any() else -math.inf
+        zm = x[fixed == 0, 2]
+        h_insert = float(zm.max() - max(z_bed, zm.min())) if len(zm) else 0.0
+        # a given settled pile rests in the bed's hollows
+        z_floor = b.z_mean
+    else:
+        b = bed(cfg, net, log)
+        p, h_insert = pour(cfg, b, log)
+        fixed, x = p["fixed"], p["x"]
+        z_bed = b.z_top
+        z_floor = z_bed + 0.5
+    build.check_initial(p["ids"], x, fixed, L_x, L_y, z_floor, allow_overlap=p["slots"] is not None,
+                        overlap_warn=cfg.checks.overlap_warn, warn=log.warn, wall=cfg.bed.wall)
+    whole = {"id": p["ids"], "x": x, "v": p["v"], "omega": p["omega"], "fixed": fixed}
+    if cfg.bed.wall and p["wall_ds"] is not None:
+        whole["wall_ds"] = p["wall_ds"]
+    if p["slots"] is not None:
+        whole.update(zip(("count", "partner", "ds"), p["slots"]))
+    n_bed = len(b.x)
+    pile = Pile(z_bed=z_bed, z_bed_mean=b.z_mean if n_bed else -math.inf, h_insert=h_insert)
+    return Initial(whole, pile, n_mobile=int((fixed == 0).sum()), n_bed=n_bed)

@@ -1,0 +1,212 @@
+"""Restart: choose the state file, check its config, and resume the run from it.
+
+``open_target`` picks the newest usable state file of a run directory (or
+takes the file given), reads this rank's share of it collectively and
+resolves the restart's config. ``verdict`` says whether there is anything to
+do; ``resume`` gives a new ``simulation.Run`` the file's particles and the
+restart records of its schedules. The next step is then bit for bit the one
+the straight run takes (ARCHITECTURE.md, invariants).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tomllib
+from dataclasses import dataclass
+
+from . import checkpoint, config, initial, rundir
+from .checkpoint import StateFileError
+from .schedule import from_dict
+
+EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
+# attributes a state file needs to be restarted from
+NEEDED = ("run_state", "n_mobile", "n_bed", "config")
+
+
+@dataclass
+class Target:
+    """A state file chosen for a restart, read, with its config resolved.
+
+    Attributes
+    ----------
+    path : str
+    run_dir : str
+    local : dict of arrays
+        This rank's share of the file (``checkpoint.read``).
+    attrs : dict
+    cfg : Config
+        The restart's config: the file's, with --set.
+    stop_changed : list of str
+        ``stop.*`` keys that --set changed.
+    skipped : list of str
+        Why newer files were passed over.
+    """
+    path: str
+    run_dir: str
+    local: dict
+    attrs: dict
+    cfg: object
+    stop_changed: list
+    skipped: list
+
+
+def candidates(target):
+    """Files a restart of ``target`` may start from, newest first, and the run directory.
+
+    A directory gives its checkpoints and final.h5, ordered by step (from
+    the file attributes; a file whose attributes cannot be read is tried
+    last). A file gives itself; its run directory is the parent of
+    ``checkpoints/`` or the directory it is in.
+    """
+    if os.path.isdir(target):
+        run = target
+        files = [p for _, p in rundir.checkpoints(run)]
+        if os.path.exists(rundir.final_path(run)):
+            files.append(rundir.final_path(run))
+        if not files:
+            raise StateFileError(f"{run}: no checkpoints/ckpt-*.h5 and no final.h5 to restart from")
+
+        def step(p):
+            try:
+                return int(checkpoint.read_attrs(p)["step"])
+            except (StateFileError, KeyError):
+                return -1
+        # newest first; at equal steps the final state (it knows the run ended)
+        return sorted(files, key=lambda p: (step(p), p == rundir.final_path(run)), reverse=True), run
+    if not os.path.exists(target):
+        raise StateFileError(f"{target}: no such file or directory")
+    d = os.path.dirname(os.path.abspath(target))
+    run = os.path.dirname(d) if os.path.basename(d) in (rundir.CKPT_DIR, rundir.SNAP_DIR) else d
+    return [target], run
+
+
+def restart_config(attrs, path, run, sets):
+    """The config of a restart: the file's, checked against RUN/config.toml, with --set.
+
+    Raises StateFileError when the run directory's config differs from the
+    checkpoint's in a key that changes the arithmetic, and ConfigError when
+    --set tries to change such a key.
+    """
+    try:
+        # the keys derived in the run stay derived: a restart leaves config.toml as it was
+        raw = config.raw_from_toml(attrs.get("config", ""), origin=path)
+        cfg = config.resolve(raw)
+    except (tomllib.TOMLDecodeError, config.ConfigError) as e:
+        raise StateFileError(f"{path}: its config is unusable ({e})") from None
+    ours = os.path.join(run, "config.toml")
+    if os.path.exists(ours):
+        try:
+            mine = config.load(ours)
+        except config.ConfigError as e:
+            raise StateFileError(f"{ours}: {e}") from None
+        diff = _fixed_keys_differing(cfg, mine)
+        if diff:
+            k = diff[0]
+            raise StateFileError(f"{path} does not match {ours}: {k} = {cfg.values[k]!r} in the checkpoint, "
+                                 f"{mine.values[k]!r} in the run directory ({len(diff)} keys differ); "
+                                 f"restart from a checkpoint of this run")
+    if sets:
+        new = config.load(None, sets, base=raw)
+        bad = _fixed_keys_differing(new, cfg)
+        if bad:
+            raise config.ConfigError(
+                f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only {config.key_summary(config.RESTART_KEYS)}; "
+                f"to continue with other physics start a new run with --set run.initial_file={path}")
+        cfg = new
+    return cfg
+
+
+def _fixed_keys_differing(a, b):
+    """Keys a restart may not change (not in config.RESTART_KEYS) whose values differ between two Configs."""
+    return [k for k in config.KEYS if not config.KEYS[k].restart and a.values[k] != b.values[k]]
+
+
+def open_target(target, net, sets):
+    """The newest usable state file of ``target`` (a run directory or a state file), read collectively.
+
+    Parameters
+    ----------
+    target : str
+    net : parallel.Channel
+    sets : list of str
+        ``--set key=value`` (only keys that may change at restart).
+
+    Returns
+    -------
+    Target
+
+    Raises
+    ------
+    StateFileError
+        On every rank alike: no usable file (each one's reason listed).
+    """
+    # rank 0 chooses the order; every rank then reads the same files collectively
+    files, run_dir = net.on_root(candidates, target, catch=StateFileError)
+    skipped = []
+    for path in files:
+        try:
+            local, attrs = checkpoint.read(path, net)
+            missing = [k for k in NEEDED if k not in attrs]
+            if attrs.get("kind") not in checkpoint.KINDS or missing:
+                raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
+                                     f"restart accepts the checkpoints, snapshots and final.h5 of a run")
+            cfg = restart_config(attrs, path, run_dir, sets)
+            # the file's own config, to see which stop.* keys --set changed
+            old = config.resolve(config.raw_from_toml(attrs["config"], origin=path))
+            changed = [k for k in cfg.values if k.startswith("stop.") and cfg.values[k] != old.values[k]]
+            return Target(path, run_dir, local, attrs, cfg, changed, skipped)
+        except StateFileError as e:
+            if not os.path.isdir(target):
+                raise
+            skipped.append(str(e))
+    raise StateFileError(f"{run_dir}: no usable state file to restart from:\n  " + "\n  ".join(skipped))
+
+
+def verdict(t, say):
+    """Whether to go on from ``t``: None to resume, else the exit status (nothing to do).
+
+    A converged run goes on only under a stop rule changed by --set; a final
+    state at ``run.max_steps`` needs a higher cap. ``say`` (a Logger) takes
+    the lines that explain it, and warnings for skipped files.
+    """
+    path, attrs, cfg = t.path, t.attrs, t.cfg
+    for e in t.skipped:
+        say.warn(f"restart: skipping {e}")
+    if t.skipped:
+        say.warn(f"restart: falling back to {path} (step {attrs['step']})")
+    if attrs.get("converged") and not t.stop_changed:
+        say(f"restart: {path}: the run converged at step {attrs['step']}; nothing to do")
+        return EXIT_OK
+    if attrs.get("converged"):
+        say(f"restart: {path} converged at step {attrs['step']}; going on under the changed stop rule "
+            f"({', '.join(f'{k} = {cfg.values[k]!r}' for k in t.stop_changed)})")
+    # a checkpoint at the cap still goes on, to write the final state
+    if attrs.get("kind") == "final" and int(attrs["step"]) >= cfg.run.max_steps:
+        say(f"restart: {path} is at step {attrs['step']} and run.max_steps = {cfg.run.max_steps}; "
+            f"raise it with --set run.max_steps=... to go on")
+        return EXIT_NOT_CONVERGED
+    return None
+
+
+def resume(run, t):
+    """Continue ``run`` (a new ``simulation.Run`` in ``t.run_dir``) from state file ``t``.
+
+    Distributes the file's rows to the slab owners, gives the run and its
+    schedules their restart records, rewrites config.toml (a --set may have
+    changed it) and cuts thermo.csv back to the file's step.
+    """
+    attrs, rs = t.attrs, json.loads(t.attrs["run_state"])
+    run.history = from_dict(type(run.history), rs)
+    run.history.segments += 1
+    for part in (run.stop, run.checkpoints, run.snapshots):
+        part.restore(from_dict(type(part.record()), rs))
+    st = run.domain.distribute(t.local, float(attrs["L_x"]), float(attrs["L_y"]))
+    st.step, st.time = int(attrs["step"]), float(attrs["time"])
+    if run.rank == 0:
+        rundir.write_atomic(os.path.join(run.out, "config.toml"), run.cfg.to_toml())
+        rundir.truncate_thermo(os.path.join(run.out, "thermo.csv"), st.step)
+    run.log(f"restart: from {t.path} at step {st.step} (t = {st.time:.6g}), segment {run.history.segments}, "
+            f"{run.domain.size} ranks (written by {attrs.get('ranks', '?')})")
+    for w in run.cfg.warnings:
+        run.log.warn(w)
+    run.begin(st, from_dict(initial.Pile, rs), int(attrs["n_mobile"]), int(attrs["n_bed"]))

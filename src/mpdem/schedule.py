@@ -1,0 +1,327 @@
+"""What a run does between steps, each on its own schedule.
+
+``Checks`` (every step), ``StopRule`` with ``Thermo`` (every sample),
+``Progress`` (every ``output.progress_every`` steps), ``Checkpoints`` and
+``Snapshots`` (their ``output`` cadences). Each object that a restart must
+continue serialises its state into a typed record (a dataclass); the run
+stores the records' fields together as the ``run_state`` attribute of every
+state file, and a restart gives each object its record back (``restart``).
+All ranks call every object at the same steps; only rank 0 writes text.
+"""
+from __future__ import annotations
+
+import collections
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field, fields
+
+from . import rundir
+from .errors import MpdemError
+
+
+class RunError(MpdemError, RuntimeError):
+    """The run cannot go on (NaN, excessive overlap, a particle under the bed)."""
+
+
+def from_dict(cls, d):
+    """A record of type ``cls`` from the fields of ``d`` it names (others ignored, missing ones default)."""
+    return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
+
+
+class Logger:
+    """Lines to stdout and the run's log file (rank 0 only)."""
+
+    def __init__(self, path=None, quiet=False, rank=0):
+        self.rank, self.quiet = rank, quiet
+        self.fh = open(path, "a") if (path and rank == 0) else None
+
+    def __call__(self, msg):
+        if self.rank != 0:
+            return
+        if not self.quiet:
+            print(msg, flush=True)
+        if self.fh:
+            self.fh.write(msg + "\n")
+            self.fh.flush()
+
+    def warn(self, msg):
+        if self.rank == 0:
+            print(f"warning: {msg}", file=sys.stderr, flush=True)
+            if self.fh:
+                self.fh.write(f"warning: {msg}\n")
+                self.fh.flush()
+
+    def close(self):
+        if self.fh:
+            self.fh.close()
+
+
+def fmt_seconds(s):
+    """``1h02m`` or ``3m05s``; ``?`` for an unknown duration."""
+    if not math.isfinite(s) or s < 0:
+        return "?"
+    s = int(s)
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
+class Checks:
+    """Run-time checks of docs/model.md section 8, at every step.
+
+    Parameters
+    ----------
+    cfg : Config
+        ``checks.*`` and ``bed.wall``.
+    pile : initial.Pile
+    n_bed : int
+    log : Logger
+    """
+
+    def __init__(self, cfg, pile, n_bed, log):
+        self.c, self.wall, self.log = cfg.checks, cfg.bed.wall, log
+        self.under = pile.z_bed_mean if n_bed and not cfg.bed.wall else -math.inf
+        self.escape = pile.z_bed + 1.0 + pile.h_insert + cfg.checks.escape_margin
+        self.escaped, self.warned_at = False, -10**18
+
+    def fatal(self, info, step):
+        """Raise RunError for a NaN position or an overlap beyond ``checks.overlap_error``."""
+        if math.isnan(info.z_min):
+            raise RunError(f"step {step}: a position became NaN or infinite (check dt and k_n)")
+        if info.max_overlap > self.c.overlap_error:
+            raise RunError(f"step {step}: overlap {info.max_overlap:.4g} d exceeds "
+                           f"checks.overlap_error = {self.c.overlap_error:g} (dt too large or k_n too small "
+                           f"for the impact speeds)")
+
+    def __call__(self, info, step):
+        """All checks of one step: errors raise RunError, warnings are logged (overlaps at most every 10^4 steps)."""
+        self.fatal(info, step)
+        if info.max_overlap > self.c.overlap_warn and step - self.warned_at >= 10000:
+            self.warned_at = step
+            self.log.warn(f"step {step}: overlap {info.max_overlap:.4g} d exceeds "
+                          f"checks.overlap_warn = {self.c.overlap_warn:g}")
+        if info.z_min < self.under:
+            raise RunError(f"step {step}: a mobile sphere fell through the bed "
+                           f"(z = {info.z_min:.4g} below the mean bed height {self.under:.4g}); "
+                           f"under a sparse bed, bed.wall = true puts a wall plane at z = 0 to rest on")
+        if info.z_max > self.escape and not self.escaped:
+            self.escaped = True
+            self.log.warn(f"step {step}: a sphere escaped upwards to z = {info.z_max:.4g}")
+
+
+@dataclass
+class StopRecord:
+    """Restart state of the stop rule: its window of E_k/N samples [m g d]."""
+    stop_samples: list = field(default_factory=list)
+
+
+class StopRule:
+    """Kinetic-energy stop rule of docs/model.md 5.4 on samples every n_sample steps."""
+
+    def __init__(self, E_stop, rule, window, sample_interval, dt):
+        self.E_stop, self.rule = E_stop, rule
+        self.n_sample = max(1, int(round(sample_interval / dt)))
+        self.size = max(1, int(round(window / (self.n_sample * dt))))
+        self.samples = collections.deque(maxlen=self.size)
+
+    @classmethod
+    def from_config(cls, cfg, dt):
+        s = cfg.stop
+        return cls(s.E_stop, s.rule, s.window, s.sample_interval, dt)
+
+    def due(self, step):
+        return step % self.n_sample == 0
+
+    def add(self, ek):
+        self.samples.append(ek)
+
+    @property
+    def last(self):
+        """The newest sample (inf before the first)."""
+        return self.samples[-1] if self.samples else math.inf
+
+    @property
+    def mean(self):
+        return sum(self.samples) / len(self.samples) if self.samples else math.inf
+
+    def satisfied(self):
+        if self.rule == "instantaneous":
+            return bool(self.samples) and self.samples[-1] < self.E_stop
+        return len(self.samples) == self.size and self.mean < self.E_stop
+
+    def time_to_stop(self, dt):
+        """Rough simulated time until the stop, from the log-decay over the window [tau]."""
+        if len(self.samples) < 2 or min(self.samples) <= 0:
+            return math.nan
+        rate = (math.log(self.samples[0]) - math.log(self.samples[-1])) / ((len(self.samples) - 1) * self.n_sample * dt)
+        if rate <= 0:
+            return math.nan
+        return max(0.0, math.log(self.mean / self.E_stop) / rate)
+
+    def record(self):
+        return StopRecord(list(self.samples))
+
+    def restore(self, rec):
+        self.samples.extend(rec.stop_samples)
+
+
+class Thermo:
+    """RUN/thermo.csv: one line per stop-rule sample (rank 0 writes; a restart truncates it first)."""
+
+    HEADER = ("step,time,ek,ek_trans,ek_rot,ek_window,max_overlap,contacts_per_particle,"
+              "z_max,rebuilds,wall_seconds\n")
+
+    def __init__(self, out_dir, rank):
+        self.fh = None
+        if rank == 0:
+            path = os.path.join(out_dir, "thermo.csv")
+            new = not os.path.exists(path) or os.path.getsize(path) == 0
+            self.fh = open(path, "a")
+            if new:
+                self.fh.write(self.HEADER)
+
+    def write(self, st, et, er, N, stop, info, rebuilds, wall):
+        """One line: energies per mobile particle, the stop window's mean, the step's figures."""
+        if self.fh:
+            self.fh.write(f"{st.step},{st.time:.10g},{(et + er) / N:.6e},{et / N:.6e},{er / N:.6e},"
+                          f"{stop.mean:.6e},{info.max_overlap:.6e},{info.n_contacts / N:.5f},"
+                          f"{info.z_max:.6g},{rebuilds},{wall:.3f}\n")
+
+    def flush(self):
+        if self.fh:
+            self.fh.flush()
+
+    def close(self):
+        if self.fh:
+            self.fh.close()
+
+
+class Progress:
+    """A progress line every ``output.progress_every`` steps: rate, E_k, overlap, ETAs."""
+
+    def __init__(self, every, log, domain, dt, max_steps, N, step, t0):
+        self.every, self.log, self.domain, self.dt = every, log, domain, dt
+        self.max_steps, self.N = max_steps, N
+        self.t0 = t0                    # the loop's start (communication share) [perf_counter s]
+        self.t_last, self.s_last = time.perf_counter(), step
+
+    def due(self, step):
+        return step % self.every == 0
+
+    def line(self, st, info, stop):
+        """Log the line (collective: every rank calls it at the same steps)."""
+        now = time.perf_counter()
+        rate = (st.step - self.s_last) / max(now - self.t_last, 1e-9)
+        self.t_last, self.s_last = now, st.step
+        t_stop = stop.time_to_stop(self.dt) / self.dt / rate
+        par = ""
+        if self.domain.parallel:
+            # a collective: every rank computes it, rank 0 prints it
+            imbalance = self.domain.imbalance(st)
+            share = self.domain.comm_seconds / max(now - self.t0, 1e-9)
+            par = f"  imbalance {imbalance:4.2f}  comm {100 * share:3.0f}%"
+        # no E_k before the first sample: a dash, not "inf"
+        ek = stop.last
+        ek_text = f"{ek:9.3e}" if math.isfinite(ek) else f"{'-':>9}"
+        self.log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek_text}  "
+                 f"max_delta {info.max_overlap:8.2e}  contacts/N {info.n_contacts / self.N:5.2f}  "
+                 f"{rate:7.0f} steps/s{par}  eta cap {fmt_seconds((self.max_steps - st.step) / rate)}  "
+                 f"stop ~{fmt_seconds(t_stop)}")
+
+
+@dataclass
+class CheckpointRecord:
+    """Restart state of the checkpoints: how many were written (numbers the next)."""
+    n_checkpoints: int = 0
+
+
+class Checkpoints:
+    """RUN/checkpoints/ckpt-NNNNN.h5 every ``output.checkpoint_every`` steps or
+    ``output.checkpoint_seconds`` of wall time, and at an early stop; the newest
+    ``output.checkpoint_keep`` are kept.
+
+    Parameters
+    ----------
+    out_dir : str
+    output : config section ``output``
+    write : callable(path, kind)
+        Writes the state file (collective).
+    domain : Domain
+    log : Logger
+    """
+
+    def __init__(self, out_dir, output, write, domain, log):
+        self.out, self.o, self._write, self.domain, self.log = out_dir, output, write, domain, log
+        self.n = 0
+        self.last_write = 0.0           # seconds the last write took (slowest rank)
+        self.next_clock = time.monotonic() + output.checkpoint_seconds
+
+    def clock_due(self, now):
+        """This rank's clock says a checkpoint is due (agreed over ranks in the step's allreduce)."""
+        return self.o.checkpoint_seconds > 0 and now >= self.next_clock
+
+    def due(self, step, clock):
+        return bool(self.o.checkpoint_every and step % self.o.checkpoint_every == 0) or bool(clock)
+
+    def write(self, step):
+        """Write the next checkpoint (collective); returns its path."""
+        t = time.perf_counter()
+        path = rundir.checkpoint_path(self.out, self.n)
+        self.n += 1
+        self._write(path, "checkpoint")
+        if self.domain.rank == 0:
+            rundir.prune(self.out, self.o.checkpoint_keep)
+        self.last_write = self.domain.max(time.perf_counter() - t)
+        self.next_clock = time.monotonic() + self.o.checkpoint_seconds
+        self.log(f"checkpoint: {path} at step {step} ({self.last_write:.2f} s)")
+        return path
+
+    def record(self):
+        return CheckpointRecord(self.n)
+
+    def restore(self, rec):
+        self.n = rec.n_checkpoints
+
+
+@dataclass
+class SnapshotRecord:
+    """Restart state of the snapshots: how many were written (numbers the next)."""
+    n_snapshots: int = 0
+
+
+class Snapshots:
+    """RUN/snapshots/snap-NNNNN.h5 every ``output.snapshot_every`` steps, with XDMF sidecars.
+
+    ``write`` takes the same callable as ``Checkpoints``.
+    """
+
+    def __init__(self, out_dir, every, write, rank):
+        self.out, self.every, self._write, self.rank = out_dir, every, write, rank
+        self.n = 0
+
+    def due(self, step):
+        return bool(self.every) and step % self.every == 0
+
+    def write(self, final=False):
+        """Write the next snapshot, or RUN/final.h5 (collective); returns its path."""
+        from . import export
+        if final:
+            path = rundir.final_path(self.out)
+        else:
+            path = rundir.snapshot_path(self.out, self.n)
+            self.n += 1
+            if self.rank == 0:
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+        self._write(path, "final" if final else "snapshot")
+        if self.rank == 0:
+            export.write_xdmf(path)
+            if not final:
+                export.write_xdmf_series([p for _, p in rundir.snapshots(self.out)],
+                                         os.path.join(self.out, rundir.SNAP_DIR, "series.xmf"))
+        return path
+
+    def record(self):
+        return SnapshotRecord(self.n)
+
+    def restore(self, rec):
+        self.n = rec.n_snapshots
