@@ -146,14 +146,14 @@ def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
     ("run.seed=2", False), ("run.initial_file=x.h5", False),
 ])
 def test_a_restart_set_may_change_only_restart_keys(tmp_path, item, allowed):
-    from mpdem import rundir
+    from mpdem import restart
     attrs = {"config": cfg().to_toml()}
     if allowed:
         key, value = config.parse_set(item)
-        assert rundir.restart_config(attrs, "ck.h5", str(tmp_path), [item]).values[key] == value
+        assert restart.restart_config(attrs, "ck.h5", str(tmp_path), [item]).values[key] == value
     else:
         with pytest.raises(ConfigError, match=re.escape("a restart can change only run.max_steps, stop.*, checks.*")):
-            rundir.restart_config(attrs, "ck.h5", str(tmp_path), [item])
+            restart.restart_config(attrs, "ck.h5", str(tmp_path), [item])
 
 
 def test_sections_are_built_once_and_read_only():
