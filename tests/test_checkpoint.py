@@ -1,6 +1,7 @@
 """State files: round trip, integrity checks, restart fallback and refusals,
 and the contact list of snapshots."""
 import json
+import os
 
 import h5py
 import numpy as np
@@ -139,6 +140,26 @@ def test_checkpoints_are_numbered_and_pruned(small_run, tmp_path):
     assert [k for k, _ in rundir.checkpoints(str(out))] == [6, 7]
     steps = [checkpoint.read_attrs(p)["step"] for _, p in rundir.checkpoints(str(out))]
     assert steps == [17500, 20000]
+
+
+def test_clock_checkpoints_and_a_restart_from_one_give_the_straight_digest(small_run, tmp_path):
+    """output.checkpoint_seconds alone (no step schedule): checkpoints land on the clock,
+    and continuing from the oldest kept one ends with the straight run's digest."""
+    _, digest = small_run
+    out = tmp_path / "clock"
+    # a tiny interval: a checkpoint every few steps, whatever the machine's speed
+    assert main(["run", *sets("output.checkpoint_every=0", "output.checkpoint_seconds=0.05",
+                              "output.checkpoint_keep=2"), "--out", str(out), "--quiet"]) == 3
+    kept = rundir.checkpoints(str(out))
+    assert len(kept) == 2 and kept[-1][0] >= 2
+    steps = [checkpoint.read_attrs(p)["step"] for _, p in kept]
+    assert 0 < steps[0] < steps[1] < 20000
+    # restart from the older one: the newer one and the final state go
+    for name in ("final.h5", "final.xmf", "summary.json"):
+        (out / name).unlink()
+    os.remove(kept[-1][1])
+    assert main(["restart", str(out), "--quiet"]) == 3
+    assert json.loads((out / "summary.json").read_text())["digest"] == digest
 
 
 def _pair_forces_sum(st, phys, pairs):

@@ -254,7 +254,11 @@ class Checkpoints:
         self.out, self.o, self._write, self.domain, self.log = out_dir, output, write, domain, log
         self.n = 0
         self.last_write = 0.0           # seconds the last write took (slowest rank)
-        self.next_clock = time.monotonic() + output.checkpoint_seconds
+        self.start_clock()
+
+    def start_clock(self):
+        """The clock schedule counts from now (the loop's start, and each write)."""
+        self.next_clock = time.monotonic() + self.o.checkpoint_seconds
 
     def clock_due(self, now):
         """This rank's clock says a checkpoint is due (agreed over ranks in the step's allreduce)."""
@@ -272,7 +276,7 @@ class Checkpoints:
         if self.domain.rank == 0:
             rundir.prune(self.out, self.o.checkpoint_keep)
         self.last_write = self.domain.max(time.perf_counter() - t)
-        self.next_clock = time.monotonic() + self.o.checkpoint_seconds
+        self.start_clock()
         self.log(f"checkpoint: {path} at step {step} ({self.last_write:.2f} s)")
         return path
 

@@ -173,6 +173,7 @@ class Run:
         """The engine, set up for a new or a continued run; starts the loop's clock."""
         eng = self.engine = Engine(self.state, self.physics, self.domain)
         self.t0, self.first_step, h = time.perf_counter(), self.state.step, self.history
+        self.checkpoints.start_clock()
         if h.segments > 1:
             eng.start_from_file(h.max_overlap, h.n_rebuilds)
         else:
