@@ -49,19 +49,20 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     nbr_start = np.array([0, 1, 2], np.int64)
     nbr = np.array([1, 0], np.int32)
     hist = np.zeros((2, 3))
-    touch = np.zeros(2, np.uint8)
+    # evaluation 1; the stamp 0 (the previous one) marks a contact going on, any other a new one
+    stamp = np.full(2, 7, np.uint32)
     if ds_old is not None:
         hist[0] = ds_old
-        touch[0] = 1
+        stamp[0] = 0
     f = np.zeros((2, 3))
     t = np.zeros((2, 3))
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full
     # each entry its own history slot (no pairs shared: hist[k] is entry k's)
     res = contact_forces(2, x, v, omega, fx, nbr_start, nbr, np.arange(2, dtype=np.int32), 0, hist,
-                         np.zeros((0, 6)), touch, f, t, 10.0, 10.0, law, increment, np.zeros(2), np.zeros(2, np.int64),
-                         np.zeros((2, 4), np.int32))
-    return f, t, touch, hist, res
+                         np.zeros((0, 6)), stamp, 1, f, t, 10.0, 10.0, law, increment, np.zeros(2),
+                         np.zeros(2, np.int64), np.zeros((2, 4), np.int32))
+    return f, t, (stamp == 1).astype(np.uint8), hist, res
 
 
 @pytest.mark.parametrize("gamma_t", [0.0, 25.0])
@@ -114,6 +115,32 @@ def test_first_evaluation_does_not_increment():
     f, t, n, ds, _ = pair_kernel([[5, 5, 5.999], [5, 5, 5]], [[1, 0, 0], [0, 0, 0]], np.zeros((2, 3)),
                                  None, increment=True)
     assert ds[0, 0] == pytest.approx(1e-4)
+
+
+def test_a_contact_that_ended_starts_again_from_zero_history():
+    """docs/model.md 2.4: the history of a contact that ended is deleted. Two spheres graze,
+    part, and meet again on the same list entry (no rebuild): the step of the second touch
+    has the bits of a fresh engine started just before it (no history)."""
+    eng = make_engine([[2.0, 2.0, 2.0], [3.01, 2.0, 2.0]], v=[[0.2, 0.1, 0.0], [-0.2, -0.1, 0.0]],
+                      mu=0.5, gamma_t=20.0)
+    touched = False
+    while not (touched and eng.contacts() == 0):
+        eng.step()
+        touched = touched or eng.contacts() > 0
+    s = eng.state
+    rebuilds = eng.n_rebuilds
+    s.v[:2] = [[0.2, -0.1, 0.0], [-0.2, 0.1, 0.0]]
+    while True:
+        before = [a[:2].copy() for a in (s.x, s.v, s.omega)]
+        eng.step()
+        if eng.contacts() > 0:
+            break
+    assert eng.n_rebuilds == rebuilds                 # the same list entries as the first contact
+    assert np.any(s.torque[:2] != 0)                  # a tangential force
+    fresh = make_engine(*before, mu=0.5, gamma_t=20.0)
+    fresh.step()
+    for a, b in ((s.f, fresh.state.f), (s.torque, fresh.state.torque), (s.v, fresh.state.v)):
+        assert np.array_equal(a[:2], b[:2])
 
 
 def test_frictionless_has_no_tangential_force_or_torque():

@@ -60,7 +60,7 @@ class Engine:
     """Advance a State with a Physics over a Domain.
 
     Between rebuilds the contact history lives with the neighbour list
-    (``hist``, ``touch``, one entry per list entry) and is updated in place;
+    (``hist``, ``stamp``, one entry per list entry) and is updated in place;
     ``sync_slots`` packs it into the state's compact slots, which a rebuild,
     a migration and a checkpoint use.
 
@@ -93,7 +93,8 @@ class Engine:
         self.hist = np.zeros((0, 3))
         self.pair = np.zeros((0, 6))
         self._n_pairs = 0
-        self.touch = np.zeros(0, np.uint8)
+        self.stamp = np.zeros(0, np.uint32)
+        self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
         state.packer = self.sync_slots
@@ -137,19 +138,20 @@ class Engine:
         # made (forces() takes them back), so the peak memory holds the history once
         self.pair = np.zeros((0, 6))
         n = s.n_own
-        total = history.count_contacts(n, self.nbr_start, self.touch, s.slot_n, self.nchunk)
+        total = history.count_contacts(n, self.nbr_start, self.stamp, self._epoch, s.slot_n, self.nchunk)
         start = s.slot_offsets()
         slot_id = np.empty(total, np.int64)
         slot_ds = np.empty((total, 3))
         history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs, self.hist,
-                                 self.touch, start, slot_id, slot_ds, self.nchunk)
+                                 self.stamp, self._epoch, start, slot_id, slot_ds, self.nchunk)
         s.slot_id, s.slot_ds = slot_id, slot_ds
         s.slots_current = True
 
     def _unpack_slots(self):
         s = self.state
         history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs,
-                                 s.slot_offsets(), s.slot_id, s.slot_ds, self.hist, self.touch, self.nchunk)
+                                 s.slot_offsets(), s.slot_id, s.slot_ds, self.hist, self.stamp, self._epoch,
+                                 self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
@@ -202,7 +204,7 @@ class Engine:
         # the history moved to the slots before the lists were rebuilt: nothing to keep
         self.nbr_list = np.zeros(size, np.int32)
         self.link = np.zeros(size, np.int32)
-        self.touch = np.zeros(size, np.uint8)
+        self.stamp = np.zeros(size, np.uint32)
 
     def _sort_rows(self):
         """Order owned rows by cell so neighbours are near in memory.
@@ -227,8 +229,10 @@ class Engine:
         if len(self.pair) < self._n_pairs:
             # each step's lower rows write a pair's slot before the higher row reads it
             self.pair = np.empty((self._n_pairs, 6))
+        self._epoch += 1
         max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
-                                     self.link, self._n_pairs, self.hist, self.pair, self.touch, s.f, s.torque,
+                                     self.link, self._n_pairs, self.hist, self.pair, self.stamp, self._epoch,
+                                     s.f, s.torque,
                                      s.L_x, s.L_y, self.law, increment, self._chunk_max, self._chunk_count,
                                      self._found)
         if p.floor:
@@ -332,4 +336,4 @@ class Engine:
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
         return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
-                                                             self.hist, self.pair, self.touch))
+                                                             self.hist, self.pair, self.stamp))

@@ -9,10 +9,13 @@ the partner of row i, on this rank or another, holds the mirror of i's
 contact to the bit.
 
 Contact history lives with the neighbour list: entry k of the list (row i,
-partner j) has ``touch[k]``, 1 while the pair is in contact, and the slot
-``h = link[k]`` of ``hist``, the tangential displacement Delta s of i
-relative to j, read and written in place each step. Rows are split into
-chunks, one thread per chunk. A pair of two owned rows of one chunk has one
+partner j) has ``stamp[k]``, the number of the last force evaluation that
+found the pair in contact, and the slot ``h = link[k]`` of ``hist``, the
+tangential displacement Delta s of i relative to j, read and written in
+place each step. A contact whose stamp is not the previous evaluation's is
+new: its Delta s starts from zero (docs/model.md 2.4: the history of a
+contact that ended is deleted), so entries out of contact are never written.
+Rows are split into chunks, one thread per chunk. A pair of two owned rows of one chunk has one
 slot h < P for both entries (``link_entries``): the lower row computes the
 contact in full, keeps its Delta s in ``hist[h]`` and leaves its contact
 force and torque in ``pair[h]``; the higher row adds minus that force and
@@ -31,6 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from .geometry import min_image
+from .history import stamp_of
 
 R = 0.5          # particle radius [d]
 INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
@@ -62,8 +66,8 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque,
-                   L_x, L_y, law, increment, chunk_max, chunk_count, found):
+def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f,
+                   torque, L_x, L_y, law, increment, chunk_max, chunk_count, found):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
@@ -83,11 +87,14 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
     n_pairs : int
     hist : (n_pairs + U, 3) float64, in/out
         Delta s [d] of each slot's pair (the lower row's view for a shared
-        slot), zero when not in contact.
+        slot); read only if the pair was in contact at the previous evaluation.
     pair : (>= n_pairs, 6) float64, scratch
         Per shared slot: the lower row's contact force [m g] and torque [m g d].
-    touch : (E,) uint8, in/out
-        1 if the entry's pair is in contact after this evaluation.
+    stamp : (E,) uint32, in/out
+        Per entry, the number (mod 2**32) of the last evaluation that found its
+        pair in contact; set to ``epoch`` for the contacts of this one.
+    epoch : int
+        The number of this evaluation (the previous one is ``epoch - 1``).
     f, torque : (n_rows, 3) float64, out
         Force [m g] including gravity, torque [m g d].
     L_x, L_y : float
@@ -110,7 +117,7 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed,
-                       nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque, L_x, L_y, law,
+                       nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f, torque, L_x, L_y, law,
                        increment, found[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
@@ -123,8 +130,8 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, touch, f, torque, L_x, L_y,
-          law, increment, found):
+def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f, torque,
+          L_x, L_y, law, increment, found):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
     Per row: a screening pass records the contacts in ``found`` without a
@@ -138,6 +145,8 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
     hertz = law.model == MODEL_HERTZ
     friction = mu > 0.0
     dt = law.dt
+    now = stamp_of(epoch)
+    before = stamp_of(epoch - 1)
     hx = 0.5 * L_x
     hy = 0.5 * L_y
     max_overlap = 0.0
@@ -166,14 +175,6 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
             on = np.uint8(dx * dx + dy * dy + dz * dz < 1.0)
             found[m] = k
             m += on
-            was = touch[k]
-            touch[k] = on
-            if was > on:
-                # the contact ended (rare): its history is deleted (by both rows of a shared slot)
-                h = link[k]
-                hist[h, 0] = 0.0
-                hist[h, 1] = 0.0
-                hist[h, 2] = 0.0
         n_contacts += m
         fx = 0.0
         fy = 0.0
@@ -185,6 +186,9 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
             k = found[q]
             j = nbr_list[k]
             g = link[k]
+            # in contact at the previous evaluation too, or a new contact (history from zero)
+            was = stamp[k] == before
+            stamp[k] = now
             shared = g < n_pairs
             if shared and j < i:
                 # the lower row of the chunk computed this pair: minus its force, its torque
@@ -226,7 +230,8 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
                 vty = vry - vn * ny - (wz * nx - wx * nz)
                 vtz = vrz - vn * nz - (wx * ny - wy * nx)
                 sx, sy, sz, ftx, fty, ftz = _tangential(
-                    hist[g, 0], hist[g, 1], hist[g, 2], vtx, vty, vtz, nx, ny, nz,
+                    hist[g, 0] if was else 0.0, hist[g, 1] if was else 0.0, hist[g, 2] if was else 0.0,
+                    vtx, vty, vtz, nx, ny, nz,
                     hertz, scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
                 # + 0.0 stores a zero as +0.0 whichever way it was reached
                 hist[g, 0] = sx + 0.0

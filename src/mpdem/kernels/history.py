@@ -1,23 +1,32 @@
 """Contact history between its two homes: list entries and compact slots.
 
 Between rebuilds the history of row i's contact with partner j is with the
-neighbour-list entry k of that pair: ``touch[k]``, and Delta s in the slot
-``hist[link[k]]``, which the two entries of a pair within a chunk share
-(``neighbours.link_entries``). At a rebuild,
+neighbour-list entry k of that pair: ``stamp[k]``, the number of the last
+force evaluation that found it in contact (``contact_forces``), and Delta s in
+the slot ``hist[link[k]]``, which the two entries of a pair within a chunk
+share (``neighbours.link_entries``). An entry is in contact now if its stamp
+is the last evaluation's number, ``epoch``. At a rebuild,
 a migration or a checkpoint it is in compact per-row slots (partner ids
 ascending, Delta s), which travel with the particle (ARCHITECTURE.md).
 Both are sorted by partner id, so each direction is one merge per row.
 """
+import numpy as np
 from numba import njit, prange
 
 
+@njit(cache=True, inline="always")
+def stamp_of(epoch):
+    """The stamp of force evaluation number ``epoch``: its value mod 2**32 (uint32)."""
+    return np.uint32(epoch & 0xFFFFFFFF)
+
+
 @njit(cache=True, parallel=True)
-def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
+def count_contacts(n_own, nbr_start, stamp, epoch, slot_n, nchunk):
     """slot_n[i] = entries of row i in contact, for the owned rows.
 
     Parameters
     ----------
-    nbr_start : (n_own + 1,) int64; touch : (E,) uint8
+    nbr_start : (n_own + 1,) int64; stamp : (E,) uint32; epoch : int
     slot_n : (n_own,) int32, out
     nchunk : int
         Chunks of rows for the threads.
@@ -26,11 +35,12 @@ def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
     -------
     int : total contacts.
     """
+    now = stamp_of(epoch)
     for c in prange(nchunk):
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
-                m += touch[k]
+                m += stamp[k] == now
             slot_n[i] = m
     total = 0
     for i in range(n_own):
@@ -39,7 +49,7 @@ def count_contacts(n_own, nbr_start, touch, slot_n, nchunk):
 
 
 @njit(cache=True, parallel=True)
-def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, n_pairs, hist, touch, slot_start, slot_id,
+def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, n_pairs, hist, stamp, epoch, slot_start, slot_id,
                      slot_ds, nchunk):
     """Pack the entries in contact into compact slots.
 
@@ -53,16 +63,17 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, n_pairs, hist, touch
     nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32, link : (E,) int32
     n_pairs : int
         History slots below this are shared by the two entries of a pair.
-    hist : (n_pairs + U, 3) float64, touch : (E,) uint8
+    hist : (n_pairs + U, 3) float64, stamp : (E,) uint32, epoch : int
     slot_start : (n_own + 1,) int64
         Offsets of each row's slots (prefix sum of ``count_contacts``).
     slot_id : (M,) int64, slot_ds : (M, 3) float64, out
     """
+    now = stamp_of(epoch)
     for c in prange(nchunk):
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             p = slot_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
-                if touch[k]:
+                if stamp[k] == now:
                     j = nbr_list[k]
                     h = link[k]
                     slot_id[p] = ids[j]
@@ -77,7 +88,7 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, n_pairs, hist, touch
 
 @njit(cache=True, parallel=True)
 def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, n_pairs, slot_start, slot_id, slot_ds, hist,
-                     touch, nchunk):
+                     stamp, epoch, nchunk):
     """Unpack compact slots onto the entries of new neighbour lists.
 
     A slot whose partner is not in the new list is dropped: the pair is
@@ -89,8 +100,13 @@ def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, n_pairs, slot_start,
     ----------
     link : (E,) int32, n_pairs : int
     slot_start : (n_own + 1,) int64, slot_id : (M,) int64, slot_ds : (M, 3) float64
-    hist : (n_pairs + U, 3) float64, touch : (E,) uint8, out
+    hist : (n_pairs + U, 3) float64, stamp : (E,) uint32, out
+    epoch : int
+        The number of the last force evaluation: a slot's entry gets it as its
+        stamp (in contact then), any other entry ``epoch - 1``.
     """
+    now = stamp_of(epoch)
+    old = stamp_of(epoch - 1)
     for c in prange(nchunk):
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             p = slot_start[i]
@@ -103,12 +119,12 @@ def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, n_pairs, slot_start,
                 while p < pe and slot_id[p] < jid:
                     p += 1
                 if p < pe and slot_id[p] == jid:
-                    touch[k] = 1
+                    stamp[k] = now
                     if own:
                         for a in range(3):
                             hist[h, a] = slot_ds[p, a] + 0.0
                 else:
-                    touch[k] = 0
+                    stamp[k] = old
                     if own:
                         for a in range(3):
                             hist[h, a] = 0.0
