@@ -91,6 +91,7 @@ SCHEMA = (
     _k("integration", "contact_slots", 16, "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints load)", int, physics=False),
     _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous"), restart=True),
+    _k("stop", "energy", "total", "the kinetic energy the rule tests: 'total' (translational + rotational, the paper's) or 'translational' (a settled pile can keep a sphere spinning about the line through two contacts, which nothing in the contact model damps: docs/model.md 5.4)", str, ("total", "translational"), restart=True),
     _k("stop", "window", 1.0, "averaging window of the stop rule [tau]", restart=True),
     _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)", restart=True),
     _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one warning (a settled pile), deeper ones refused", restart=True, physics=False),

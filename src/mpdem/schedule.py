@@ -111,15 +111,17 @@ class Checks:
 
 @dataclass
 class StopRecord:
-    """Restart state of the stop rule: its window of E_k/N samples [m g d]."""
+    """Restart state of the stop rule: its window of E_k/N samples [m g d] and the energy they measure."""
     stop_samples: list = field(default_factory=list)
+    stop_energy: str = "total"
 
 
 class StopRule:
-    """Kinetic-energy stop rule of docs/model.md 5.4 on samples every n_sample steps."""
+    """Kinetic-energy stop rule of docs/model.md 5.4 on samples every n_sample steps
+    (of the total or the translational energy: ``stop.energy``)."""
 
-    def __init__(self, E_stop, rule, window, sample_interval, dt):
-        self.E_stop, self.rule = E_stop, rule
+    def __init__(self, E_stop, rule, window, sample_interval, dt, energy="total"):
+        self.E_stop, self.rule, self.energy = E_stop, rule, energy
         self.n_sample = max(1, int(round(sample_interval / dt)))
         self.size = max(1, int(round(window / (self.n_sample * dt))))
         self.samples = collections.deque(maxlen=self.size)
@@ -127,13 +129,15 @@ class StopRule:
     @classmethod
     def from_config(cls, cfg, dt):
         s = cfg.stop
-        return cls(s.E_stop, s.rule, s.window, s.sample_interval, dt)
+        return cls(s.E_stop, s.rule, s.window, s.sample_interval, dt, s.energy)
 
     def due(self, step):
         return step % self.n_sample == 0
 
-    def add(self, ek):
-        self.samples.append(ek)
+    def add(self, e_trans, e_rot, N):
+        """A sample: of the translational and rotational kinetic energy [m g d] of N
+        particles, the part ``energy`` names, per particle."""
+        self.samples.append((e_trans if self.energy == "translational" else e_trans + e_rot) / N)
 
     @property
     def last(self):
@@ -159,10 +163,12 @@ class StopRule:
         return max(0.0, math.log(self.mean / self.E_stop) / rate)
 
     def record(self):
-        return StopRecord(list(self.samples))
+        return StopRecord(list(self.samples), self.energy)
 
     def restore(self, rec):
-        self.samples.extend(rec.stop_samples)
+        # a restart that changes stop.energy starts a new window (the old samples measure the other energy)
+        if rec.stop_energy == self.energy:
+            self.samples.extend(rec.stop_samples)
 
 
 class Thermo:

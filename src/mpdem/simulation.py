@@ -191,7 +191,7 @@ class Run:
     def _sample(self, info, N):
         """A stop-rule sample and its thermo line; True if the rule holds."""
         et, er = self.engine.kinetic()
-        self.stop.add((et + er) / N)
+        self.stop.add(et, er, N)
         self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total())
         return self.stop.satisfied()
 

@@ -1,0 +1,90 @@
+"""stop.energy: a settled pile with a sphere that keeps spinning (docs/model.md 5.4).
+
+Frictionless contacts exert no torque, so a sphere given a spin keeps it
+exactly: the pile settles, the total kinetic energy never falls below E_stop,
+and only the translational rule (``stop.energy = "translational"``) stops it.
+That is the frictional campaign's spinner (a sphere turning about the line
+through two contacts) in its simplest, exact form.
+"""
+import json
+
+import numpy as np
+
+from mpdem import build, config
+from mpdem.schedule import StopRecord, StopRule
+from mpdem.simulation import Run
+
+from helpers import mpdem, settled_table
+
+SPIN = 2.0      # [sqrt(g/d)] about z, of the top sphere of one column: E_rot = 0.5 I w^2 = 0.2 [m g d]
+
+
+def spinner_table(path):
+    """The settled columns of ``helpers.settled_table`` (216 mobile on 36 bed, 6 d x 6 d), with
+    the top sphere of the first column spinning about z; returns its row."""
+    settled_table(path)
+    t = build.read_table(path)
+    top = int(np.argmax(np.where(t["fixed"] == 0, t["x"][:, 2], -np.inf)))
+    omega = np.zeros_like(t["x"])
+    omega[top, 2] = SPIN
+    build.write_table(path, t["ids"], t["x"], t["v"], t["fixed"], omega)
+    return top
+
+
+def run_pile(tmp_path, name, energy, max_steps=60000):
+    table = tmp_path / "spinner.txt"
+    top = spinner_table(table)
+    cfg = config.load(None, [f"run.max_steps={max_steps}", "box.L_x=6.0", "box.L_y=6.0", "contact.mu=0.0",
+                             "checks.overlap_warn=0.01", "stop.E_stop=1e-6", f'run.initial_file="{table}"',
+                             f'stop.energy="{energy}"'])
+    r = Run(cfg, str(tmp_path / name), quiet=True)
+    r.prepare()
+    status = r.run()
+    r.finish()
+    return r, status, top
+
+
+def test_the_rule_keeps_the_energy_it_names():
+    for energy, want in (("total", 3.0), ("translational", 1.0)):
+        rule = StopRule(2.0, "instantaneous", 0.1, 0.1, 0.1, energy)
+        rule.add(4.0, 8.0, 4)                         # per particle: 1 translational, 2 rotational
+        assert rule.last == want
+        assert rule.satisfied() == (want < 2.0)
+
+
+def test_a_restart_that_changes_the_energy_starts_a_new_window():
+    old = StopRule(1.0, "window", 0.3, 0.1, 0.1, "total")
+    for _ in range(3):
+        old.add(1.0, 1.0, 1)
+    same, other = (StopRule(1.0, "window", 0.3, 0.1, 0.1, e) for e in ("total", "translational"))
+    same.restore(old.record())
+    other.restore(old.record())
+    assert list(same.samples) == [2.0] * 3 and list(other.samples) == []
+    # a checkpoint written before the key existed measured the total energy
+    other.restore(StopRecord([2.0]))
+    assert list(other.samples) == []
+
+
+def test_a_spinning_sphere_holds_the_total_rule_but_not_the_translational_one(tmp_path):
+    r, status, top = run_pile(tmp_path, "total", "total")
+    assert status == "max_steps"
+    # frictionless: no torque, so the spin is kept to the bit, and it is all the energy left
+    assert r.state.omega[r.state.ids == top + 1][0].tolist() == [0.0, 0.0, SPIN]
+    e_rot = 0.5 * 0.1 * SPIN ** 2 / 216
+    assert r.ek > e_rot > 100 * r.cfg.stop.E_stop
+    assert r.ek - e_rot < r.cfg.stop.E_stop
+
+    r2, status2, _ = run_pile(tmp_path, "trans", "translational")
+    assert status2 == "converged" and r2.state.step < 60000
+    s = json.loads((tmp_path / "trans" / "summary.json").read_text())
+    assert s["converged"] and s["E_k_per_particle"] > e_rot
+
+
+def test_restart_with_the_translational_rule_ends_a_run_held_by_a_spinner(tmp_path):
+    run_pile(tmp_path, "held", "total", max_steps=30000)
+    p = mpdem("restart", tmp_path / "held", "--set", 'stop.energy="translational"', "--set", "run.max_steps=60000",
+              check=0)
+    s = json.loads((tmp_path / "held" / "summary.json").read_text())
+    assert s["status"] == "converged" and 30000 < s["steps"] < 60000, p.stdout
+    cfg = (tmp_path / "held" / "config.toml").read_text()
+    assert 'energy = "translational"' in cfg
