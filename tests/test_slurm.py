@@ -3,7 +3,9 @@
 
 A chain submitted as jobs/README.md shows it, from a directory outside the repository,
 with only the time and task count on the sbatch command line: at least two segments
-(exit 75, resubmitted, then 0) and the straight run's digest. Then a two-row sweep array
+(exit 75, resubmitted, then 0) and the straight run's digest. The first job gets Slurm's
+early-warning signal from the test (scancel --signal=USR1 --batch), so that the chain has
+two segments on a machine of any speed. Then a two-row sweep array
 that finishes. Where Slurm cannot run here (not root, no slurm-wlm), the test says why.
 """
 import json
@@ -23,8 +25,10 @@ pytestmark = [pytest.mark.slurm, pytest.mark.validation]
 ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT / "tools" / "local-slurm.sh"
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
-# a pile that takes longer than one 2-minute job (its first segment), and settles in the second
+# a pile that settles in about 75 s of 2 ranks here (875 000 steps); later segments of about
+# 35 s (a 2-minute job less an 80 s margin, MPDEM_MARGIN) if the run outlasts the second
 PILE = "pour.N=600 box.L_x=5 box.L_y=5 run.max_steps=2000000 output.progress_every=50000"
+MARGIN = "80"
 # the last line of a jobs.log that ends a chain
 ENDS = ("finished (exit", "error:", "stop:", "not converged:")
 SMALL = "pour.N=150 box.L_x=4 box.L_y=4 run.max_steps=2000000 output.progress_every=50000"
@@ -70,17 +74,29 @@ def digest(path):
 def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_path):
     sub = tmp_path / "elsewhere"                  # not the repository root
     sub.mkdir()
-    env = dict(slurm, MPDEM_RUN_DIR="runs/chain", MPDEM_SET=PILE)
+    env = dict(slurm, MPDEM_RUN_DIR="runs/chain", MPDEM_SET=PILE, MPDEM_MARGIN=MARGIN)
     p = subprocess.run(["sbatch", "--time=2", "--ntasks=2", str(ROOT / "jobs/slurm/chain.sbatch")], cwd=sub,
                        env=env, capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
+    job = p.stdout.split()[-1]
     # meanwhile, the straight run on one rank
     ref = {}
     straight = threading.Thread(target=lambda: ref.update(p=mpdem(
         "run", "--out", tmp_path / "straight", "--quiet", *sum((["--set", kv] for kv in PILE.split()), []),
         timeout=1800)))
     straight.start()
-    log = jobs_log_until(sub / "runs/chain/jobs.log", ENDS, 1800, slurm)
+    # the first job gets Slurm's early-warning signal by hand once its run is pouring (every rank
+    # has its handlers then), the path of --signal=B:USR1@60: two segments at least, whatever
+    # the machine's speed or clock
+    mlog, jlog = sub / "runs/chain/log.txt", sub / "runs/chain/jobs.log"
+    t0 = time.monotonic()
+    while not (mlog.exists() and "\npour: " in mlog.read_text()):
+        assert time.monotonic() - t0 < 600, "the first segment did not start"
+        time.sleep(0.2)
+    sig = subprocess.run(["scancel", "--signal=USR1", "--batch", job], env=slurm, capture_output=True, text=True)
+    # (it may have stopped on its own meanwhile)
+    assert sig.returncode == 0 or "resubmitting" in jlog.read_text(), sig.stderr
+    log = jobs_log_until(jlog, ENDS, 1800, slurm)
     straight.join()
     assert ref["p"].returncode == 0, ref["p"].stderr
     text = "\n".join(log)
