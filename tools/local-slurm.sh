@@ -87,7 +87,11 @@ stop() {
   local dir=$1 f pid
   [[ -d $dir ]] || return 0
   export SLURM_CONF=$dir/slurm.conf
-  [[ -e $SLURM_CONF ]] && scancel --state=PENDING,RUNNING -u root 2>/dev/null || true
+  if [[ -e $SLURM_CONF ]]; then
+    scancel --state=PENDING,RUNNING -u root 2>/dev/null || true
+    # let the cancelled jobs' steps end before slurmd goes, or their slurmstepd outlive it
+    for _ in $(seq 60); do [[ -z $(squeue -h 2>/dev/null) ]] && break; sleep 0.5; done
+  fi
   for f in slurmd slurmctld; do
     pid=$(cat "$dir/$f.pid" 2>/dev/null || true)
     if [[ -n $pid ]] && kill "$pid" 2>/dev/null; then
