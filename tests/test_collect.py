@@ -362,3 +362,27 @@ def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
     new = dict(old, **{"bed.wall": False})
     assert _physics_key(old) == _physics_key(new)
     assert _physics_key(old) != _physics_key(dict(old, **{"bed.wall": True}))
+
+
+def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
+    """A set run under another stop rule (stop.energy, not a PARAM_KEYS column) at the same mu
+    is its own family: the z(mu) trend of the others does not step from mu = 0.5 to 0.5."""
+    from mpdem.analysis.runs import RunResult, families
+    rng = np.random.default_rng(11)
+    root = tmp_path / "runs"
+    for mu, z in ((0.0, 6.10), (0.5, 4.90), (1.0, 4.80)):
+        for seed in (1, 2):
+            make_run(root / f"mu{mu}_s{seed}", params(mu=mu, seed=seed), z + 0.001 * seed, 0.62, 0.5, rng)
+    s = make_run(root / "mu0.5_s1_translational", params(mu=0.5, seed=1), 5.0, 0.62, 0.5, rng)
+    s["physics"] = {"stop.energy": "translational", "stop.E_stop": 1e-9}   # E_stop: derived, not a family key
+    (root / "mu0.5_s1_translational/analysis/summary.json").write_text(json.dumps(s))
+    runs = [RunResult(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    sets, _ = co.group(runs)
+    assert len(sets) == 4 and sorted(x.extra.get("stop.energy", "total") for x in sets).count("translational") == 1
+    fams = families(sets, "contact.mu")
+    assert sorted(len(m) for _, m in fams) == [1, 3]
+    assert [f for f, m in fams if len(m) == 1][0]["stop.energy"] == "translational"
+    out = tmp_path / "out"
+    co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
+    trend = [ln for ln in (out / "README.md").read_text().splitlines() if ln.startswith("| z(mu) trend")]
+    assert len(trend) == 1 and "decreasing at every step" in trend[0], trend

@@ -182,6 +182,20 @@ def _physics_key(physics):
     return tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in full.items()))
 
 
+def _extra(physics_key):
+    """The keys of a ``_physics_key`` outside PARAM_KEYS set away from their defaults (not derived)."""
+    from ..config import DERIVED, KEYS, PARAM_KEYS, REQUIRED
+    out = {}
+    for k, v in physics_key:
+        spec = KEYS.get(k)
+        if spec is None or k in PARAM_KEYS or spec.default in (REQUIRED, DERIVED):
+            continue
+        default = tuple(spec.default) if isinstance(spec.default, (list, tuple)) else spec.default
+        if v != default:
+            out[k] = v
+    return out
+
+
 def group(runs):
     """Sets of runs with equal parameters; a repeated seed in a set is a duplicate.
 
@@ -208,7 +222,7 @@ def group(runs):
                                                           f"{kept[seed].path} (the same sample)"})
             else:
                 kept[seed] = r
-        sets.append(Set("", dict(key[0]), [kept[k] for k in sorted(kept, key=_order)]))
+        sets.append(Set("", dict(key[0]), [kept[k] for k in sorted(kept, key=_order)], _extra(key[1])))
     width = max(2, len(str(len(sets))))
     for i, s in enumerate(sets, 1):
         s.id = f"S{i:0{width}d}"

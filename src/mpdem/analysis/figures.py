@@ -31,7 +31,7 @@ def _seeds(n):
 def _label(fam, varying, keys=("mu", "epsilon")):
     names = {"mu": "μ", "epsilon": "ε", "phi_i": "φ_i", "k_n": "k_n"}
     parts = [f"{names[k]} = {fmt_kn(fam[k]) if k == 'k_n' else format(fam[k], 'g')}" for k in keys if k in fam]
-    return ", ".join(parts + [f"{k} = {fam[k]}" for k in varying if k not in keys])
+    return ", ".join(parts + [f"{k} = {fam[k]}" for k in varying if k not in keys and k in fam])
 
 
 # follow epsilon and k_n: named in a label only when the families differ in nothing else
@@ -40,7 +40,8 @@ _QUIET = ("k_t", "gamma_n", "dt", "k_t/k_n", "gamma_n/sqrt(k_n)")
 
 def _varying(dicts):
     """The keys whose values differ between the family dicts (what tells their curves apart)."""
-    keys = [k for k in dicts[0]] if dicts else []
+    # every family's keys: an extra physics key (stop.energy) is only in the families that set it
+    keys = list(dict.fromkeys(k for d in dicts for k in d))
     vary = [k for k in keys if len({repr(d.get(k)) for d in dicts}) > 1]
     loud = [k for k in vary if k not in _QUIET]
     distinct = len({tuple(repr(d.get(k)) for k in loud) for d in dicts}) == len(dicts)

@@ -42,10 +42,16 @@ class RunResult:
 
 @dataclass
 class Set:
-    """The runs (``RunResult``) of one parameter set (all of ``PARAM_KEYS`` but the seed equal)."""
+    """The runs (``RunResult``) of one parameter set (all of ``PARAM_KEYS`` but the seed equal).
+
+    ``extra`` holds the physics keys outside ``PARAM_KEYS`` that the set's runs chose
+    away from their defaults (e.g. ``{"stop.energy": "translational"}``); derived keys
+    (E_stop, which follows k_n) are not among them. Families keep such sets apart.
+    """
     id: str
     params: dict
     runs: list
+    extra: dict = field(default_factory=dict)
 
     def p(self, short):
         """A parameter by its short name (mu, epsilon, k_n, phi_i, N, L_x, ...)."""
@@ -96,12 +102,12 @@ def _sig(x):
     return float(f"{x:.10g}")
 
 
-def family_key(params, vary):
+def family_key(params, vary, extra=None):
     """What a family of sets that differ only in ``vary`` (a PARAM_KEYS key) shares.
 
     For ``contact.k_n`` the parameters that follow k_n enter as the scale-free
     k_t/k_n, gamma_n/sqrt(k_n) and gamma_t/gamma_n (10 significant digits) and
-    dt is left out.
+    dt is left out. ``extra`` (a Set's ``extra``) enters as it is, by full key name.
 
     Returns
     -------
@@ -113,14 +119,14 @@ def family_key(params, vary):
         k, g_n, g_t = params["contact.k_n"], params["contact.gamma_n"], params["contact.gamma_t"]
         key += [("k_t/k_n", _sig(params["contact.k_t"] / k)), ("gamma_n/sqrt(k_n)", _sig(g_n / math.sqrt(k))),
                 ("gamma_t/gamma_n", _sig(g_t / g_n) if g_n else g_t)]
-    return tuple(key)
+    return tuple(key + sorted((extra or {}).items()))
 
 
 def families(sets, vary):
     """[(family dict, sets sorted by ``vary``)] in the order of the first set of each."""
     fam = {}
     for s in sets:
-        fam.setdefault(family_key(s.params, vary), []).append(s)
+        fam.setdefault(family_key(s.params, vary, s.extra), []).append(s)
     return [(dict(k), sorted(v, key=lambda s: s.params[vary])) for k, v in fam.items()]
 
 
