@@ -91,7 +91,10 @@ def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_pat
     mlog, jlog = sub / "runs/chain/log.txt", sub / "runs/chain/jobs.log"
     t0 = time.monotonic()
     while not (mlog.exists() and "\npour: " in mlog.read_text()):
-        assert time.monotonic() - t0 < 600, "the first segment did not start"
+        lines = jlog.read_text().splitlines() if jlog.exists() else []
+        ended = bool(lines) and any(w in lines[-1] for w in ENDS)
+        assert time.monotonic() - t0 < 600 and not ended, "the first segment did not pour:\n" + (
+            jlog.read_text() if jlog.exists() else "(no jobs.log)") + (mlog.read_text() if mlog.exists() else "")
         time.sleep(0.2)
     sig = subprocess.run(["scancel", "--signal=USR1", "--batch", job], env=slurm, capture_output=True, text=True)
     # (it may have stopped on its own meanwhile)
