@@ -61,7 +61,7 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     # each entry its own history slot (no pairs shared: hist[k] is entry k's)
     res = contact_forces(2, x, v, omega, fx, nbr_start, nbr, np.arange(2, dtype=np.int32), 0, hist,
                          np.zeros((0, 6)), stamp, 1, f, t, 10.0, 10.0, law, increment, np.zeros(2),
-                         np.zeros(2, np.int64), np.zeros((2, 4), np.int32))
+                         np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
     return f, t, (stamp == 1).astype(np.uint8), hist, res
 
 

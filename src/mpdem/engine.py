@@ -126,7 +126,8 @@ class Engine:
     def _scratch(self, width):
         """Per-chunk scratch of the force kernel for rows of up to ``width`` entries."""
         self._width = width
-        self._found = np.zeros((self.nchunk, width), np.int32)
+        self._found = np.zeros((self.nchunk, width, 2), np.int32)
+        self._sep = np.zeros((self.nchunk, width, 4))
 
     # -- contact history: list entries <-> compact slots --
     def sync_slots(self):
@@ -234,7 +235,7 @@ class Engine:
                                      self.link, self._n_pairs, self.hist, self.pair, self.stamp, self._epoch,
                                      s.f, s.torque,
                                      s.L_x, s.L_y, self.law, increment, self._chunk_max, self._chunk_count,
-                                     self._found)
+                                     self._found, self._sep)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
         if p.wall:
