@@ -115,7 +115,7 @@ def warm_up_kernels(phys, L_x, L_y):
 
     A 3 x 3 bed with five mobile spheres resting on it, touching each other
     and the bed (overlaps 0.005 d), stepped ``WARMUP_STEPS`` times with the
-    bench's physics on this rank alone.
+    bench's physics on this rank alone, then rebuilt and stepped once more.
     """
     g = np.arange(3.0)
     bed = np.array([[1.0 + i, 1.0 + j, 0.0] for j in g for i in g])
@@ -125,6 +125,9 @@ def warm_up_kernels(phys, L_x, L_y):
     eng = Engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None))
     eng.start()
     eng.advance(WARMUP_STEPS)
+    # a rebuild with contacts in the lists compiles the history's list-to-slot kernels too
+    eng.rebuild()
+    eng.advance(1)
     eng.kinetic()
     eng.contacts()
 
@@ -219,22 +222,25 @@ def run_table_bench(args, net):
     wall, rebuilds, before, after = timed_loop(eng, dom, args.steps)
     fig = dict(table=args.table, tile=tuple(args.tile), n_atoms=n_atoms, n_mobile=n_mobile, L_x=L_x, L_y=L_y,
                cfg=cfg, ranks=dom.size, steps=args.steps, wall=wall, wall_max=dom.max(wall), rebuilds=rebuilds,
-               phases=(before, after), **after_loop(eng, dom, st, baseline))
+               phases=(before, after), **after_loop(eng, dom, st, baseline, (before, after)))
     for line in report_lines(fig):
         say(line)
     return fig["ns"]
 
 
-def after_loop(eng, dom, st, baseline):
+def after_loop(eng, dom, st, baseline, phases):
     """Figures taken after the timed loop (collectives: every rank calls this).
 
     Returns contacts (global, both partners counted), E_k [m g d], imbalance,
+    per_rank (each rank's seconds per phase, from ``phases`` = (before, after) clocks),
     grown (peak RSS - baseline summed over ranks [bytes]), peak (largest
     process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed), threads.
     """
     from .threads import count
     et, er = eng.kinetic()
-    return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st),
+    before, after = phases
+    spent = {k: after[k] - before[k] for k in before}
+    return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st), per_rank=dom.allgather(spent),
                 grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
                 engine_bytes=int(dom.sum_int(np.array([eng.memory_bytes()]))[0]),
                 threads=count())
@@ -256,6 +262,9 @@ def report_lines(fig):
         + (f", imbalance (max/mean owned) {fig['imbalance']:.2f}" if par else ""),
         "bench: the loop by phase" + (" (rank 0's loop)" if par else "") + ":",
         *phase_lines(*fig["phases"], fig["wall"]),
+        *(["bench: seconds per rank: " + "; ".join(
+            f"{k} " + " / ".join(f"{p[k]:.3f}" for p in fig["per_rank"]) for k in fig["per_rank"][0])]
+          if par else []),
         f"bench: memory {fig['grown'] / n:.0f} bytes per atom (peak RSS minus the import baseline"
         + (", summed over ranks" if par else "") + ")"
         + f", engine arrays {fig['engine_bytes'] / n:.0f} bytes per atom"
