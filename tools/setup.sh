@@ -41,6 +41,8 @@ mpiexec_real=mpiexec.$flavour
 h5pc=hdf5-$flavour
 
 say() { printf 'setup: %s\n' "$*"; }
+# wait (up to 10 min) for another apt or dpkg run to release its lock instead of failing at once
+apt_get() { apt-get -o DPkg::Lock::Timeout=600 "$@"; }
 
 # ---- 1. system packages --------------------------------------------------
 have_system() {
@@ -51,9 +53,9 @@ if ! have_system; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     say "installing system packages: $pkgs"
     export DEBIAN_FRONTEND=noninteractive
-    apt-get update -qq
+    apt_get update -qq
     # shellcheck disable=SC2086
-    apt-get install -y -qq --no-install-recommends $pkgs >/dev/null
+    apt_get install -y -qq --no-install-recommends $pkgs >/dev/null
   else
     cat >&2 <<MSG
 setup: the $flavour MPI and parallel HDF5 system libraries are missing
@@ -69,16 +71,16 @@ fi
 # a single-node Slurm for the `slurm` tests (tools/local-slurm.sh): best effort, as root with apt
 if ! command -v slurmctld >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
   say "installing slurm-wlm and munge (the job templates are tested against a real Slurm)"
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null 2>&1 \
-    || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge >/dev/null; } \
+  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null 2>&1 \
+    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null; } \
     || say "slurm-wlm not installed; the slurm tests will say so and not run"
 fi
 
 # shellcheck lints the job scripts in the tests; a developer tool, so best effort
 if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
   say "installing shellcheck (lints jobs/ in the tests)"
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends shellcheck >/dev/null 2>&1 \
-    || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends shellcheck >/dev/null; } \
+  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null 2>&1 \
+    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null; } \
     || say "shellcheck not installed; the lint test of jobs/ will be skipped"
 fi
 
