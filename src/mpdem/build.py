@@ -17,6 +17,7 @@ from .decomp import Domain
 from .engine import Engine, Physics
 from .errors import MpdemError
 from .kernels.insert import rsa_insert
+from .rundir import write_atomic
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
@@ -215,15 +216,18 @@ def particle_ids(values, path):
 
 def write_table(path, ids, x, v=None, fixed=None, omega=None):
     """Write a particle table readable by ``read_table`` (exact: repr of doubles);
-    with ``omega``, the columns omegax omegay omegaz too."""
+    with ``omega``, the columns omegax omegay omegaz too. Atomic: written to
+    ``path.tmp``, then renamed."""
     n = len(ids)
     v = np.zeros((n, 3)) if v is None else v
     fixed = np.zeros(n, np.uint8) if fixed is None else fixed
-    with open(path, "w") as fh:
-        fh.write("# id x y z vx vy vz" + (" omegax omegay omegaz" if omega is not None else "") + " fixed\n")
+
+    def lines():
+        yield "# id x y z vx vy vz" + (" omegax omegay omegaz" if omega is not None else "") + " fixed\n"
         for k in range(n):
             row = [float(a) for a in (*x[k], *v[k], *(omega[k] if omega is not None else ()))]
-            fh.write(f"{int(ids[k])} " + " ".join(map(repr, row)) + f" {int(fixed[k])}\n")
+            yield f"{int(ids[k])} " + " ".join(map(repr, row)) + f" {int(fixed[k])}\n"
+    write_atomic(path, lines())
 
 
 def tile_table(table, L_x, L_y, nx, ny):
