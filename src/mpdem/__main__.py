@@ -25,7 +25,8 @@ import sys
 import time
 import tomllib
 
-EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+from .errors import EXIT_ERROR, EXIT_NOT_CONVERGED, EXIT_OK, EXIT_RESTART
+
 T_START = time.monotonic()
 # stop signals received before the run loop takes over (a job may end during set-up)
 SIGNALS = []
@@ -133,7 +134,6 @@ def cmd_run(args, net):
 
 def _go(run):
     """Run to the end (final state, exit 0 or 3) or to an early stop (checkpoint, exit 75)."""
-    from .simulation import EXIT_RESTART
     if run.run() == "interrupted":
         run.log.close()
         return EXIT_RESTART
@@ -226,7 +226,7 @@ def cmd_sweep(args):
     jobs = args.jobs or sweep.default_jobs(args.ranks, args.threads)
     rc = sweep.Sweep(rows, args.out, args.config, args.set, jobs=jobs, ranks=args.ranks, threads=args.threads,
                      progress=args.progress).run()
-    if rc == sweep.EXIT_RESTART or args.no_collect:
+    if rc == EXIT_RESTART or args.no_collect:
         return rc
     from .analysis.collect import collect
     from .analysis.report import AnalysisError

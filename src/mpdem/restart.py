@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 from . import checkpoint, config, initial, rundir
 from .checkpoint import StateFileError
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK
 from .schedule import from_dict
 
-EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
 # attributes a state file needs to be restarted from
 NEEDED = ("run_state", "n_mobile", "n_bed", "config")
 

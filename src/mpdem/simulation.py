@@ -20,13 +20,13 @@ from . import build, checkpoint, initial, rundir, summary
 from .config import collision_time
 from .decomp import Domain
 from .engine import Engine, Physics
+from .errors import EXIT_RESTART
 from .pairs import contact_pairs
 from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
                        Thermo)
 
 # exit status of a run that stopped early on purpose (wall time, SIGTERM,
 # SIGUSR1) after writing a checkpoint: "not finished, restart me" (EX_TEMPFAIL)
-EXIT_RESTART = 75
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
 

@@ -25,8 +25,8 @@ import time
 from dataclasses import dataclass, field
 
 from . import config, rundir
+from .errors import EXIT_RESTART
 
-EXIT_RESTART = 75
 # table column -> (config key, the short name used in run directory names)
 COLUMNS = {"mu": ("contact.mu", "mu"), "epsilon": ("contact.epsilon", "eps"), "k_n": ("contact.k_n", "kn"),
            "phi_i": ("pour.phi_i", "phi"), "seed": ("run.seed", "s")}
