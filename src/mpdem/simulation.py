@@ -25,8 +25,8 @@ from .pairs import contact_pairs
 from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
                        Thermo)
 
-# exit status of a run that stopped early on purpose (wall time, SIGTERM,
-# SIGUSR1) after writing a checkpoint: "not finished, restart me" (EX_TEMPFAIL)
+# the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
+# ("not finished, restart me", EX_TEMPFAIL)
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
 

@@ -140,10 +140,10 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
     ``found`` and their separations in ``sep`` (kept for the law, not read or
     computed again: 8-14 % faster), without a branch on the outcome (about
     half the entries are contacts, in no predictable order, so a branch there
-    is mispredicted often); then the
-    law is applied to the contacts in partner-id order. A contact with a
-    linked lower row of the chunk (done earlier by this thread) takes the
-    force and torque that row left; any other is computed in full.
+    is mispredicted often); then the law is applied to the contacts in
+    partner-id order. A contact with a linked lower row of the chunk (done
+    earlier by this thread) takes the force and torque that row left; any
+    other is computed in full.
     """
     k_t, gamma_t, mu = law.k_t, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
