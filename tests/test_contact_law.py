@@ -57,11 +57,12 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     f = np.zeros((2, 3))
     t = np.zeros((2, 3))
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
-    # one chunk per row, so each row computes its view in full
-    # each entry its own history slot (no pairs shared: hist[k] is entry k's)
-    res = contact_forces(2, x, v, omega, fx, nbr_start, nbr, np.arange(2, dtype=np.int32), 0, hist,
-                         np.zeros((0, 6)), stamp, 1, f, t, 10.0, 10.0, law, increment, np.zeros(2),
-                         np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
+    # one chunk per row, so each row computes its view in full: each entry its own slot
+    # (link k, hist[k] is entry k's), both entries computed (comp_list = nbr)
+    lists = (nbr_start, nbr, np.arange(2, dtype=np.int32), nbr_start.copy(), nbr.copy())
+    scratch = (np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
+    res = contact_forces(2, x, v, omega, fx, lists, hist, np.zeros((3, 6)), stamp, 1, f, t, 10.0, 10.0, law,
+                         increment, scratch)
     return f, t, (stamp == 1).astype(np.uint8), hist, res
 
 

@@ -60,7 +60,8 @@ class Engine:
     """Advance a State with a Physics over a Domain.
 
     Between rebuilds the contact history lives with the neighbour list
-    (``hist``, ``stamp``, one entry per list entry) and is updated in place;
+    (``hist``, ``stamp``, one slot per computed pair, ``link_entries``) and is
+    updated in place;
     ``sync_slots`` packs it into the state's compact slots, which a rebuild,
     a migration and a checkpoint use.
 
@@ -90,10 +91,12 @@ class Engine:
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
         self.link = np.zeros(0, np.int32)
+        self.comp_start = np.zeros(state.capacity + 1, np.int64)
+        self.comp_list = np.zeros(0, np.int32)
         self.hist = np.zeros((0, 3))
         self.pair = np.zeros((0, 6))
-        self._n_pairs = 0
         self.stamp = np.zeros(0, np.uint32)
+        self._n_slots = 0
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
@@ -139,20 +142,20 @@ class Engine:
         # made (forces() takes them back), so the peak memory holds the history once
         self.pair = np.zeros((0, 6))
         n = s.n_own
-        total = history.count_contacts(n, self.nbr_start, self.stamp, self._epoch, s.slot_n, self.nchunk)
+        total = history.count_contacts(n, self.nbr_start, self.link, self.stamp, self._epoch, s.slot_n,
+                                       self.nchunk)
         start = s.slot_offsets()
         slot_id = np.empty(total, np.int64)
         slot_ds = np.empty((total, 3))
-        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs, self.hist,
-                                 self.stamp, self._epoch, start, slot_id, slot_ds, self.nchunk)
+        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self.hist, self.stamp,
+                                 self._epoch, start, slot_id, slot_ds, self.nchunk)
         s.slot_id, s.slot_ds = slot_id, slot_ds
         s.slots_current = True
 
     def _unpack_slots(self):
         s = self.state
-        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, self._n_pairs,
-                                 s.slot_offsets(), s.slot_id, s.slot_ds, self.hist, self.stamp, self._epoch,
-                                 self.nchunk)
+        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, s.slot_offsets(),
+                                 s.slot_id, s.slot_ds, self.hist, self.stamp, self._epoch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
@@ -191,21 +194,27 @@ class Engine:
         self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
 
     def _link(self):
-        """History slots of the entries (``link_entries``); a new ``hist`` for them.
+        """Computed and taken entries and their slots (``link_entries``); a new
+        ``hist`` and ``stamp`` for the slots.
 
         Only when the history is in the compact slots (``sync_slots``).
         """
         s = self.state
-        n_pairs, n_other = link_entries(s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk,
-                                        self.link)
-        self._n_pairs = int(n_pairs)
-        self.hist = np.empty((int(n_pairs + n_other), 3))
+        if len(self.comp_start) < s.n_own + 1:
+            self.comp_start = np.zeros(s.capacity + 1, np.int64)
+        args = (s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link, self.comp_start)
+        k = int(link_entries(*args, self.comp_list))
+        if k > len(self.comp_list):
+            self.comp_list = np.zeros(int(k * 1.1) + 64, np.int32)
+            link_entries(*args, self.comp_list)
+        self._n_slots = k
+        self.hist = np.empty((k, 3))
+        self.stamp = np.empty(k, np.uint32)
 
     def _alloc_lists(self, size):
         # the history moved to the slots before the lists were rebuilt: nothing to keep
         self.nbr_list = np.zeros(size, np.int32)
         self.link = np.zeros(size, np.int32)
-        self.stamp = np.zeros(size, np.uint32)
 
     def _sort_rows(self):
         """Order owned rows by cell so neighbours are near in memory.
@@ -227,15 +236,16 @@ class Engine:
         """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
         t = time.perf_counter()
         s, p = self.state, self.phys
-        if len(self.pair) < self._n_pairs:
-            # each step's lower rows write a pair's slot before the higher row reads it
-            self.pair = np.empty((self._n_pairs, 6))
+        if len(self.pair) < self._n_slots + 1:
+            # each step's computing rows write a pair's slot before any row sums it; the last
+            # row stays zero (what an entry out of contact adds)
+            self.pair = np.empty((self._n_slots + 1, 6))
+            self.pair[-1] = 0.0
         self._epoch += 1
-        max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, self.nbr_start, self.nbr_list,
-                                     self.link, self._n_pairs, self.hist, self.pair, self.stamp, self._epoch,
-                                     s.f, s.torque,
-                                     s.L_x, s.L_y, self.law, increment, self._chunk_max, self._chunk_count,
-                                     self._found, self._sep)
+        lists = (self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
+        scratch = (self._chunk_max, self._chunk_count, self._found, self._sep)
+        max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, lists, self.hist, self.pair, self.stamp,
+                                     self._epoch, s.f, s.torque, s.L_x, s.L_y, self.law, increment, scratch)
         if p.floor:
             floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
         if p.wall:
@@ -337,4 +347,5 @@ class Engine:
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
         return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
-                                                             self.hist, self.pair, self.stamp))
+                                                             self.comp_start, self.comp_list, self.hist,
+                                                             self.pair, self.stamp))

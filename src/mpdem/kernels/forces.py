@@ -1,29 +1,30 @@
 """Contact forces and torques (docs/model.md section 2).
 
-Each owned mobile particle computes every one of its contacts itself, from a
-full neighbour list sorted by partner id, and sums them in that order
-(ARCHITECTURE.md). The operations are arranged so that the two
-partners' views of a pair are exact negatives in IEEE arithmetic (raw
-difference, then minimum image; symmetric sums of partner quantities), so
-the partner of row i, on this rank or another, holds the mirror of i's
-contact to the bit.
+Each owned mobile particle sums its contacts in the order of its full
+neighbour list, sorted by partner id (ARCHITECTURE.md). The operations are
+arranged so that the two partners' views of a pair are exact negatives in
+IEEE arithmetic (raw difference, then minimum image; symmetric sums of
+partner quantities), so the partner of row i, on this rank or another, holds
+the mirror of i's contact to the bit.
 
-Contact history lives with the neighbour list: entry k of the list (row i,
-partner j) has ``stamp[k]``, the number of the last force evaluation that
-found the pair in contact, and the slot ``h = link[k]`` of ``hist``, the
-tangential displacement Delta s of i relative to j, read and written in
-place each step. A contact whose stamp is not the previous evaluation's is
-new: its Delta s starts from zero (docs/model.md 2.4: the history of a
-contact that ended is deleted), so entries out of contact are never written.
-Rows are split into chunks, one thread per chunk. A pair of two owned rows of one chunk has one
-slot h < P for both entries (``link_entries``): the lower row computes the
-contact in full, keeps its Delta s in ``hist[h]`` and leaves its contact
-force and torque in ``pair[h]``; the higher row adds minus that force and
-the same torque. Its own view would give exactly these values (n and F_t
-flip sign, f_n and n x F_t do not), so this is the same arithmetic, bit for
-bit, as computing both views, and the result does not depend on the chunks
-or threads. The lower rows meet their pairs in slot order, so they read and
-write ``hist`` and ``pair`` in sequence.
+Rows are split into chunks, one thread per chunk, which does its rows in
+ascending order. Of a pair of two owned mobile rows of one chunk the lower
+row computes the contact; every other pair (ghost, bed or other-chunk
+partner) is computed by each row (``neighbours.link_entries``). A computed
+contact has a slot g: ``stamp[g]``, the number of the last force evaluation
+that found it in contact, Delta s in ``hist[g]`` (the computing row's view),
+read and written in place each step, and the contact force and torque in
+``pair[g]``. A contact whose stamp is not the previous evaluation's is new:
+its Delta s starts from zero (docs/model.md 2.4: the history of a contact
+that ended is deleted), so slots out of contact are never written.
+
+Per row, two passes: the row computes its own contacts (screening only the
+entries it computes), then sums all its entries in partner-id order, adding
+``pair[g]`` for its own and, for a pair the lower row computed, minus its
+force and the same torque. The higher row's own view would give exactly
+these values (n and F_t flip sign, f_n and n x F_t do not), so this is the
+same arithmetic, bit for bit, as computing both views, and the result does
+not depend on the chunks or threads.
 Stored zeros are +0.0 (``x + 0.0``), so the stored state does not depend on
 which arithmetic path produced a zero.
 """
@@ -34,7 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 from .geometry import min_image
-from .history import stamp_of
+from .history import slot_of, stamp_of
 
 R = 0.5          # particle radius [d]
 INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
@@ -66,8 +67,8 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f,
-                   torque, L_x, L_y, law, increment, chunk_max, chunk_count, found, sep):
+def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque, L_x, L_y, law,
+                   increment, scratch):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
@@ -79,19 +80,20 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
         v and omega are the half-step values of velocity Verlet.
     fixed : (n_rows,) uint8
         1 for bed particles (never moved; zero force and torque here).
-    nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32
-        Full neighbour lists in CSR form, each sorted by partner id.
-    link : (E,) int32
-        Each entry's history slot (``link_entries``); below ``n_pairs`` shared
-        by the two entries of a pair within a chunk.
-    n_pairs : int
-    hist : (n_pairs + U, 3) float64, in/out
-        Delta s [d] of each slot's pair (the lower row's view for a shared
-        slot); read only if the pair was in contact at the previous evaluation.
-    pair : (>= n_pairs, 6) float64, scratch
-        Per shared slot: the lower row's contact force [m g] and torque [m g d].
-    stamp : (E,) uint32, in/out
-        Per entry, the number (mod 2**32) of the last evaluation that found its
+    lists : tuple (nbr_start, nbr_list, link, comp_start, comp_list)
+        ``nbr_start`` (n_own + 1,) int64 and ``nbr_list`` (E,) int32: full
+        neighbour lists in CSR form, each sorted by partner id; ``link`` (E,)
+        int32: each entry's slot, g or ~g (``link_entries``); ``comp_start``
+        (n_own + 1,) int64 and ``comp_list`` (K,) int32: the partners of the
+        entries each row computes, slot g = position in ``comp_list``.
+    hist : (K, 3) float64, in/out
+        Delta s [d] of each slot's pair (the computing row's view); read only
+        if the pair was in contact at the previous evaluation.
+    pair : (>= K + 1, 6) float64, scratch
+        Per slot: the computing row's contact force [m g] and torque [m g d];
+        the last row must be zeros (the kernel never writes it).
+    stamp : (K,) uint32, in/out
+        Per slot, the number (mod 2**32) of the last evaluation that found its
         pair in contact; set to ``epoch`` for the contacts of this one.
     epoch : int
         The number of this evaluation (the previous one is ``epoch - 1``).
@@ -102,12 +104,12 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
     law : Law
     increment : bool
         False on the set-up evaluation at t = 0 (no history increment).
-    chunk_max : (C,) float64, chunk_count : (C,) int64
-        Scratch, one slot per chunk of rows (C >= 1; any C gives the same result).
-    found : (C, W, 2) int32, sep : (C, W, 4) float64
-        Scratch of each chunk, W >= the longest list of a row: the entry and
-        partner row of each of a row's contacts, and their separation
-        x_i - x_j [d] and its square [d^2].
+    scratch : tuple (chunk_max, chunk_count, found, sep)
+        ``chunk_max`` (C,) float64 and ``chunk_count`` (C,) int64: one slot per
+        chunk of rows (C >= 1; any C gives the same result); ``found``
+        (C, W, 2) int32 and ``sep`` (C, W, 4) float64, W >= the longest list of
+        a row: the slot and partner row of each of a row's computed contacts,
+        their separation x_i - x_j [d] and its square [d^2].
 
     Returns
     -------
@@ -116,11 +118,11 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
     n_contacts : int
         Contacts counted from owned mobile particles (bed partners included).
     """
+    chunk_max, chunk_count, found, sep = scratch
     nchunk = len(chunk_max)
     for c in prange(nchunk):
-        mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed,
-                       nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f, torque, L_x, L_y, law,
-                       increment, found[c], sep[c])
+        mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed, lists, hist, pair,
+                       stamp, epoch, f, torque, L_x, L_y, law, increment, found[c], sep[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -132,19 +134,21 @@ def contact_forces(n_own, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, pair, stamp, epoch, f, torque,
-          L_x, L_y, law, increment, found, sep):
+def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque, L_x, L_y, law, increment,
+          found, sep):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
-    Per row: a screening pass records the contacts (entry, partner) in
-    ``found`` and their separations in ``sep`` (kept for the law, not read or
-    computed again: 8-14 % faster), without a branch on the outcome (about
-    half the entries are contacts, in no predictable order, so a branch there
-    is mispredicted often); then the law is applied to the contacts in
-    partner-id order. A contact with a linked lower row of the chunk (done
-    earlier by this thread) takes the force and torque that row left; any
-    other is computed in full.
+    Per row: a screening pass over the entries the row computes records the
+    contacts (slot, partner) in ``found`` and their separations in ``sep``
+    (kept for the law, not read or computed again), without a branch on the
+    outcome (about half the entries are contacts, in no predictable order, so
+    a branch there is mispredicted often); the law is applied to them, each
+    result left in its slot of ``pair``. Then one pass over all the row's
+    entries in partner-id order sums the slots in contact now, again without
+    a branch on the outcome (adding +0.0 to a sum that started at +0.0 or
+    -gravity leaves it as it is).
     """
+    nbr_start, nbr_list, link, comp_start, comp_list = lists
     k_t, gamma_t, mu = law.k_t, law.gamma_t, law.mu
     hertz = law.model == MODEL_HERTZ
     friction = mu > 0.0
@@ -153,6 +157,7 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
     before = stamp_of(epoch - 1)
     hx = 0.5 * L_x
     hy = 0.5 * L_y
+    zero = len(pair) - 1
     max_overlap = 0.0
     n_contacts = 0
     for i in range(lo, hi):
@@ -164,57 +169,38 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
         xi = x[i, 0]
         yi = x[i, 1]
         zi = x[i, 2]
-        vix = v[i, 0]
-        viy = v[i, 1]
-        viz = v[i, 2]
-        rwix = R * omega[i, 0]
-        rwiy = R * omega[i, 1]
-        rwiz = R * omega[i, 2]
         m = 0
-        for k in range(nbr_start[i], nbr_start[i + 1]):
-            j = nbr_list[k]
+        # unsigned indices: numba adds no negative-index wrap-around to their loads (4-6 % here)
+        for g in range(np.uint64(comp_start[i]), np.uint64(comp_start[i + 1])):
+            j = np.uint64(comp_list[g])
             dx = min_image(xi - x[j, 0], L_x, hx)
             dy = min_image(yi - x[j, 1], L_y, hy)
             dz = zi - x[j, 2]
             r2 = dx * dx + dy * dy + dz * dz
             on = np.uint8(r2 < 1.0)
-            found[m, 0] = k
+            found[m, 0] = g
             found[m, 1] = j
             sep[m, 0] = dx
             sep[m, 1] = dy
             sep[m, 2] = dz
             sep[m, 3] = r2
             m += on
-        n_contacts += m
-        fx = 0.0
-        fy = 0.0
-        fz = -law.gravity
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
+        vix = v[i, 0]
+        viy = v[i, 1]
+        viz = v[i, 2]
+        rwix = R * omega[i, 0]
+        rwiy = R * omega[i, 1]
+        rwiz = R * omega[i, 2]
         for q in range(m):
-            k = found[q, 0]
-            j = found[q, 1]
-            g = link[k]
+            g = np.uint64(found[q, 0])
+            j = np.uint64(found[q, 1])
             # in contact at the previous evaluation too, or a new contact (history from zero)
-            was = stamp[k] == before
-            stamp[k] = now
-            shared = g < n_pairs
-            if shared and j < i:
-                # the lower row of the chunk computed this pair: minus its force, its torque
-                fx += -pair[g, 0]
-                fy += -pair[g, 1]
-                fz += -pair[g, 2]
-                if friction:
-                    tx += pair[g, 3]
-                    ty += pair[g, 4]
-                    tz += pair[g, 5]
-                continue
+            was = stamp[g] == before
+            stamp[g] = now
             dx = sep[q, 0]
             dy = sep[q, 1]
             dz = sep[q, 2]
-            r2 = sep[q, 3]
-            r = math.sqrt(r2)
+            r = math.sqrt(sep[q, 3])
             delta = 1.0 - r
             if delta > max_overlap:
                 max_overlap = delta
@@ -251,24 +237,35 @@ def _rows(lo, hi, x, v, omega, fixed, nbr_start, nbr_list, link, n_pairs, hist, 
                 fcy += fty
                 fcz += ftz
                 # T_i += -R n x F_t (the same for both partners)
-                tix = -(R * (ny * ftz - nz * fty))
-                tiy = -(R * (nz * ftx - nx * ftz))
-                tiz = -(R * (nx * fty - ny * ftx))
-                tx += tix
-                ty += tiy
-                tz += tiz
-                if shared:
-                    pair[g, 3] = tix
-                    pair[g, 4] = tiy
-                    pair[g, 5] = tiz
-            if shared:
-                # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
-                pair[g, 0] = fcx
-                pair[g, 1] = fcy
-                pair[g, 2] = fcz
-            fx += fcx
-            fy += fcy
-            fz += fcz
+                pair[g, 3] = -(R * (ny * ftz - nz * fty))
+                pair[g, 4] = -(R * (nz * ftx - nx * ftz))
+                pair[g, 5] = -(R * (nx * fty - ny * ftx))
+            # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
+            pair[g, 0] = fcx
+            pair[g, 1] = fcy
+            pair[g, 2] = fcz
+        fx = 0.0
+        fy = 0.0
+        fz = -law.gravity
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for k in range(np.uint64(nbr_start[i]), np.uint64(nbr_start[i + 1])):
+            l = link[k]
+            g = slot_of(l)
+            on = stamp[np.uint64(g)] == now
+            n_contacts += on
+            # arithmetic, not branches (contacts and taken pairs come in no predictable order):
+            # the zero row for an entry out of contact, -1.0 * the force for a taken pair
+            g = np.uint64(zero + (g - zero) * on)
+            sign = 1.0 + 2.0 * (l >> 31)
+            fx += sign * pair[g, 0]
+            fy += sign * pair[g, 1]
+            fz += sign * pair[g, 2]
+            if friction:
+                tx += pair[g, 3]
+                ty += pair[g, 4]
+                tz += pair[g, 5]
         f[i, 0] = fx
         f[i, 1] = fy
         f[i, 2] = fz

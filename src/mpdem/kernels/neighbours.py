@@ -188,60 +188,62 @@ def _linked(j, n_own, fixed, nchunk, c):
 
 
 @njit(cache=True, parallel=True)
-def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link):
-    """Give each entry its history slot: one per pair within a chunk, one per other entry.
+def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_start, comp_list):
+    """Split the entries into those a row computes and those it takes, and give each its slot.
 
     Rows of a chunk are done in ascending order by one thread, so of a pair of
     two owned mobile rows of one chunk the lower row computes the contact
     once, and the higher row takes its force and torque (``contact_forces``).
-    Such a pair has one slot, ``0 <= link < P``, for both its entries, and
-    keeps its Delta s as seen from the lower row; the pairs are numbered in
-    the order the lower rows meet them, chunk after chunk, so the lower rows
-    read and write their slots in sequence. Every other entry (ghost, bed or
-    other-chunk partner) has a slot of its own, ``P <= link < P + U``. Lists
-    are symmetric (the distance test is mirror-exact) and sorted by id, so
-    the mirror entry is found by bisection.
+    Every other entry (ghost, bed or other-chunk partner) is computed by its
+    row. The computed entries of row i are ``comp_list[comp_start[i]:
+    comp_start[i + 1]]`` (partner rows, in id order), numbered chunk after
+    chunk and row after row, so a row reads and writes its slots in sequence;
+    slot g holds that contact's history and result. ``link[k]`` is the slot of
+    entry k: ``g`` for an entry its row computes, ``~g`` (negative) for one it
+    takes, whose slot keeps Delta s as seen from the lower row. Lists are
+    symmetric (the distance test is mirror-exact) and sorted by id, so the
+    mirror entry is found by bisection.
 
     Parameters
     ----------
     link : (len(nbr_list),) int32, out
+    comp_start : (>= n_own + 1,) int64, out
+    comp_list : (>= K,) int32, out
+        Partner rows of the computed entries (see Returns).
 
     Returns
     -------
-    P, U : int
-        Pairs, and other entries.
+    K : int
+        Computed entries. If larger than ``len(comp_list)``, only ``comp_start``
+        was written: grow ``comp_list`` and call again.
     """
-    # chunk c's pair slots start at first[0, c], its other slots at P + first[1, c]
-    first = np.zeros((2, nchunk + 1), np.int64)
+    comp_start[0] = 0
     for c in prange(nchunk):
-        mp = 0
-        mo = 0
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
-                if not _linked(j, n_own, fixed, nchunk, c):
-                    mo += 1
-                elif j > i:
-                    mp += 1
-        first[0, c + 1] = mp
-        first[1, c + 1] = mo
-    for c in range(nchunk):
-        first[0, c + 1] += first[0, c]
-        first[1, c + 1] += first[1, c]
-    n_pairs = first[0, nchunk]
+                m += j > i or not _linked(j, n_own, fixed, nchunk, c)
+            comp_start[i + 1] = m
+    for i in range(n_own):
+        comp_start[i + 1] += comp_start[i]
+    total = comp_start[n_own]
+    if total > len(comp_list):
+        return total
     for c in prange(nchunk):
-        p = first[0, c]
-        o = n_pairs + first[1, c]
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             idi = ids[i]
+            g = comp_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
                 if not _linked(j, n_own, fixed, nchunk, c):
-                    link[k] = o
-                    o += 1
+                    link[k] = g
+                    comp_list[g] = j
+                    g += 1
                 elif j > i:
                     # the higher row's entry of this pair is set here, before that row is reached
-                    link[k] = p
-                    link[_mirror_entry(nbr_start, nbr_list, ids, j, idi)] = p
-                    p += 1
-    return n_pairs, first[1, nchunk]
+                    link[k] = g
+                    link[_mirror_entry(nbr_start, nbr_list, ids, j, idi)] = ~g
+                    comp_list[g] = j
+                    g += 1
+    return total
