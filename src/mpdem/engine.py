@@ -236,11 +236,9 @@ class Engine:
         """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
         t = time.perf_counter()
         s, p = self.state, self.phys
-        if len(self.pair) < self._n_slots + 1:
-            # each step's computing rows write a pair's slot before any row sums it; the last
-            # row stays zero (what an entry out of contact adds)
-            self.pair = np.empty((self._n_slots + 1, 6))
-            self.pair[-1] = 0.0
+        if len(self.pair) < self._n_slots:
+            # each step's computing rows write a pair's slot before any row sums it
+            self.pair = np.empty((self._n_slots, 6))
         self._epoch += 1
         lists = (self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
         scratch = (self._chunk_max, self._chunk_count, self._found, self._sep)

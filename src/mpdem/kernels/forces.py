@@ -89,9 +89,9 @@ def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f
     hist : (K, 3) float64, in/out
         Delta s [d] of each slot's pair (the computing row's view); read only
         if the pair was in contact at the previous evaluation.
-    pair : (>= K + 1, 6) float64, scratch
-        Per slot: the computing row's contact force [m g] and torque [m g d];
-        the last row must be zeros (the kernel never writes it).
+    pair : (>= K, 6) float64, scratch
+        Per slot: the computing row's contact force [m g] and torque [m g d]
+        (zeros out of contact; the torque only with friction).
     stamp : (K,) uint32, in/out
         Per slot, the number (mod 2**32) of the last evaluation that found its
         pair in contact; set to ``epoch`` for the contacts of this one.
@@ -144,9 +144,9 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
     outcome (about half the entries are contacts, in no predictable order, so
     a branch there is mispredicted often); the law is applied to them, each
     result left in its slot of ``pair``. Then one pass over all the row's
-    entries in partner-id order sums the slots in contact now, again without
-    a branch on the outcome (adding +0.0 to a sum that started at +0.0 or
-    -gravity leaves it as it is).
+    entries in partner-id order sums their slots, again without a branch on
+    the outcome: a slot out of contact holds zeros (adding +0.0
+    or -0.0 to a sum that started at +0.0 or -gravity leaves it as it is).
     """
     nbr_start, nbr_list, link, comp_start, comp_list = lists
     k_t, gamma_t, mu = law.k_t, law.gamma_t, law.mu
@@ -157,7 +157,6 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
     before = stamp_of(epoch - 1)
     hx = 0.5 * L_x
     hy = 0.5 * L_y
-    zero = len(pair) - 1
     max_overlap = 0.0
     n_contacts = 0
     for i in range(lo, hi):
@@ -185,6 +184,14 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
             sep[m, 2] = dz
             sep[m, 3] = r2
             m += on
+            # out of contact, the slot adds zeros (the law overwrites a contact's)
+            pair[g, 0] = 0.0
+            pair[g, 1] = 0.0
+            pair[g, 2] = 0.0
+            if friction:
+                pair[g, 3] = 0.0
+                pair[g, 4] = 0.0
+                pair[g, 5] = 0.0
         vix = v[i, 0]
         viy = v[i, 1]
         viz = v[i, 2]
@@ -197,6 +204,8 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
             # in contact at the previous evaluation too, or a new contact (history from zero)
             was = stamp[g] == before
             stamp[g] = now
+            # the higher row of a pair within the chunk counts it too
+            n_contacts += 1 + (lo <= found[q, 1] < hi and not fixed[j])
             dx = sep[q, 0]
             dy = sep[q, 1]
             dz = sep[q, 2]
@@ -252,12 +261,8 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
         tz = 0.0
         for k in range(np.uint64(nbr_start[i]), np.uint64(nbr_start[i + 1])):
             l = link[k]
-            g = slot_of(l)
-            on = stamp[np.uint64(g)] == now
-            n_contacts += on
-            # arithmetic, not branches (contacts and taken pairs come in no predictable order):
-            # the zero row for an entry out of contact, -1.0 * the force for a taken pair
-            g = np.uint64(zero + (g - zero) * on)
+            g = np.uint64(slot_of(l))
+            # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
             sign = 1.0 + 2.0 * (l >> 31)
             fx += sign * pair[g, 0]
             fy += sign * pair[g, 1]
