@@ -106,6 +106,14 @@ def _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
     return total - first
 
 
+@njit(cache=True)
+def _offsets(start, n):
+    """Counts in start[1..n] to CSR offsets in place (start[0] = 0); returns the total."""
+    for i in range(n):
+        start[i + 1] += start[i]
+    return start[n]
+
+
 @njit(cache=True, parallel=True)
 def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, nbr_list, nchunk):
     """Full neighbour lists of the owned mobile rows, each sorted by partner id.
@@ -148,9 +156,7 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
                 m = _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
                               nbr_list, 0, False)
             nbr_start[i + 1] = m
-    for i in range(n_own):
-        nbr_start[i + 1] += nbr_start[i]
-    total = nbr_start[n_own]
+    total = _offsets(nbr_start, n_own)
     if total > len(nbr_list):
         return total
     for c in prange(nchunk):
@@ -225,9 +231,7 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
                 j = nbr_list[k]
                 m += j > i or not _linked(j, n_own, fixed, nchunk, c)
             comp_start[i + 1] = m
-    for i in range(n_own):
-        comp_start[i + 1] += comp_start[i]
-    total = comp_start[n_own]
+    total = _offsets(comp_start, n_own)
     if total > len(comp_list):
         return total
     for c in prange(nchunk):
