@@ -16,7 +16,8 @@ that found it in contact, Delta s in ``hist[g]`` (the computing row's view),
 read and written in place each step, and the contact force and torque in
 ``pair[g]``. A contact whose stamp is not the previous evaluation's is new:
 its Delta s starts from zero (docs/model.md 2.4: the history of a contact
-that ended is deleted), so slots out of contact are never written.
+that ended is deleted), so the history of a slot out of contact is never
+written; its ``pair`` row is set to zeros.
 
 Per row, two passes: the row computes its own contacts (screening only the
 entries it computes), then sums all its entries in partner-id order, adding
