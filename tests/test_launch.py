@@ -77,3 +77,25 @@ def test_threads_warnings_name_binding_and_oversubscription(monkeypatch):
     monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "4")
     over = threads_warnings(2, 4)
     assert len(over) == 1 and "4 rank(s) x 2 threads on this node's 4 cores" in over[0]
+
+
+def test_the_program_ignores_stop_signals_once_its_work_is_done(tmp_path):
+    """A stop signal while ``python -m mpdem`` shuts down (MPI finalize; a batch system's
+    early warning reaching a run that has just finished) must not turn its exit status into a
+    death by signal (a job chain read exit 138 as an error); an in-process caller gets its
+    own handlers back."""
+    import signal
+    from mpdem.__main__ import main
+    stops = (signal.SIGTERM, signal.SIGUSR1)
+    old = {s: signal.getsignal(s) for s in stops}
+    try:
+        import pytest
+        with pytest.raises(SystemExit):
+            main(["info", str(tmp_path / "missing.h5")])
+        assert all(signal.getsignal(s) == old[s] for s in stops)
+        with pytest.raises(SystemExit):
+            main(["info", str(tmp_path / "missing.h5")], program=True)
+        assert all(signal.getsignal(s) == signal.SIG_IGN for s in stops)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

@@ -359,7 +359,8 @@ def parser():
     return p
 
 
-def main(argv=None):
+def main(argv=None, program=False):
+    """The command line; ``program``: this process is ``python -m mpdem`` and ends after it."""
     import signal
     old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
            for s in (signal.SIGTERM, signal.SIGUSR1)}
@@ -370,7 +371,10 @@ def main(argv=None):
         return _main(argv)
     finally:
         for s, h in old.items():
-            signal.signal(s, h)
+            # the program's work is done: a stop signal while the process shuts down (MPI
+            # finalize; a batch system's early warning) must not turn its exit status into a
+            # death by signal
+            signal.signal(s, signal.SIG_IGN if program else h)
         if old_threads is not None:
             threads.restore(old_threads)
 
@@ -437,4 +441,4 @@ def _fail(net, msg):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(program=True))
