@@ -96,7 +96,6 @@ class Engine:
         self.hist = np.zeros((0, 3))
         self.pair = np.zeros((0, 6))
         self.stamp = np.zeros(0, np.uint32)
-        self._n_slots = 0
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
@@ -207,7 +206,6 @@ class Engine:
         if k > len(self.comp_list):
             self.comp_list = np.zeros(int(k * 1.1) + 64, np.int32)
             link_entries(*args, self.comp_list)
-        self._n_slots = k
         self.hist = np.empty((k, 3))
         self.stamp = np.empty(k, np.uint32)
 
@@ -236,9 +234,9 @@ class Engine:
         """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
         t = time.perf_counter()
         s, p = self.state, self.phys
-        if len(self.pair) < self._n_slots:
-            # each step's computing rows write a pair's slot before any row sums it
-            self.pair = np.empty((self._n_slots, 6))
+        if len(self.pair) < len(self.hist):
+            # one row per slot; each step's computing rows write it before any row sums it
+            self.pair = np.empty((len(self.hist), 6))
         self._epoch += 1
         lists = (self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
         scratch = (self._chunk_max, self._chunk_count, self._found, self._sep)
