@@ -17,6 +17,8 @@
 # if RUN_DIR/config.toml exists). Then, by mpdem's exit code:
 #   0   finished                                  -> exit 0
 #   3   hit run.max_steps without converging      -> exit 3, no resubmission
+#       (0 or 3 without RUN_DIR/summary.json: mpdem did not run, e.g. a
+#       launcher that failed to start it: exit 1, no resubmission)
 #   75  interrupted, checkpoint written           -> run RESUBMIT, exit 0
 #       (no RESUBMIT: exit 75, restart it yourself). Instead stop, exit 1, if
 #       the newest checkpoint's number did not advance or MPDEM_MAX_SEGMENTS
@@ -251,6 +253,12 @@ while kill -0 "$pid" 2>/dev/null; do rc=0; wait "$pid" || rc=$?; done  # wait en
 trap - USR1 TERM
 after=$(newest)
 
+# mpdem's exit 0 and 3 leave RUN_DIR/summary.json; a launcher that could not start the ranks
+# may exit 0 all the same (srun after "task 0 launch failed"): not a finished run
+if [[ ($rc == 0 || $rc == 3) && ! -e $run_dir/summary.json ]]; then
+  log "error: exit $rc but no $run_dir/summary.json: mpdem did not run to its end (did the launcher start it? see the job's output); not resubmitting"
+  exit 1
+fi
 case $rc in
   0) log "finished (exit 0)"; exit 0 ;;
   3) log "not converged: stopped at run.max_steps (exit 3); not resubmitting"; exit 3 ;;

@@ -83,6 +83,7 @@ if act.startswith("noisy"):  # a launcher's report of a non-zero exit on stderr 
     done(int(act[5:]))
 if act.startswith("final"):
     (run_dir / "final.h5").write_text("")
+    (run_dir / "summary.json").write_text("{{}}")
     done(int(act[5:]))
 done(int(act[4:]))  # exitN
 '''
@@ -273,6 +274,8 @@ STOPS = {  # plan: (segments, exit codes of the jobs, words in jobs.log)
     "not-converged": (("final3",), ["run"], [3], "not converged"),
     "error": (("ckpt75", "exit1"), ["run", "restart"], [0, 1], "error: exit 1; not resubmitting"),
     "usage-error": (("exit2",), ["run"], [2], "error: exit 2; not resubmitting"),
+    # a launcher that exits 0 without having started mpdem (srun after "task 0 launch failed")
+    "launch-failed": (("ckpt75", "exit0"), ["run", "restart"], [0, 1], "exit 0 but no runs/c/summary.json"),
     "no-progress": (("ckpt75", "noprog75"), ["run", "restart"], [0, 1], "no new checkpoint"),
     "no-first-checkpoint": (("noprog75",), ["run"], [1], "no new checkpoint"),
 }

@@ -111,6 +111,7 @@ def test_a_chain_as_shipped_converges_over_segments_bit_identical(slurm, tmp_pat
     # each resubmission asked for what the first job got on its command line
     assert all("--ntasks=2" in ln and "--time=00:02:00" in ln for ln in resub), text
     run = sub / "runs/chain"
+    assert (run / "summary.json").exists(), text + "\n" + mlog.read_text()
     s = json.loads((run / "summary.json").read_text())
     assert s["converged"] and s["segments"] == len(segs)
     assert digest(run / "final.h5") == digest(tmp_path / "straight" / "final.h5") == s["digest"]

@@ -63,6 +63,10 @@ AccountingStorageType=accounting_storage/none
 NodeName=$host CPUs=$cpus RealMemory=$mem State=UNKNOWN
 PartitionName=local Nodes=ALL Default=YES MaxTime=INFINITE State=UP
 EOF
+  # pmix's per-step client directories in DIR too: job ids start at 1 in every new DIR, and a
+  # /tmp/spmix_appdir_0_2.0 left by an earlier instance fails step 2.0's launch ("File exists")
+  mkdir -p "$dir/pmix"
+  echo "PMIxCliTmpDirBase=$dir/pmix" >"$dir/mpi.conf"
   if ! pgrep -x munged >/dev/null; then
     mkdir -p /run/munge && chown munge:munge /run/munge
     runuser -u munge -- /usr/sbin/munged
