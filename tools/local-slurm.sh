@@ -75,8 +75,8 @@ EOF
   export SLURM_CONF=$dir/slurm.conf
   /usr/sbin/slurmctld -f "$SLURM_CONF" -c -i
   /usr/sbin/slurmd -f "$SLURM_CONF" -c
-  local t
-  for t in $(seq 60); do
+  local _
+  for _ in $(seq 60); do
     if sinfo -h -o %T 2>/dev/null | grep -qx idle; then
       echo "$me: Slurm up in $dir (export SLURM_CONF=$SLURM_CONF)"; return 0
     fi
