@@ -1,5 +1,6 @@
 """Helpers shared by the serial tests (imported as ``helpers``; fixtures stay in conftest)."""
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -104,6 +105,15 @@ def child_env(add=None, clean=False):
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src")] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     env.update(add or {})
     return env
+
+
+def fake_segment_mpdem(path, log):
+    """A stand-in for the job helper's mpdem command (``MPDEM_CMD="bash PATH"``): appends its
+    arguments to ``log``, one line per call, and finishes as ``mpdem run --out DIR`` does, with
+    DIR/summary.json (the helper takes exit 0 without it for a launch that never started)."""
+    path.write_text('printf "%s\\n" "$*" >> ' + shlex.quote(str(log)) + '\n'
+                    'while (( $# )); do [[ $1 != --out ]] || { mkdir -p "$2"; echo "{}" > "$2/summary.json"; }; shift; done\n')
+    return f"bash {path}"
 
 
 def mpdem_argv(*args, n=1):

@@ -21,7 +21,7 @@ from mpdem.analysis import collect as co
 from mpdem.analysis import fits, report
 from mpdem.analysis.report import AnalysisError
 
-from helpers import mpdem
+from helpers import fake_segment_mpdem, mpdem
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -275,10 +275,8 @@ def test_cli(tree, tmp_path):
 
 def test_sweep_tables_pass_the_sweep_helper(tmp_path):
     """Every row of analysis/sweeps/*.tsv through jobs/mpdem-segment.sh --sweep (a stand-in mpdem)."""
-    fake = tmp_path / "fake-mpdem.sh"
-    fake.write_text('printf "%s\\n" "$*" >> "$FAKE_LOG"\n')
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MPDEM_", "SLURM_", "PBS_"))}
-    env.update(MPDEM_CMD=f"bash {fake}", FAKE_LOG=str(tmp_path / "calls"))
+    env.update(MPDEM_CMD=fake_segment_mpdem(tmp_path / "fake-mpdem.sh", tmp_path / "calls"))
     tables = sorted((ROOT / "analysis/sweeps").glob("*.tsv"))
     assert {t.name for t in tables} >= {"fig2-4.tsv", "fig7.tsv", "fig9.tsv"}
     names, cfgs = [], {}

@@ -11,7 +11,7 @@ import pytest
 from mpdem import config, sweep
 from mpdem.checkpoint import digest, read_state
 
-from helpers import child_env, mpdem, mpdem_argv
+from helpers import child_env, fake_segment_mpdem, mpdem, mpdem_argv
 
 ROOT = Path(__file__).resolve().parents[1]
 DEV = ROOT / "analysis" / "sweeps" / "dev"
@@ -26,9 +26,7 @@ def tables():
 def test_rows_are_named_and_set_as_the_cluster_helper_does(tmp_path):
     """Every row of every shipped table: the same run directory and --set items as
     ``jobs/mpdem-segment.sh --sweep``, so a sweep moves between cluster and laptop."""
-    fake = tmp_path / "fake-mpdem.sh"
-    fake.write_text('printf "%s\\n" "$*" >> "$FAKE_LOG"\n')
-    e = child_env({"MPDEM_CMD": f"bash {fake}", "FAKE_LOG": str(tmp_path / "calls")}, clean=True)
+    e = child_env({"MPDEM_CMD": fake_segment_mpdem(tmp_path / "fake-mpdem.sh", tmp_path / "calls")}, clean=True)
     for t in tables():
         rows = sweep.read_table(str(t))
         (tmp_path / "calls").write_text("")
