@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
 
-.PHONY: setup run test test-fast test-serial test-mpi test-validation bench reproduce collect-dev clean
+.PHONY: setup run test test-fast test-serial test-mpi test-validation bench reproduce collect-dev reproduce-paper collect-paper clean
 
 setup:
 	@bash tools/setup.sh
@@ -56,6 +56,21 @@ reproduce: setup
 # The tables, fits and figures of analysis/results/dev again, from its committed summaries alone.
 collect-dev: setup
 	$(PY) -m mpdem collect analysis/results/dev/runs --out analysis/results/dev --no-analyze
+
+# The paper at its own geometry (issue 23; analysis/sweeps/paper): the development k_n = 2e5 rows again,
+# the paper's height at a quarter of its area, then the paper's size (hours a row; resumable), then collect.
+PAPER := analysis/sweeps/paper
+PAPER_RUNS := analysis/results/paper/runs
+reproduce-paper: setup
+	$(PY) -m mpdem sweep $(PAPER)/dev2e5.tsv --config $(DEV)/dev.toml --out $(PAPER_RUNS)/dev --no-collect
+	$(PY) -m mpdem sweep $(PAPER)/height.tsv --config $(PAPER)/height.toml --out $(PAPER_RUNS)/height --no-collect
+	$(PY) -m mpdem sweep $(PAPER)/size.tsv --config $(PAPER)/size.toml --out $(PAPER_RUNS)/size --no-collect
+	$(MAKE) collect-paper
+
+# The tables, fits and figures of analysis/results/paper from its committed files alone (summaries and
+# packings: a run whose analysis is older than its packing is analysed again).
+collect-paper: setup
+	$(PY) -m mpdem collect $(PAPER_RUNS) --out analysis/results/paper
 
 clean:
 	rm -rf runs .pytest_cache

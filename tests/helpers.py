@@ -48,6 +48,18 @@ def settled_table(path, depth=1e-3):
     return len(mob), len(bed)
 
 
+def draw_gaps(rng, n, alpha, a, b):
+    """n gaps from p(xi) ~ xi^-alpha (1 + xi)^2 on [a, b]: inverse transform of xi^-alpha, then rejection."""
+    out = []
+    while sum(map(len, out)) < n:
+        u = rng.random(4 * n)
+        e = 1.0 - alpha
+        xi = (a ** e + u * (b ** e - a ** e)) ** (1.0 / e)
+        keep = rng.random(xi.size) < ((1 + xi) / (1 + b)) ** 2
+        out.append(xi[keep])
+    return np.concatenate(out)[:n]
+
+
 # nearest-neighbour distance of the crystals: a hair below d, so neighbours overlap (contact is delta > 0)
 SQUEEZE = 1.0 - 1e-7
 

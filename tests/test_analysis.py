@@ -227,22 +227,10 @@ def test_bulk_contacts_select_by_midpoint():
 
 # ---- fits ----------------------------------------------------------------------
 
-def test_power_law_fit_recovers_alpha():
-    rng = np.random.default_rng(5)
-    xi = np.logspace(-4, 0, 41)
-    g = 2.5 * xi ** -0.52 * np.exp(0.03 * rng.standard_normal(xi.size))
-    f = fits.power_law(xi, g, 1e-3, 5e-2)
-    assert f["n_bins"] == int(((xi >= 1e-3) & (xi <= 5e-2)).sum())
-    assert abs(f["alpha"] - 0.52) < 3 * f["alpha_err"] and 0 < f["alpha_err"] < 0.03
-    assert math.exp(f["c"]) == pytest.approx(2.5, rel=0.1)
-    assert math.isnan(fits.power_law(xi, g, 0.5, 0.6)["alpha"])     # too few bins
-
-
-def test_fit_window_follows_the_stiffness_and_the_overlap():
-    assert fits.fit_window(2e5, 1e-6) == (pytest.approx(1e-3), 5e-2)
-    assert fits.fit_window(2e9, 1e-9)[0] == pytest.approx(1e-5)
-    assert fits.fit_window(2e5, 1e-4)[0] == pytest.approx(2e-3)
-    assert fits.fit_window(2e5, 1e-4, xi_lo=3e-3) == (3e-3, 5e-2)
+def test_the_default_alpha_window_is_the_same_for_every_stiffness():
+    assert fits.fit_window() == (1e-3, 5e-2)
+    assert fits.fit_window(5e-2, -1.0) == (1e-3, 5e-2)      # older configs' "automatic"
+    assert fits.fit_window(1e-2, 3e-3) == (3e-3, 1e-2)
 
 
 def test_eq7_fit_recovers_the_paper_like_parameters():
@@ -384,3 +372,37 @@ def test_analyze_cli_on_a_run_directory(tmp_path):
     assert (run / "analysis" / "snap-00002" / "summary.json").exists()
     p = mpdem("analyze", tmp_path)
     assert p.returncode == 1 and "no final.h5" in p.stderr
+
+
+def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
+    from mpdem import export, packing
+    run = tmp_path / "run"
+    run.mkdir()
+    a = math.sqrt(2.0) * SQUEEZE
+    x, L = fcc(8, 12, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    write_crystal(run / "final.h5", x, fixed, L, converged=True)
+    out = export.export_file(str(run / "final.h5"), "packing")
+    assert out == str(run / "packing.npz") and packing.is_packing(out) and not (run / "packing.npz.tmp").exists()
+    arrays, attrs = packing.read(out)
+    full, fattrs = checkpoint.read_state(str(run / "final.h5"), pairs=True)
+    for k in packing.FIELDS:
+        assert np.array_equal(arrays[k], full[k]), k
+    assert attrs["config"] == fattrs["config"] and attrs["converged"] is True and attrs["L_x"] == L
+    s_full, _ = report.analyze(str(run), out=str(tmp_path / "a1"), plots=False, log=lambda m: None)
+    (run / "final.h5").unlink()
+    s_pack, out_dir = report.analyze(str(run), plots=False, log=lambda m: None)
+    assert out_dir == str(run / "analysis") and s_pack["source"].endswith("packing.npz")
+    for k in ("z", "z_no_rattlers", "phi", "alpha", "backbone", "bands", "P_f", "zeta", "order"):
+        assert report._finite(s_pack[k]) == report._finite(s_full[k]), k
+    # a damaged or foreign file is refused with its name
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(open(out, "rb").read()[:2000])
+    with pytest.raises(packing.PackingFileError, match="bad.npz"):
+        packing.read(str(bad))
+    np.savez_compressed(tmp_path / "other.npz", x=np.zeros(3))
+    with pytest.raises(packing.PackingFileError, match="not an mpdem packing file"):
+        packing.read(str(tmp_path / "other.npz"))
+    # a state without a contact list (a checkpoint) has no packing
+    with pytest.raises(packing.PackingFileError, match="no contact list"):
+        packing.write(str(tmp_path / "c.npz"), {k: v for k, v in full.items() if k not in checkpoint.PAIR_FIELDS}, fattrs)

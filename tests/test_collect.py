@@ -18,10 +18,10 @@ import pytest
 
 from mpdem import config, rundir
 from mpdem.analysis import collect as co
-from mpdem.analysis import fits, report
+from mpdem.analysis import bands, fits, nearcontact, report
 from mpdem.analysis.report import AnalysisError
 
-from helpers import fake_segment_mpdem, mpdem
+from helpers import draw_gaps, fake_segment_mpdem, mpdem
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -30,6 +30,7 @@ EQ7_TRUE = dict(z_inf=6.02, a=0.12, alpha_n=0.45)    # synthetic truth, not the 
 EQ9_TRUE = dict(A=0.58, B=0.05, C=5.0)
 PHI_I = [0.02, 0.05, 0.08, 0.13, 0.20, 0.30]
 NOISE_Z, NOISE_PHI = 2e-3, 5e-4                      # seed-to-seed scatter of the synthetic runs
+OVERLAP_TRUE = dict(z_c=6.0, A=12.0)                 # z of a depth band = z_c + A (delta/d)^(1/2), synthetic
 
 
 def params(**kw):
@@ -81,7 +82,21 @@ def make_run(run, p, z, phi, alpha, rng, converged=True):
          "alpha": alpha, "alpha_err": 0.01,
          "alpha_fit": {"alpha": alpha, "alpha_err": 0.01, "c": -1.0, "n_bins": 17, "xi_lo": 1e-3, "xi_hi": 5e-2},
          "gofr": {}, "zeta": zeta, "warnings": []}
-    (an / "summary.json").write_text(json.dumps(s))
+    # the measures under gravity: gaps drawn from the run's alpha, depth bands on the overlap law, P(f)
+    wins = [(1e-3, 1e-2), (1e-2, 5e-2), (1e-3, 5e-2)]
+    gaps = draw_gaps(rng, 1500, alpha, 1e-3, 5e-2)
+    s["alpha_windows"] = [nearcontact.window_stats(gaps, a, b) for a, b in wins]
+    s["alpha_local"] = nearcontact.local_slope(gaps, [3e-3, 1e-2])
+    depth = np.arange(8) * 2.5
+    delta = (depth + 1.25) * 1e-5 * 2e5 / p["contact.k_n"]
+    s["bands"] = {"depth_lo": depth.tolist(), "depth_hi": (depth + 2.5).tolist(), "in_bulk": [False] + [True] * 6 + [False],
+                  "z": (OVERLAP_TRUE["z_c"] + OVERLAP_TRUE["A"] * np.sqrt(delta) + rng.normal(0, 0.01, 8)).tolist(),
+                  "overlap_mean": delta.tolist()}
+    for col in ("z_backbone", "phi", "sigma_zz", "crystal_fraction", "rattler_fraction"):
+        s["bands"][col] = [0.5] * 8
+    s["P_f"] = bands.force_distribution(rng.exponential(1.0, 3000))
+    s["backbone"] = {"z": z - 0.01}
+    (an / "summary.json").write_text(json.dumps(report._finite(s)))
     return s
 
 
@@ -197,7 +212,7 @@ def test_tables_and_figures_written(tree):
         assert (out / f).is_file(), f
     assert not list(out.glob("*.tmp"))
     figs = res["figures"]
-    assert set(figs) == {f"fig{i}" for i in range(2, 10)}
+    assert set(figs) == {f"fig{i}" for i in range(2, 13)}
     for name, f in figs.items():
         assert f["made"], (name, f["reason"])
         assert (out / f["file"]).read_bytes()[:8] == PNG, name
@@ -210,6 +225,47 @@ def test_tables_and_figures_written(tree):
     assert json.loads((out / "collect.json").read_text())["n_runs"] == len(tree["made"])
     readme = (out / "README.md").read_text()
     assert "6.144" in readme and "within" in readme and "S01" in readme
+
+
+def test_eq7_is_weighted_by_the_pooled_scatter_and_fitted_with_the_exponent_fixed_too(tree):
+    e = _fit(tree, "eq7", mu=0.0)
+    # 5 sets of 3 seeds: 10 degrees of freedom of scatter around NOISE_Z; each set's sigma is scatter / sqrt(3)
+    assert e["pooled_dof"] == 10 and 0.5 * NOISE_Z < e["pooled_scatter"] < 1.6 * NOISE_Z
+    assert e["z_sigma"] == pytest.approx([e["pooled_scatter"] / math.sqrt(3)] * 5)
+    assert 0 <= e["p_value"] <= 1
+    fx = e["fixed"]
+    assert fx["alpha_n"] == 0.5 and fx["dof"] == 3 and 0 <= fx["p_value"] <= 1
+    # the truth has alpha_n = 0.45: the fixed 1/2 fits worse than the free fit
+    assert fx["chi2"] >= e["chi2"]
+
+
+def test_alpha_pooled_over_seeds_on_every_window_with_a_bootstrap_error(tree):
+    fj = json.loads((tree["out"] / "fits.json").read_text())
+    sets = {s["set"]: s for s in fj["alpha"]}
+    res = json.loads((tree["out"] / "collect.json").read_text())["sets"]
+    sid = next(k for k, v in res.items() if v["params"]["mu"] == 0 and v["params"]["k_n"] == 2e5)
+    e = sets[sid]
+    assert e["n_runs"] == 3 and [(w["xi_lo"], w["xi_hi"]) for w in e["windows"]] == [(1e-3, 1e-2), (1e-2, 5e-2), (1e-3, 5e-2)]
+    whole = e["windows"][2]
+    # three seeds of 1500 gaps each drawn at alpha = 0.52 +- 0.01
+    assert whole["n"] == 4500 and abs(whole["alpha"] - 0.52) < 4 * math.hypot(whole["alpha_err"], 0.01)
+    assert math.isfinite(whole["boot_err"]) and whole["boot_err"] > 0
+    assert len(e["local"]) == 2 and all(p["n"] > 0 for p in e["local"])
+    readme = (tree["out"] / "README.md").read_text()
+    assert "Near-contact exponent α (eq. 6) on fixed windows" in readme and "[0.001, 0.05]" in readme
+
+
+def test_overlap_fit_over_the_bulk_bands_of_a_family(tree):
+    fj = json.loads((tree["out"] / "fits.json").read_text())
+    hits = [e for e in fj["overlap"] if e["family"]["mu"] == 0 and e["status"] == "fitted"]
+    assert len(hits) == 1
+    e = hits[0]
+    assert e["n_runs"] == 15 and e["n_bands"] == 15 * 6          # the bulk bands only
+    assert abs(e["z_c"] - OVERLAP_TRUE["z_c"]) < 4 * e["z_c_err"] and e["z_c_err"] < 0.02
+    assert abs(e["A"] - OVERLAP_TRUE["A"]) < 4 * e["A_err"]
+    pf = {s["set"]: s for s in fj["P_f"]}
+    assert all(abs(p["tail_rate"] - 1.0) < 5 * p["tail_rate_err"] for p in pf.values())
+    assert "z against the overlap" in (tree["out"] / "README.md").read_text()
 
 
 def test_unusable_runs_listed_with_reasons(tree):

@@ -72,6 +72,28 @@ def test_the_development_tables():
     assert rows[0].cost == min(r.cost for r in rows)
 
 
+def test_the_paper_tables():
+    """analysis/sweeps/paper (issue 23): the paper's height at a quarter of its area, the paper's size,
+    and the development tables' k_n = 2e5 rows at mu = 0 and 0.5 again with their own seeds."""
+    P = DEV.parent / "paper"
+    dev = {r.name: r.sets for r in sweep.plan(sorted(str(t) for t in DEV.glob("*.tsv")), str(DEV / "dev.toml"))}
+    for table, toml, n, L, rows in (("height", "height", 5000, 10, 6), ("size", "size", 20000, 20, 9),
+                                    ("dev2e5", None, 2000, 10, 13)):
+        cfg = str(P / f"{toml}.toml") if toml else str(DEV / "dev.toml")
+        plan = sweep.plan([str(P / f"{table}.tsv")], cfg)
+        assert len(plan) == rows
+        for r in plan:
+            v = config.load(cfg, r.sets).values
+            assert v["pour.N"] == n and v["box.L_x"] == v["box.L_y"] == L and v["contact.k_n"] == 2e5
+            assert v["pour.phi_i"] == 0.13 and v["contact.mu"] in (0, 0.1, 0.5, 1)
+            if table == "dev2e5":
+                # the same row (so the same bits) as in the development tables
+                assert dev[r.name] == r.sets
+    size = [config.load(str(P / "size.toml"), r.sets).values for r in sweep.plan([str(P / "size.tsv")], str(P / "size.toml"))]
+    assert sum(v["contact.mu"] == 0 and v["contact.epsilon"] == 0.88 for v in size) == 3
+    assert sum(v["contact.mu"] == 0.5 for v in size) == 2
+
+
 @pytest.mark.parametrize("text, match", [
     ("mu\tcolour\n0.5\tred\n", "unknown column 'colour'"),
     ("mu\tcontact.k_x\n0.5\t1\n", "column 'contact.k_x' is no config key"),
@@ -144,6 +166,7 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     assert "1/2 finished (0 not converged), 0 running, 1 failed" in q.stdout
     summ = json.loads((run1 / "analysis" / "summary.json").read_text())
     assert summ["converged"] and summ["params"]["contact.mu"] == 0.5
+    assert (run1 / "packing.npz").exists()          # the row's packing, kept for later analyses
     assert (tmp_path / "collect" / "runs.csv").exists()
 
     ref = tmp_path / "ref"

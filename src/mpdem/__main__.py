@@ -202,7 +202,8 @@ def cmd_analyze(args, net):
         from .analysis.series import series
         series(args.target, args.set, args.out, plots=not args.no_plots, log=_quiet(args.quiet))
         return EXIT_OK
-    analyze(args.target, args.out, args.set, plots=not args.no_plots, log=_quiet(args.quiet))
+    analyze(args.target, args.out, args.set, plots=not args.no_plots, log=_quiet(args.quiet),
+            keep_packing=args.packing)
     return EXIT_OK
 
 
@@ -295,8 +296,9 @@ def parser():
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
     e.add_argument("file")
-    e.add_argument("--format", required=True, choices=("lammps-dump", "lammps-data", "xyz"))
-    e.add_argument("--out", help="output path (default: FILE with .dump, .data or .xyz)")
+    e.add_argument("--format", required=True, choices=("lammps-dump", "lammps-data", "xyz", "packing"))
+    e.add_argument("--out", help="output path (default: FILE with .dump, .data or .xyz; RUN/packing.npz for "
+                                 "a final.h5's packing)")
     b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",
@@ -327,6 +329,9 @@ def parser():
     an.add_argument("--set", action="append", default=[], metavar="analysis.KEY=VALUE",
                     help="change an analysis setting (repeatable)")
     an.add_argument("--no-plots", action="store_true", help="summary and tables only")
+    an.add_argument("--packing", action="store_true",
+                    help="also keep RUN/packing.npz beside a final.h5: its positions and contact forces, "
+                         "compressed, which analyze can read when final.h5 is gone")
     an.add_argument("--series", action="store_true",
                     help="measure every snapshot of RUN_DIR (bulk z, phi, contacts, E_k) into "
                          "RUN/analysis/series.csv and series.png: how the run settled")

@@ -106,7 +106,10 @@ SCHEMA = (
     _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int, restart=True, physics=False),
     _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 (h - z_bed), 3, 10)", restart=True, physics=False),
     _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom", restart=True, physics=False),
-    _k("analysis", "n_min", -1, "rattler threshold: fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int, restart=True, physics=False),
+    _k("analysis", "rattlers", "force", "rattler rule: 'force' (the backbone: contacts below analysis.force_fraction of their depth band's mean normal force dropped, then, repeatedly, spheres that cannot balance their weight with the contacts left; docs/model.md 6.2) or 'count' (fewer than analysis.n_min contacts, the rule of packings without gravity)", str, ("force", "count"), restart=True, physics=False),
+    _k("analysis", "force_fraction", 0.01, "the backbone's force cut: a contact whose normal force is below this fraction of the mean of its depth band carries no load", restart=True, physics=False),
+    _k("analysis", "band_width", 2.5, "depth bands below the free surface of the depth profile, P(f) and the backbone's force cut [d]", restart=True, physics=False),
+    _k("analysis", "n_min", -1, "threshold of the count rule (analysis.rattlers = 'count', also reported beside the backbone): fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int, restart=True, physics=False),
     _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]", restart=True, physics=False),
     _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)", restart=True, physics=False),
     _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]", restart=True, physics=False),
@@ -115,9 +118,13 @@ SCHEMA = (
     _k("analysis", "xi_min", 1e-6, "smallest xi = r/d - 1 of the logarithmic near-contact bins", restart=True, physics=False),
     _k("analysis", "xi_per_decade", 10, "logarithmic bins per decade of xi (they run from xi_min to 1)", int, restart=True, physics=False),
     _k("analysis", "fit_xi_hi", 5e-2, "upper end of the power-law fit window in xi (eq. 6)", restart=True, physics=False),
-    _k("analysis", "fit_xi_lo", -1.0, "lower end of the fit window in xi; -1 = max(1e-3 sqrt(2e5 / k_n), 20 x median bulk overlap)", restart=True, physics=False),
+    _k("analysis", "fit_xi_lo", 1e-3, "lower end of the default alpha window in xi, the same for every k_n and mu (-1, from older configs, means 1e-3)", restart=True, physics=False),
+    _k("analysis", "alpha_windows", (1e-3, 1e-2, 5e-2), "edges of the alpha windows reported side by side: each [e_i, e_i+1] and the whole [e_0, e_last] (docs/model.md 6.5)", list, restart=True, physics=False),
     _k("analysis", "zeta_bins", 50, "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
     _k("analysis", "mobilised", 0.99, "zeta above which a contact counts as fully mobilised", restart=True, physics=False),
+    _k("analysis", "order_cutoff", 1.4, "neighbour shell of the q6 bond order [d]", restart=True, physics=False),
+    _k("analysis", "order_bond", 0.7, "normalised q6 product above which a bond is solid-like", restart=True, physics=False),
+    _k("analysis", "order_bonds", 8, "solid-like bonds that make a sphere crystal-like", int, restart=True, physics=False),
 )
 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
@@ -347,6 +354,12 @@ def _coerce(key, value):
                 isinstance(a, bool) or not isinstance(a, int) or a < 1 for a in value):
             raise ConfigError(f"{key} = {value!r}: expected a list of integers >= 1, e.g. [2]")
         return tuple(int(a) for a in value)
+    if spec.kind is list:
+        # a list of numbers
+        if not isinstance(value, (list, tuple)) or not value or any(
+                isinstance(a, bool) or not isinstance(a, (int, float)) or not math.isfinite(a) for a in value):
+            raise ConfigError(f"{key} = {value!r}: expected a list of numbers, e.g. [1e-3, 1e-2]")
+        return tuple(float(a) for a in value)
     if spec.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key} = {value!r}: expected a number")
@@ -476,7 +489,15 @@ def resolve(raw):
     need("analysis.xi_per_decade", vals["analysis.xi_per_decade"] >= 1, "xi_per_decade >= 1")
     need("analysis.fit_xi_hi", 0 < vals["analysis.fit_xi_hi"] <= 1, "0 < fit_xi_hi <= 1")
     need("analysis.fit_xi_lo", vals["analysis.fit_xi_lo"] == -1 or 0 < vals["analysis.fit_xi_lo"] < vals["analysis.fit_xi_hi"],
-         "-1 (automatic) or 0 < fit_xi_lo < fit_xi_hi")
+         "0 < fit_xi_lo < fit_xi_hi (or -1: 1e-3)")
+    w = vals["analysis.alpha_windows"]
+    need("analysis.alpha_windows", len(w) >= 2 and all(0 < a < b <= 1 for a, b in zip(w, w[1:])),
+         "at least two increasing edges in (0, 1]")
+    need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
+    need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")
+    need("analysis.order_cutoff", 1 < vals["analysis.order_cutoff"] < 2, "1 < order_cutoff < 2")
+    need("analysis.order_bond", -1 <= vals["analysis.order_bond"] < 1, "-1 <= order_bond < 1")
+    need("analysis.order_bonds", vals["analysis.order_bonds"] >= 1, "order_bonds >= 1")
     need("analysis.zeta_bins", vals["analysis.zeta_bins"] >= 1, "zeta_bins >= 1")
     need("analysis.mobilised", 0 < vals["analysis.mobilised"] <= 1, "0 < mobilised <= 1")
     return Config(MappingProxyType(vals), tuple(warns), frozenset(derived), frozenset(raw))

@@ -206,16 +206,27 @@ def export_file(path, fmt, out=None):
     ----------
     path : str
         An mpdem state file (checksums are verified).
-    fmt : {"lammps-dump", "xyz", "lammps-data"}
+    fmt : {"lammps-dump", "xyz", "lammps-data", "packing"}
+        ``packing``: the positions and the contact list with its forces, compressed
+        (``mpdem.packing``; what ``analyze`` needs, not a restart).
     out : str, optional
-        Output path; default ``path`` with the suffix ``.dump`` or ``.xyz``.
+        Output path; default ``path`` with the suffix ``.dump``, ``.xyz`` or ``.data``;
+        for ``packing`` RUN/packing.npz beside a final.h5, else ``.packing.npz``.
 
     Returns
     -------
     str : the output path (written atomically).
     """
+    if fmt == "packing":
+        # what the analyses need, compressed (mpdem.packing): RUN/final.h5 -> RUN/packing.npz
+        from . import packing
+        base = os.path.basename(path)
+        out = out or (os.path.join(os.path.dirname(path), "packing.npz") if base == "final.h5"
+                      else os.path.splitext(path)[0] + ".packing.npz")
+        arrays, attrs = checkpoint.read_state(path, pairs=True)
+        return packing.write(out, arrays, attrs)
     if fmt not in FORMATS:
-        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}")
+        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}, packing")
     suffix, render = FORMATS[fmt]
     out = out or os.path.splitext(path)[0] + suffix
     arrays, attrs = checkpoint.read_state(path)

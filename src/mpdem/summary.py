@@ -51,9 +51,11 @@ def finish(run):
     try:
         a = cfg.analysis
         bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], st.L_x, st.L_y, cfg.contact.mu,
-                                     a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile)
+                                     a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile,
+                                     rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
+                                     force_fraction=a.force_fraction, band_width=a.band_width)
         summary["bulk"] = bulk
-        log(f"bulk: z = {bulk['z']:.3f} (without rattlers {bulk['z_no_rattlers']:.3f}, "
+        log(f"bulk: z = {bulk['z']:.3f} (without rattlers {bulk['z_no_rattlers']:.3f} by the {bulk['rattlers']} rule, "
             f"rattlers {100 * bulk['rattler_fraction']:.1f}%), phi = {bulk['phi']:.4f}, "
             f"{bulk['n_bulk']} particles in z in [{bulk['z1']:.2f}, {bulk['z2']:.2f}], "
             f"surface h = {bulk['h']:.2f}")

@@ -8,7 +8,9 @@ same names as ``jobs/mpdem-segment.sh --sweep``, so a sweep begun on a
 cluster can be finished here and the other way round.
 
 Each row is an ``mpdem run`` (or ``mpdem restart`` from its newest
-checkpoint) in its own process group, J at a time, then ``mpdem analyze``.
+checkpoint) in its own process group, J at a time, then ``mpdem analyze``
+(which keeps the row's packing, ``RUN/packing.npz``, for analyses after
+the state files are gone).
 A row is finished when its directory holds ``final.h5`` or
 ``analysis/summary.json``; finished rows are skipped, so a sweep resumes
 where it stopped. SIGINT and SIGTERM are passed on as SIGUSR1: every running
@@ -191,7 +193,7 @@ class Sweep:
         """(stage, argv) of the next thing a row needs: run, restart or analyze."""
         d = self.dir(row)
         if finished(d):
-            return "analyze", [sys.executable, "-m", "mpdem", "analyze", d, "--no-plots", "--quiet"]
+            return "analyze", [sys.executable, "-m", "mpdem", "analyze", d, "--no-plots", "--quiet", "--packing"]
         threads = ["--threads", str(self.threads), "--quiet"]
         if rundir.checkpoints(d):
             return "run", self.mpdem() + ["restart", d] + threads

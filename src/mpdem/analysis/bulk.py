@@ -170,7 +170,11 @@ class Packing:
     ----------
     x : (n, 3) positions [d]; fixed : (n,) 1 for bed spheres
     L_x, L_y : box [d]; mu : friction (sets the default rattler threshold)
-    n_min : rattler threshold; -1 = 4 for mu = 0, 2 for mu > 0
+    n_min : threshold of the count rule; -1 = 4 for mu = 0, 2 for mu > 0
+
+    Rattlers: built with the count rule (``remove_rattlers``, ``kept_count``,
+    ``counts_count``); ``use_backbone`` switches ``kept`` and ``counts_nr`` to
+    the force-based backbone (docs/model.md 6.2), the default of the analysis.
     """
 
     def __init__(self, x, fixed, L_x, L_y, mu, n_min=-1):
@@ -186,16 +190,32 @@ class Packing:
         n = len(self.x)
         self.counts = np.bincount(self.pairs.ravel(), minlength=n)
         self.n_min = (4 if mu == 0 else 2) if n_min < 0 else int(n_min)
-        self.kept, self.counts_nr = remove_rattlers(n, self.pairs, self.mobile, self.n_min)
+        self.kept_count, self.counts_count = remove_rattlers(n, self.pairs, self.mobile, self.n_min)
+        self.rule = "count"
+        self.kept, self.counts_nr = self.kept_count, self.counts_count
+        self.live = None
+
+    def use_backbone(self, kept, live, counts):
+        """Rattlers from now on by the force-based backbone (``backbone.of_packing``)."""
+        self.rule, self.kept, self.live, self.counts_nr = "force", kept, live, counts
 
     def in_slab(self, z1, z2):
         """(n,) bool: mobile particles with centres in [z1, z2]."""
         return self.mobile & (self.x[:, 2] >= z1) & (self.x[:, 2] <= z2)
 
     def measure(self, z1, z2):
-        """z, z_nr, rattler fraction, P(z), phi_f and bulk overlaps for the slab [z1, z2]."""
+        """z, z_nr, rattler fraction, P(z), phi_f and bulk overlaps for the slab [z1, z2].
+
+        z_no_rattlers and rattler_fraction follow the packing's rule (``rattlers``);
+        ``count_rule`` holds the count rule's when the backbone is in use.
+        """
         bulk = self.in_slab(z1, z2)
         out = coordination(self.counts, self.kept, self.counts_nr, bulk)
+        out["rattlers"] = self.rule
+        if self.rule != "count":
+            c = coordination(self.counts, self.kept_count, self.counts_count, bulk)
+            out["count_rule"] = {"n_min": self.n_min, "z_no_rattlers": c["z_no_rattlers"],
+                                 "rattler_fraction": c["rattler_fraction"]}
         out["phi"] = packing_fraction(self.x[self.mobile, 2], self.L_x, self.L_y, z1, z2)
         in_bulk = bulk[self.pairs[:, 0]] | bulk[self.pairs[:, 1]]
         overl = 1.0 - self.r[in_bulk]
@@ -210,7 +230,8 @@ class Packing:
 
 
 def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_min=-1,
-                 profile_bin=0.5, tall_pile=40.0, packing=None):
+                 profile_bin=0.5, tall_pile=40.0, packing=None, rattlers="count", k_n=2e5, model="hooke",
+                 force_fraction=0.01, band_width=2.5):
     """Bulk z, z without rattlers, rattler fraction and phi_f of a packing.
 
     Parameters
@@ -218,17 +239,24 @@ def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_
     x : (n, 3) positions [d]; fixed : (n,) 1 for bed spheres
     mu : friction (sets the default rattler threshold)
     margin_bottom, margin_top : bulk margins [d]; -1 = automatic (6.1)
-    n_min : rattler threshold; -1 = 4 for mu = 0, 2 for mu > 0
+    n_min : threshold of the count rule; -1 = 4 for mu = 0, 2 for mu > 0
     packing : Packing of the same arguments, if already built
+    rattlers : 'force' (the backbone, with the elastic normal forces of the overlaps:
+        k_n, model, force_fraction, band_width) or 'count' (n_min)
 
     Returns
     -------
     dict with z, z_no_rattlers, rattler_fraction, phi, n_bulk, z1, z2, h,
     z_bed, margins, n_min, phi_plateau, P(z) with and without rattlers,
-    median and maximum bulk overlap.
+    median and maximum bulk overlap, the rule ``rattlers``.
     """
     pk = packing or Packing(x, fixed, L_x, L_y, mu, n_min)
     reg = pk.region(margin_bottom, margin_top, profile_bin, tall_pile)
+    if rattlers == "force":
+        from . import backbone, contacts
+        cf = contacts.contact_forces(pk, {}, k_n, mu, model)
+        bb = backbone.of_packing(pk, cf, reg["h"], band_width, force_fraction)
+        pk.use_backbone(bb["kept"], bb["live"], bb["counts"])
     out = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     out["n_min"] = pk.n_min
     out.update(pk.measure(reg["z1"], reg["z2"]))

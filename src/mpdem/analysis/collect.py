@@ -33,14 +33,14 @@ import numpy as np
 
 from .. import rundir
 from ..config import PARAM_KEYS
-from . import fits, paper
+from . import fits, paper, pooled
 from .comparison import comparisons, write_readme
 from .figures import make_figures
-from .report import SUMMARY, AnalysisError
+from .report import PACKING, SUMMARY, AnalysisError
 from .runs import NAN, SHORT, RunResult, Set, families, mean_sem
 
 SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mobilised_fraction",
-                  "z_halved", "phi_halved", "overlap_median", "step")
+                  "z_halved", "phi_halved", "overlap_median", "step", "z_backbone", "z_iso", "crystal_fraction")
 
 
 # ---------------------------------------------------------------- parameter sets
@@ -67,7 +67,7 @@ def _set_order(params):
 
 def _is_run(d):
     return any(os.path.exists(os.path.join(d, *p)) for p in
-               (("final.h5",), ("analysis", SUMMARY), ("config.toml",)))
+               (("final.h5",), (PACKING,), ("analysis", SUMMARY), ("config.toml",)))
 
 
 def find_runs(targets):
@@ -133,6 +133,8 @@ def load_run(path, analyze_missing=True, log=print):
     step cap is not used for comparisons).
     """
     summ, final = os.path.join(path, "analysis", SUMMARY), rundir.final_path(path)
+    if not os.path.exists(final) and os.path.exists(os.path.join(path, PACKING)):
+        final = os.path.join(path, PACKING)      # a campaign's kept packing, the state file gone
     if not os.path.exists(summ):
         if not os.path.exists(final):
             return None, "unfinished: no final.h5 and no analysis/summary.json"
@@ -245,6 +247,13 @@ def _fit_one(kind, fam, members):
         e.update(status="not fitted", reason=f"{distinct} distinct {SHORT[xkey]} (3 parameters need at least 3)")
         return e
     sem = np.array([v for _, v, _ in stats])
+    if kind == "eq7":
+        # docs/model.md 6.6: weights from the family's pooled seed scatter (two seeds give a poor error of their own)
+        sigma, scatter, dof = pooled.eq7_sigma(members, q)
+        e.update(pooled_scatter=scatter, pooled_dof=dof)
+        if sigma is not None:
+            sem = sigma
+        e[f"{q}_sigma"] = [float(v) if math.isfinite(v) else None for v in sem]
     weighted = bool(np.all(np.isfinite(sem) & (sem > 0)))
     if not weighted:
         e["note"] = ("unweighted, errors scaled by the residuals: sets "
@@ -258,6 +267,13 @@ def _fit_one(kind, fam, members):
         e.update(status="failed", reason=f"{type(err).__name__}: {err}")
         return e
     e.update(status="fitted", **r)
+    if kind == "eq7" and weighted:
+        # the exponent fixed: 1/2 at mu = 0 (z - z_c ~ delta^(1/2)), the paper's 1/4 with friction
+        fixed = 0.5 if e["family"]["mu"] == 0 else paper.EQ7_FRICTIONAL_ALPHA_N
+        try:
+            e["fixed"] = fits.fit_eq7_fixed(x, e[q], sem, fixed)
+        except (ValueError, np.linalg.LinAlgError) as err:
+            e["fixed"] = {"status": "failed", "reason": str(err)}
     if not all(math.isfinite(r[f"{n}_err"]) for n in (("z_inf", "a", "alpha_n") if kind == "eq7" else "ABC")):
         e["note"] = (e.get("note", "") + "; " if "note" in e else "") + "parameter errors not determined"
     return e
@@ -281,8 +297,18 @@ def _alpha_check(e, members):
 
 
 def make_fits(sets):
-    """{'eq7': [...], 'eq9': [...]}: one entry per family with >= 2 values of k_n (phi_i)."""
-    out = {"eq7": [], "eq9": []}
+    """{'eq7': [...], 'eq9': [...], 'overlap': [...], 'alpha': [...]}: eq. 7 per family with >= 2
+    values of k_n, eq. 9 per family with >= 2 values of phi_i, the overlap fit per family of k_n
+    (any number of k_n), alpha pooled over the seeds of each set."""
+    out = {"eq7": [], "eq9": [], "overlap": [], "alpha": [], "P_f": [], "depth": []}
+    for fam, members in families(sets, "contact.k_n"):
+        out["overlap"].append(dict(family=fam, **pooled.overlap_fit(members)))
+    for s in sets:
+        for key, fn in (("alpha", pooled.set_alpha), ("P_f", pooled.set_force_distribution),
+                        ("depth", pooled.set_depth)):
+            got = fn(s)
+            if got is not None:
+                out[key].append(dict(set=s.id, **got))
     for fam, members in families(sets, "contact.k_n"):
         if len({s.p("k_n") for s in members}) >= 2:
             e = _fit_one("eq7", fam, members)
@@ -300,7 +326,8 @@ def make_fits(sets):
 # ---------------------------------------------------------------- tables
 
 RUN_COLUMNS = ("z", "z_no_rattlers", "rattler_fraction", "phi", "n_bulk", "alpha", "alpha_err",
-               "mobilised_fraction", "z_halved", "phi_halved", "overlap_median", "overlap_max", "step")
+               "mobilised_fraction", "z_halved", "phi_halved", "overlap_median", "overlap_max", "step",
+               "z_backbone", "z_iso", "crystal_fraction")
 
 
 def write_runs_csv(path, sets):
@@ -389,7 +416,7 @@ def collect(runs, out, analyze_missing=True, log=print):
     write_sets_csv(os.path.join(out, "sets.csv"), sets)
     fit_res = make_fits(sets)
     write_json(os.path.join(out, "fits.json"), {"source": paper.SOURCE, **fit_res})
-    for kind in ("eq7", "eq9"):
+    for kind in ("eq7", "eq9", "overlap"):
         for e in fit_res[kind]:
             log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}" + (f" ({e['reason']})" if "reason" in e else ""))
     figs = make_figures(sets, fit_res, out, log)

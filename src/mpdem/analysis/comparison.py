@@ -180,8 +180,10 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
               "development size (docs/model.md 7.1), not the paper.", ""]
     else:
         L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of docs/model.md 7).", ""]
+    L += gravity_sections(sets, fit_res)
     L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
-          "(fit weights 1/σ², σ the standard error over seeds):", ""]
+          "(fit weights 1/σ², σ = the family's pooled seed-to-seed scatter / √(seeds of the set); "
+          "the free fit, then with α_n fixed: 1/2 at μ = 0, the paper's 1/4 with friction):", ""]
     L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]
     L += ["", "Eq. 9, φ_f = A + B exp(−C φ_i), per family of sets differing in φ_i:", ""]
     L += [_fit_lines(e, "eq9") for e in fit_res["eq9"]] or ["- no family with ≥ 2 values of φ_i"]
@@ -219,4 +221,82 @@ def _fit_lines(e, kind):
     else:
         s = f"A = {fmt_pm(e['A'], e['A_err'], 4)}, B = {fmt_pm(e['B'], e['B_err'], 4)}, C = {fmt_pm(e['C'], e['C_err'], 2)}"
     s += f"; χ² = {e['chi2']:.3g} for {e['dof']} degrees of freedom" + (" (weighted)" if e["weighted"] else "")
+    if math.isfinite(e.get("p_value", math.nan)):
+        s += f", p = {e['p_value']:.2g}"
+    fx = e.get("fixed") or {}
+    if "z_inf" in fx:
+        s += (f". α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, "
+              f"ã = {fmt_pm(fx['a_tilde'], fx['a_tilde_err'], 1)}; χ² = {fx['chi2']:.3g} for {fx['dof']} degrees "
+              f"of freedom, p = {fx['p_value']:.2g}")
+    if math.isfinite(e.get("pooled_scatter", math.nan)):
+        s += f" (pooled scatter of z over seeds {e['pooled_scatter']:.4f}, {e['pooled_dof']} degrees of freedom)"
     return head + s + (f". Note: {e['note']}" if e.get("note") else "")
+
+
+def _by_id(entries):
+    return {e["set"]: e for e in entries}
+
+
+def gravity_sections(sets, fit_res):
+    """README sections of the measures of a pile under gravity (docs/model.md 6.2, 6.5, 6.6, 6.10)."""
+    L = ["## Counting under gravity", "",
+         "z over all bulk spheres (the paper's z); z of the force-bearing backbone (contacts below 1 % of their "
+         "depth band's mean normal force dropped, then spheres that cannot balance their weight with the rest; "
+         "docs/model.md 6.2) and its rattler fraction; the count rule's rattler fraction (fewer than 4 contacts at "
+         "μ = 0, 2 with friction: the rule of packings without gravity); for μ > 0 the generalized isostatic "
+         "count 4 + 2 n_m / 3; the crystal-like fraction (q6 bond order).", ""]
+    rows = []
+    for s in sets:
+        if not any(r.s.get("backbone") for r in s.runs):
+            continue
+        cr = [((r.s.get("count_rule") or {}).get("rattler_fraction")) for r in s.runs]
+        cr = [c for c in cr if c is not None]
+        n = len(s.runs)
+        rows.append([s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), s.p("N"),
+                     fmt_pm(*s.stat("z")[:2], 3, n), fmt_pm(*s.stat("z_backbone")[:2], 3, n),
+                     fmt_pm(*s.stat("rattler_fraction")[:2], 3, n),
+                     f"{np.mean(cr):.3f}" if cr else "—",
+                     fmt_pm(*s.stat("z_iso")[:2], 3, n) if s.p("mu") > 0 else "6",
+                     fmt_pm(*s.stat("crystal_fraction")[:2], 4, n)])
+    L += [_table(["set", "μ", "ε", "k_n", "N", "z (all)", "z (backbone)", "rattlers (force)", "rattlers (count rule)",
+                  "isostatic count", "crystal-like"], rows), ""] if rows else         ["No run has the backbone measures (analysed before they existed: `mpdem analyze` again).", ""]
+    al = _by_id(fit_res.get("alpha", []))
+    L += ["## Near-contact exponent α (eq. 6) on fixed windows", "",
+          "Maximum likelihood on the gaps ξ = r/d − 1 of every bulk pair in the window (docs/model.md 6.5), the "
+          "seeds pooled: first error the statistical (Fisher) one, second a bootstrap over seeds. `soft`: the "
+          "window's lower end is below 20 × the median bulk overlap. Paper: 0.52 ± 0.03 on an unnamed window; "
+          "later work on jammed frictionless spheres: about 0.4 (Donev et al. 2005; Lerner et al. 2013 about 0.38).",
+          ""]
+    rows = []
+    for s in sets:
+        e = al.get(s.id)
+        if not e:
+            continue
+        cells = [s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), s.p("N"), e["n_runs"]]
+        for w in e["windows"]:
+            txt = (f"{w['alpha']:.3f} ± {w['alpha_err']:.3f}" + (f" ± {w['boot_err']:.3f}" if math.isfinite(w["boot_err"]) else "")
+                   if math.isfinite(w["alpha"]) else "—")
+            cells.append(txt + (" soft" if w["soft"] else ""))
+        rows.append(cells)
+    if rows:
+        wins = next(e for e in fit_res["alpha"])["windows"]
+        L += [_table(["set", "μ", "ε", "k_n", "N", "seeds"] + [f"[{w['xi_lo']:g}, {w['xi_hi']:g}]" for w in wins], rows), ""]
+    else:
+        L += ["No run has window statistics.", ""]
+    L += ["## z against the overlap (docs/model.md 6.6)", "",
+          "z − z_c = A (δ/d)^(1/2) fitted over the depth bands inside the bulk of every run of a family (all k_n), "
+          "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs. At μ = 0 isostaticity "
+          "says z_c = 6.", ""]
+    ov = [e for e in fit_res.get("overlap", []) if e["status"] == "fitted"]
+    L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)}, "
+          f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs, δ/d from "
+          f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}" for e in ov] or         ["- no family with depth profiles of 2 runs or more"]
+    pf = _by_id(fit_res.get("P_f", []))
+    L += ["", "## Normal forces P(f) (docs/model.md 6.10)", "",
+          "f = F_n / the mean F_n of its depth band, bulk contacts, seeds pooled: the fraction with f < 0.1 and the "
+          "decay rate β of P(f) ~ exp(−β f) beyond f = 1 (maximum likelihood).", ""]
+    rows = [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), s.p("N"), pf[s.id]["n"],
+             f"{pf[s.id]['small_f_fraction']:.4f}", fmt_pm(pf[s.id]["tail_rate"], pf[s.id]["tail_rate_err"], 2)]
+            for s in sets if s.id in pf]
+    L += [_table(["set", "μ", "ε", "k_n", "N", "contacts", "f < 0.1", "β"], rows), ""] if rows else ["None.", ""]
+    return L

@@ -396,6 +396,83 @@ class Figures:
         self.save(fig, self._file("fig9_phi_i.png"))
 
 
+    # ---- the measures of a pile under gravity (docs/model.md 6.5, 6.6, 6.10)
+    def _set_label(self, s):
+        return (f"{s.id}: μ = {s.p('mu'):g}, ε = {s.p('epsilon'):g}, k_n = {fmt_kn(s.p('k_n'))}, "
+                f"N = {s.p('N')} ({_seeds(len(s.runs))})")
+
+    def _pooled(self, key):
+        got = {e["set"]: e for e in self.fits.get(key, [])}
+        return [(s, got[s.id]) for s in self.sets if s.id in got]
+
+    def fig10(self):
+        """The local slope of g(xi): alpha on half-decade windows, seeds pooled, per set."""
+        got = [(s, e) for s, e in self._pooled("alpha") if e["local"]]
+        if not got:
+            return "no run has the local-slope statistics (alpha_local)"
+        fig, ax = self.plt.subplots(figsize=(7, 4.5))
+        for s, e in got:
+            pts = [p for p in e["local"] if math.isfinite(p["alpha"]) and p["n"] >= 50]
+            if pts:
+                ax.errorbar([p["xi"] for p in pts], [p["alpha"] for p in pts], [p["alpha_err"] for p in pts],
+                            fmt="o-", ms=3, lw=0.8, capsize=2, label=self._set_label(s))
+        ax.axhline(paper.ALPHA, color="k", ls="--", lw=1, label=f"paper α = {paper.ALPHA} ± {paper.ALPHA_ERR}")
+        ax.axhline(0.38, color="grey", ls=":", lw=1, label="jammed frictionless spheres ≈ 0.38-0.4 (later work)")
+        ax.set(xscale="log", xlabel="ξ = r/d − 1 (window centre, ±1/4 decade)", ylabel="α (local)",
+               title="local slope −d ln g / d ln ξ (maximum likelihood, windows with ≥ 50 gaps)")
+        self._legend(ax)
+        self.save(fig, self._file("fig10_alpha_local.png"))
+
+    def fig11(self):
+        """z against depth below the surface per set, and z against sqrt(delta / d) with the overlap fits."""
+        got = [(s, e) for s, e in self._pooled("depth")]
+        if not got:
+            return "no run has a depth profile (bands)"
+        fig, (ax, bx) = self.plt.subplots(1, 2, figsize=(12, 4.5))
+        for s, e in got:
+            d = 0.5 * (np.array(e["depth_lo"], float) + np.array(e["depth_hi"], float))
+            z = np.array(e["z"], float)
+            inb = np.array(e["in_bulk"], bool)
+            line, = ax.plot(d, z, "o-", ms=3, lw=0.8, label=self._set_label(s))
+            ax.plot(d[inb], z[inb], "o", ms=6, mfc="none", color=line.get_color())
+            for r in s.runs:
+                b = r.s.get("bands")
+                if b:
+                    sel = np.array(b["in_bulk"], bool)
+                    ov = np.array([np.nan if v is None else v for v in b["overlap_mean"]], float)
+                    zz = np.array([np.nan if v is None else v for v in b["z"]], float)
+                    bx.plot(np.sqrt(ov[sel]), zz[sel], "o", ms=3, color=line.get_color())
+        for e in self.fits.get("overlap", []):
+            if e["status"] == "fitted":
+                xs = np.sqrt(np.array([0.0, e["delta_max"]]))
+                bx.plot(xs, e["z_c"] + e["A"] * xs, "-", lw=1,
+                        label=f"z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)} (μ = {e['family']['mu']:g}, N = {e['family']['N']})")
+        bx.axhline(6.0, color="k", ls=":", lw=1, label="isostatic (μ = 0): 6")
+        ax.set(xlabel="depth below the surface [d]", ylabel="z (band)", title="z per depth band (circled: in the bulk slab)")
+        bx.set(xlabel="(δ/d)^(1/2), δ the band's mean overlap", ylabel="z (band)",
+               title="z − z_c = A (δ/d)^(1/2) over the bulk bands")
+        self._legend(ax)
+        self._legend(bx)
+        self.save(fig, self._file("fig11_depth.png"))
+
+    def fig12(self):
+        """P(f), f = F_n / its depth band's mean, per set, seeds pooled."""
+        got = self._pooled("P_f")
+        if not got:
+            return "no run has P(f)"
+        from .bands import F_BIN
+        fig, ax = self.plt.subplots(figsize=(6.5, 4.5))
+        for s, e in got:
+            P = np.array(e["P"], float)
+            f = F_BIN * (np.arange(len(P)) + 0.5)
+            ok = P > 0
+            ax.semilogy(f[ok], P[ok], "o-", ms=3, lw=0.8,
+                        label=self._set_label(s) + f"; β = {e['tail_rate']:.2f}")
+        ax.set(xlabel="f = F_n / ⟨F_n⟩ (depth band)", ylabel="P(f)", title="normal-force distribution, bulk contacts")
+        self._legend(ax)
+        self.save(fig, self._file("fig12_P_f.png"))
+
+
 FIGURES = (  # name, file, what it shows
     ("fig2", "fig2_z_vs_mu.png", "bulk z against mu, one curve per epsilon, paper values as open markers"),
     ("fig3", "fig3_phi_vs_mu.png", "bulk phi_f against mu, one curve per epsilon, paper values as open markers"),
@@ -405,6 +482,9 @@ FIGURES = (  # name, file, what it shows
     ("fig7", "fig7_z_vs_kn.png", "z against k_n with the eq. 7 fit per (mu, epsilon) family; z - z_inf log-log"),
     ("fig8", "fig8_P_zeta.png", "P(zeta) (mean over seeds) per frictional mu; F_t/F_n for mu >= 1"),
     ("fig9", "fig9_phi_i.png", "phi_f and z against phi_i with the eq. 9 fit, paper eq. 9 dashed"),
+    ("fig10", "fig10_alpha_local.png", "the local slope of g(xi): alpha on half-decade windows, seeds pooled, per set"),
+    ("fig11", "fig11_depth.png", "z per depth band, and z against (delta/d)^(1/2) with the overlap fit per family"),
+    ("fig12", "fig12_P_f.png", "P(f), the normal force over its depth band's mean, per set, seeds pooled"),
 )
 
 

@@ -1,4 +1,5 @@
-"""The paper's fits: eq. 6 (near-contact power law), eq. 7 (stiffness), eq. 9 (initial density).
+"""The paper's fits: eq. 7 (stiffness), eq. 9 (initial density), the default window of eq. 6
+(its estimate: ``nearcontact``), and z against the overlap (docs/model.md 6.6).
 
 Each returns its parameters with standard errors. Weighted fits use
 sigma as absolute errors (chi^2 reported); without sigma the fit is
@@ -10,44 +11,15 @@ import math
 
 import numpy as np
 from scipy.optimize import curve_fit
+from scipy.stats import chi2 as chi2_dist
 
 K_REF = 2e5    # k_n of the paper's softest runs; eq. 7 is fitted in k_n / K_REF
 
 
-def fit_window(k_n, overlap_median, xi_hi=5e-2, xi_lo=-1.0):
-    """The default window of the eq. 6 fit (docs/model.md 6.5): (xi_lo, xi_hi)."""
-    if xi_lo < 0:
-        xi_lo = max(1e-3 * math.sqrt(K_REF / k_n), 20.0 * overlap_median)
-    return float(xi_lo), float(xi_hi)
-
-
-def power_law(xi, g, xi_lo, xi_hi):
-    """Fit log g = c - alpha log xi on the bins inside [xi_lo, xi_hi] (eq. 6).
-
-    Parameters
-    ----------
-    xi : (nb,) bin centres (geometric) in xi = r/d - 1; g : (nb,) g(r) there
-    xi_lo, xi_hi : fit window
-
-    Returns
-    -------
-    dict: alpha, alpha_err, c (natural log of the prefactor), n_bins used,
-    xi_lo, xi_hi; alpha is nan when fewer than 3 bins with g > 0 fall inside.
-    """
-    xi, g = np.asarray(xi, float), np.asarray(g, float)
-    use = (xi >= xi_lo) & (xi <= xi_hi) & (g > 0)
-    out = {"alpha": math.nan, "alpha_err": math.nan, "c": math.nan, "n_bins": int(use.sum()),
-           "xi_lo": float(xi_lo), "xi_hi": float(xi_hi)}
-    if use.sum() < 3:
-        return out
-    X, Y = np.log(xi[use]), np.log(g[use])
-    A = np.stack([np.ones_like(X), -X], axis=1)
-    coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
-    resid = Y - A @ coef
-    dof = max(len(X) - 2, 1)
-    cov = np.linalg.inv(A.T @ A) * float(resid @ resid) / dof
-    out.update(alpha=float(coef[1]), alpha_err=float(math.sqrt(cov[1, 1])), c=float(coef[0]))
-    return out
+def fit_window(xi_hi=5e-2, xi_lo=1e-3):
+    """The default window of the eq. 6 estimate (docs/model.md 6.5): (xi_lo, xi_hi), the same for
+    every k_n and mu. ``xi_lo`` -1 (older configs, where it followed k_n) is 1e-3."""
+    return (1e-3 if xi_lo < 0 else float(xi_lo)), float(xi_hi)
 
 
 def eq7(k_n, z_inf, a, alpha_n):
@@ -73,7 +45,103 @@ def _fit(model, x, y, sigma, p0, names):
     out.update({f"{n}_err": float(e) for n, e in zip(names, err)})
     out.update(n_points=int(len(x)), weighted=bool(weighted), chi2=float(res @ res),
                dof=int(len(x) - len(p)))
+    out["p_value"] = p_value(out["chi2"], out["dof"]) if weighted else math.nan
     return out, cov
+
+
+def p_value(chi2, dof):
+    """Probability of a chi^2 at least this large with ``dof`` degrees of freedom (nan for dof < 1)."""
+    return float(chi2_dist.sf(chi2, dof)) if dof >= 1 else math.nan
+
+
+def pooled_scatter(groups):
+    """The seed-to-seed standard deviation pooled over groups (sets) of one family.
+
+    Parameters
+    ----------
+    groups : list of sequences of values (one per set; a set with one value adds nothing)
+
+    Returns
+    -------
+    (s, dof): s = sqrt(sum over sets of sum (x - mean)^2 / sum (n - 1)); nan with no dof.
+    A set's standard error is then s / sqrt(n): two seeds give a poor error of
+    their own, and the scatter of one N is the same at every k_n.
+    """
+    ss, dof = 0.0, 0
+    for g in groups:
+        v = np.asarray([x for x in g if x is not None and math.isfinite(x)], float)
+        if v.size >= 2:
+            ss += float(((v - v.mean()) ** 2).sum())
+            dof += v.size - 1
+    return (math.sqrt(ss / dof) if dof else math.nan), dof
+
+
+def fit_eq7_fixed(k_n, z, sigma, alpha_n=0.5):
+    """Eq. 7 with the exponent fixed: z = z_inf + a (k_n / K_REF)^(-alpha_n), linear in (z_inf, a).
+
+    Returns
+    -------
+    dict: z_inf, a, a_tilde and errors, alpha_n (fixed), chi2, dof, p_value, n_points.
+    """
+    k_n, z, s = np.asarray(k_n, float), np.asarray(z, float), np.asarray(sigma, float)
+    if len(k_n) < 3:
+        raise ValueError(f"{len(k_n)} points: a fixed-exponent fit of 2 parameters needs 3 for a chi^2")
+    X = np.stack([np.ones_like(k_n), (k_n / K_REF) ** (-alpha_n)], axis=1) / s[:, None]
+    coef, *_ = np.linalg.lstsq(X, z / s, rcond=None)
+    cov = np.linalg.inv(X.T @ X)
+    res = z / s - X @ coef
+    chi2 = float(res @ res)
+    dof = len(k_n) - 2
+    a_tilde = float(coef[1]) * K_REF ** alpha_n
+    return {"z_inf": float(coef[0]), "z_inf_err": float(math.sqrt(cov[0, 0])), "a": float(coef[1]),
+            "a_err": float(math.sqrt(cov[1, 1])), "a_tilde": a_tilde,
+            "a_tilde_err": float(math.sqrt(cov[1, 1])) * K_REF ** alpha_n, "alpha_n": float(alpha_n),
+            "alpha_n_fixed": True, "chi2": chi2, "dof": dof, "p_value": p_value(chi2, dof),
+            "n_points": int(len(k_n)), "weighted": True}
+
+
+def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5):
+    """z - z_c = A (delta / d)^exponent over depth bands of many runs (docs/model.md 6.6).
+
+    Parameters
+    ----------
+    delta : (K,) mean overlap of each band [d]; z : (K,) its z
+    group : (K,) the run each band comes from: the error is a bootstrap over runs
+    exponent : 1/2 for Hookean contacts
+
+    Returns
+    -------
+    dict: z_c, A (least squares, every band weighted alike), z_c_err and A_err
+    (standard deviations over runs resampled with replacement), n_bands, n_runs,
+    rms (residual), delta_min, delta_max
+    """
+    delta, z, group = np.asarray(delta, float), np.asarray(z, float), np.asarray(group)
+    ok = np.isfinite(delta) & np.isfinite(z) & (delta > 0)
+    delta, z, group = delta[ok], z[ok], group[ok]
+    runs = np.unique(group)
+    if len(z) < 3:
+        raise ValueError(f"{len(z)} bands: the overlap fit needs at least 3")
+    xs = delta ** exponent
+
+    c = np.linalg.lstsq(np.stack([np.ones(len(z)), xs], axis=1), z, rcond=None)[0]
+    out = {"z_c": float(c[0]), "A": float(c[1]), "exponent": exponent, "n_bands": int(len(z)),
+           "n_runs": int(len(runs)), "rms": float(np.sqrt(np.mean((z - c[0] - c[1] * xs) ** 2))),
+           "delta_min": float(delta.min()), "delta_max": float(delta.max()),
+           "z_c_err": math.nan, "A_err": math.nan}
+    if len(runs) >= 2:
+        rng = np.random.default_rng(seed)
+        members = [np.flatnonzero(group == r) for r in runs]
+        boot = []
+        for pick in rng.integers(0, len(runs), (n_boot, len(runs))):
+            idx = np.concatenate([members[p] for p in pick])
+            if np.unique(xs[idx]).size < 2:
+                continue
+            X = np.stack([np.ones(len(idx)), xs[idx]], axis=1)
+            boot.append(np.linalg.lstsq(X, z[idx], rcond=None)[0])
+        if len(boot) > 1:
+            b = np.array(boot)
+            out["z_c_err"], out["A_err"] = float(b[:, 0].std(ddof=1)), float(b[:, 1].std(ddof=1))
+    return out
 
 
 def fit_eq7(k_n, z, sigma=None):

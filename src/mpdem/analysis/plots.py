@@ -71,11 +71,13 @@ def plot_gofr(out, s, t):
     ok = nr["g_xi"] > 0
     fig, ax = plt.subplots(figsize=(5, 4))
     ax.loglog(xi[ok], nr["g_xi"][ok], "ko", ms=3, label="g(r), r > d")
-    ax.axvspan(fit["xi_lo"], fit["xi_hi"], color="tab:green", alpha=0.12, label="fit window")
+    ax.axvspan(fit["xi_lo"], fit["xi_hi"], color="tab:green", alpha=0.12, label="window")
     if np.isfinite(fit["alpha"]):
+        from .nearcontact import prefactor
         xs = np.array([fit["xi_lo"], fit["xi_hi"]])
-        ax.loglog(xs, np.exp(fit["c"]) * xs ** -fit["alpha"], "r-",
-                  label=f"$\\alpha$ = {fit['alpha']:.3f} $\\pm$ {fit['alpha_err']:.3f}")
+        C = prefactor(fit, fit["n_ref"], nr["rho"])
+        ax.loglog(xs, C * xs ** -fit["alpha"], "r-",
+                  label=f"$\\alpha$ = {fit['alpha']:.3f} $\\pm$ {fit['alpha_err']:.3f} (max. likelihood)")
     ax.set(xlabel="$\\xi = r/d - 1$", ylabel="g", title="near contact (eq. 6)")
     ax.legend(fontsize=8)
     save(fig, os.path.join(out, "gofr_near.png"))

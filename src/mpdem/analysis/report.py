@@ -8,6 +8,9 @@
     RUN/analysis/gofr.csv         g(r), linear bins up to analysis.g_r_max
     RUN/analysis/gofr_near.csv    g(r) on logarithmic bins in xi = r/d - 1
     RUN/analysis/zeta.csv         P(zeta) (and F_t/F_n for mu >= 1), frictional runs
+    RUN/analysis/bands.csv        the depth profile: z, backbone z, phi, overlap, sigma_zz, crystal fraction per band
+    RUN/analysis/P_f.csv          P(f), f = F_n / the mean F_n of its depth band, bulk contacts
+    RUN/analysis/alpha_local.csv  the local slope: alpha on half-decade windows of xi
     RUN/analysis/*.png            the same as plots
 
 A snapshot ``RUN/snapshots/snap-NNNNN.h5`` is analysed into
@@ -24,12 +27,13 @@ import tomllib
 
 import numpy as np
 
-from .. import checkpoint, config, rundir
+from .. import checkpoint, config, packing, rundir
 from ..checkpoint import StateFileError
 from ..errors import MpdemError
-from . import bulk, fits, gofr, mobilisation
+from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
 
 SUMMARY = "summary.json"
+PACKING = "packing.npz"     # a run's kept packing (``mpdem export --format packing``) when final.h5 is gone
 
 
 class AnalysisError(MpdemError, ValueError):
@@ -39,12 +43,15 @@ class AnalysisError(MpdemError, ValueError):
 def locate(target, out=None):
     """(state file, output directory) of ``mpdem analyze TARGET``.
 
-    A run directory gives its final.h5 and RUN/analysis; a snapshot or
+    A run directory gives its final.h5 (or, without one, its packing.npz) and
+    RUN/analysis; a snapshot or
     checkpoint of a run gives RUN/analysis/<name>; RUN/final.h5 gives
     RUN/analysis; any other file gives <name>-analysis beside it.
     """
     if os.path.isdir(target):
         path = rundir.final_path(target)
+        if not os.path.exists(path) and os.path.exists(os.path.join(target, PACKING)):
+            path = os.path.join(target, PACKING)
         if not os.path.exists(path):
             snaps = rundir.snapshots(target)
             hint = (f"; analyse a snapshot instead, e.g. {snaps[-1][1]}" if snaps else "")
@@ -55,7 +62,7 @@ def locate(target, out=None):
         d = os.path.dirname(os.path.abspath(target))
         sub = os.path.basename(d) in (rundir.CKPT_DIR, rundir.SNAP_DIR)
         run = os.path.dirname(d) if sub else d
-        if not sub and os.path.basename(path) != "final.h5":
+        if not sub and os.path.basename(path) not in ("final.h5", PACKING):
             run = None
     else:
         raise AnalysisError(f"{target}: no such file or directory")
@@ -64,7 +71,7 @@ def locate(target, out=None):
     stem = os.path.splitext(os.path.basename(path))[0]
     if run is None:
         return path, os.path.join(os.path.dirname(os.path.abspath(path)), f"{stem}-analysis")
-    return path, os.path.join(run, "analysis", "" if stem == "final" else stem).rstrip(os.sep)
+    return path, os.path.join(run, "analysis", "" if stem in ("final", "packing") else stem).rstrip(os.sep)
 
 
 def file_config(attrs, path, sets=()):
@@ -132,6 +139,48 @@ def _finite(obj):
     return obj
 
 
+def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
+    """The generalized isostatic count of a frictional packing (docs/model.md 6.2).
+
+    Contacts at the Coulomb limit (zeta > ``mobilised``) remove a degree of
+    freedom each, so the count to compare z with is 4 + 2 n_m / 3, n_m the
+    fully mobilised contacts per sphere (over the bulk spheres), for all
+    spheres and for the backbone. At mu = 0 it is 2 x 3 = 6.
+    """
+    if mu == 0:
+        return {"z_iso": 6.0, "note": "mu = 0: isostatic z = 6 (2 x 3 degrees of freedom per sphere)"}
+    if not cf.from_file.any():
+        return {"note": "no contact forces in the file: no fully mobilised contacts to count"}
+    mob = np.nan_to_num(cf.zeta, nan=0.0) > mobilised
+    n = len(pk.x)
+    per = np.bincount(pk.pairs[mob].ravel(), minlength=n)
+    per_bb = np.bincount(pk.pairs[mob & live].ravel(), minlength=n)
+    bk = bulk_rows & kept
+    n_m = float(per[bulk_rows].mean()) if bulk_rows.any() else math.nan
+    n_m_bb = float(per_bb[bk].mean()) if bk.any() else math.nan
+    return {"n_m": n_m, "z_iso": 4.0 + 2.0 * n_m / 3.0, "n_m_backbone": n_m_bb,
+            "z_iso_backbone": 4.0 + 2.0 * n_m_bb / 3.0, "mobilised": mobilised}
+
+
+def _alpha(pk, z1, z2, a, overlap_median):
+    """alpha by maximum likelihood on the windows, the default window and the local slope (6.5)."""
+    lo, hi = fits.fit_window(a.fit_xi_hi, a.fit_xi_lo)
+    wins = nearcontact.windows_of(a.alpha_windows)
+    centres = nearcontact.slope_centres(*nearcontact.SLOPE_RANGE)
+    reach = max([hi] + [w[1] for w in wins] + [c * 10 ** nearcontact.SLOPE_HALF_WIDTH for c in centres])
+    refs = pk.in_slab(z1, z2)[pk.mobile]
+    xi = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, reach)
+    soft = 20.0 * overlap_median
+
+    def mark(st):
+        # soft-sphere compression flattens g below ~20 x the typical overlap
+        return dict(st, soft=bool(st["xi_lo"] < soft))
+
+    return (mark(nearcontact.window_stats(xi, lo, hi)),
+            [mark(nearcontact.window_stats(xi, w0, w1)) for w0, w1 in wins],
+            nearcontact.local_slope(xi, centres), int(refs.sum()))
+
+
 def measure(arrays, attrs, cfg):
     """All section 6 measurements of one state.
 
@@ -152,19 +201,47 @@ def measure(arrays, attrs, cfg):
     warns = []
     pk = bulk.Packing(arrays["x"], arrays["fixed"], L_x, L_y, c.mu, a.n_min)
     reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin, a.tall_pile)
-    z1, z2 = reg["z1"], reg["z2"]
+    z1, z2, h = reg["z1"], reg["z2"], reg["h"]
+    cf = contacts.contact_forces(pk, arrays, c.k_n, c.mu, c.model)
+    bb = backbone.of_packing(pk, cf, h, a.band_width, a.force_fraction)
+    if a.rattlers == "force":
+        pk.use_backbone(bb["kept"], bb["live"], bb["counts"])
     s = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     s["n_min"] = pk.n_min
     s.update(pk.measure(z1, z2))
+    bulk_rows = pk.in_slab(z1, z2)
+    bk = bulk_rows & bb["kept"]
+    mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
+    in_slab = (mid >= z1) & (mid <= z2)
+    s["backbone"] = {"z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
+                     "rattler_fraction": float(1.0 - bk.sum() / max(bulk_rows.sum(), 1)),
+                     "weak_fraction": float(bb["weak"][in_slab].mean()) if in_slab.any() else math.nan,
+                     "force_fraction": a.force_fraction, "band_width": a.band_width,
+                     "forces_from_file": float(cf.from_file.mean()) if len(cf.from_file) else math.nan,
+                     "P_z": bulk.histogram_z(bb["counts"][bk]).tolist()}
+    s["isostatic"] = isostatic(pk, cf, bb["live"], bb["kept"], bulk_rows, c.mu, a.mobilised)
     # docs/model.md 6.1.4: the same with both margins halved
     half = bulk.bulk_region(pk.x[pk.mobile, 2], pk.z_bed, L_x, L_y, 0.5 * reg["margin_bottom"],
                             0.5 * reg["margin_top"], a.profile_bin)
     s["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])
+    Q6, crystal, _ = order.crystal_order(pk.x, L_x, L_y, a.order_cutoff, a.order_bond, a.order_bonds)
+    s["order"] = {"Q6_mean": float(np.nanmean(Q6[bulk_rows])) if bulk_rows.any() else math.nan,
+                  "crystal_fraction": float(crystal[bulk_rows].mean()) if bulk_rows.any() else math.nan,
+                  "cutoff": a.order_cutoff, "bond": a.order_bond, "bonds": a.order_bonds}
+    s["bands"] = bands.depth_profile(pk, cf, bb["kept"], bb["counts"], crystal, h, a.band_width, z1, z2)
+    comp = in_slab & (cf.F_n > 0)
+    s["P_f"] = bands.force_distribution(cf.F_n[comp] / bb["ref_force"][comp])
 
     tables = {"profile": reg, "z_profile": _profile(pk, reg),
               "packing": {"x": pk.x, "fixed": pk.fixed, "counts": pk.counts, "L_x": L_x, "L_y": L_y,
                           "z_bed": pk.z_bed}}
-    s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, gofr=None)
+    s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, alpha_windows=[], alpha_local=[], gofr=None)
+    dflt, wins, local, n_refs = _alpha(pk, z1, z2, a, s["overlap_median"])
+    s.update(alpha=dflt["alpha"], alpha_err=dflt["alpha_err"], alpha_fit=dict(dflt, method="maximum likelihood",
+             n_ref=n_refs), alpha_windows=wins, alpha_local=local)
+    if not math.isfinite(dflt["alpha"]):
+        warns.append(f"alpha not estimated: {dflt['n']} gaps in [{dflt['xi_lo']:.3g}, {dflt['xi_hi']:.3g}] "
+                     f"(needs {nearcontact.N_MIN})")
     r_full = _range(a.g_r_max, L_x, L_y, z1, z2, a.g_dr, "g_r_max", warns)
     r_near = _range(a.near_r_max, L_x, L_y, z1, z2, a.g_dr, "near_r_max", warns)
     if r_full is not None and r_near is not None:
@@ -172,17 +249,10 @@ def measure(arrays, attrs, cfg):
         g = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_full, a.g_dr, a.xi_min, a.xi_per_decade)
         near = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_near, a.g_dr, a.xi_min, a.xi_per_decade)
         xi_c = np.sqrt(near["xi_lo"] * near["xi_hi"])
-        lo, hi = fits.fit_window(c.k_n, s["overlap_median"], a.fit_xi_hi, a.fit_xi_lo)
-        if not lo < hi:
-            warns.append(f"fit window empty: xi_lo = {lo:.3g} (20 x median overlap) >= xi_hi = {hi:.3g}")
-        pl = fits.power_law(xi_c, near["g_xi"], lo, hi)
-        if not math.isfinite(pl["alpha"]):
-            warns.append(f"power law not fitted: {pl['n_bins']} populated bins in [{lo:.3g}, {hi:.3g}]")
-        s.update(alpha=pl["alpha"], alpha_err=pl["alpha_err"], alpha_fit=pl)
         s["gofr"] = {"r_max": g["r_max"], "n_ref": g["n_ref"], "rho": g["rho"],
                      "near_r_max": near["r_max"], "near_n_ref": near["n_ref"],
                      "near_contacts_per_ref": near["n_overlap"] / near["n_ref"]}
-        tables.update(gofr=g, near=near, xi_c=xi_c, fit=pl)
+        tables.update(gofr=g, near=near, xi_c=xi_c, fit=s["alpha_fit"])
     s["zeta"] = None
     if c.mu == 0:
         s["zeta_note"] = "mu = 0: no tangential forces"
@@ -213,6 +283,16 @@ def write_tables(out, s, t):
             cols += [z["count_ratio"], z["P_ratio"]]
             head += ["count_ratio", "P_ratio"]
         _csv(os.path.join(out, "zeta.csv"), head, cols)
+    b = s["bands"]
+    cols = ["depth_lo", "depth_hi", "z_lo", "z_hi", "in_bulk", "n_particles", "z", "z_backbone", "rattler_fraction",
+            "phi", "overlap_mean", "overlap_median", "F_n_mean", "sigma_zz", "crystal_fraction", "n_contacts"]
+    _csv(os.path.join(out, "bands.csv"), cols, [b[c] for c in cols])
+    pf = s["P_f"]
+    edges = bands.F_BIN * np.arange(len(pf["counts"]) + 1)
+    _csv(os.path.join(out, "P_f.csv"), ["f_lo", "f_hi", "count", "P"],
+         [edges[:-1], edges[1:], pf["counts"], bands.density(pf["counts"], pf["n"])])
+    _csv(os.path.join(out, "alpha_local.csv"), ["xi", "xi_lo", "xi_hi", "n", "alpha", "alpha_err"],
+         [[w[k] for w in s["alpha_local"]] for k in ("xi", "xi_lo", "xi_hi", "n", "alpha", "alpha_err")])
     if "gofr" not in t:
         return
     g = t["gofr"]
@@ -222,14 +302,24 @@ def write_tables(out, s, t):
          [nr["xi_lo"], nr["xi_hi"], t["xi_c"], nr["count_xi"], nr["g_xi"]])
 
 
-def analyze(target, out=None, sets=(), plots=True, log=print):
-    """Analyse a run directory or a state file; returns (summary, output directory)."""
+def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False):
+    """Analyse a run directory or a state file; returns (summary, output directory).
+
+    ``keep_packing``: when the state is a run's final.h5, also write RUN/packing.npz
+    (``mpdem.packing``), which this function reads when final.h5 is gone.
+    """
     t0 = time.perf_counter()
     path, out = locate(target, out)
-    attrs = checkpoint.read_attrs(path)
-    cfg = file_config(attrs, path, sets)
-    arrays, attrs = checkpoint.read_state(path, pairs=True)
+    if packing.is_packing(path):
+        arrays, attrs = packing.read(path)
+        cfg = file_config(attrs, path, sets)
+    else:
+        attrs = checkpoint.read_attrs(path)
+        cfg = file_config(attrs, path, sets)
+        arrays, attrs = checkpoint.read_state(path, pairs=True)
     t_read = time.perf_counter() - t0
+    if keep_packing and os.path.basename(path) == "final.h5":
+        packing.write(os.path.join(os.path.dirname(path), PACKING), arrays, attrs)
     try:
         s, tables = measure(arrays, attrs, cfg)
     except ValueError as e:
@@ -257,15 +347,20 @@ def analyze(target, out=None, sets=(), plots=True, log=print):
 
 def describe(s):
     """A few lines of the main numbers."""
-    al = (f"alpha = {s['alpha']:.3f} +- {s['alpha_err']:.3f} (xi in [{s['alpha_fit']['xi_lo']:.2g}, "
-          f"{s['alpha_fit']['xi_hi']:.2g}], {s['alpha_fit']['n_bins']} bins)"
-          if math.isfinite(s["alpha"]) else "alpha: not fitted")
+    al = (f"alpha = {s['alpha']:.3f} +- {s['alpha_err']:.3f} (maximum likelihood, {s['alpha_fit']['n']} gaps "
+          f"in xi [{s['alpha_fit']['xi_lo']:.2g}, {s['alpha_fit']['xi_hi']:.2g}]); "
+          + ", ".join(f"[{w['xi_lo']:.0e}, {w['xi_hi']:.0e}]: {w['alpha']:.3f}" for w in s["alpha_windows"])
+          if math.isfinite(s["alpha"]) else "alpha: not estimated")
     zt = (f"; P(zeta): {s['zeta']['n_contacts']} bulk contacts, {100 * s['zeta']['mobilised_fraction']:.1f}% fully mobilised"
           if s.get("zeta") else "")
+    iso = s.get("isostatic") or {}
+    zi = (f"; generalized isostatic 4 + 2 n_m / 3 = {iso['z_iso']:.3f}" if "n_m" in iso else "")
     return (f"bulk z in [{s['z1']:.2f}, {s['z2']:.2f}] ({s['n_bulk']} particles): z = {s['z']:.3f}, "
-            f"without rattlers {s['z_no_rattlers']:.3f} ({100 * s['rattler_fraction']:.1f}% rattlers), "
+            f"without rattlers ({s['rattlers']} rule) {s['z_no_rattlers']:.3f} "
+            f"({100 * s['rattler_fraction']:.1f}% rattlers), backbone z = {s['backbone']['z']:.3f}{zi}, "
             f"phi = {s['phi']:.4f}\n"
-            f"margins halved: z = {s['halved_margins']['z']:.3f}, phi = {s['halved_margins']['phi']:.4f}\n"
+            f"margins halved: z = {s['halved_margins']['z']:.3f}, phi = {s['halved_margins']['phi']:.4f}; "
+            f"crystal-like {100 * s['order']['crystal_fraction']:.1f}%\n"
             f"{al}{zt}")
 
 

@@ -76,8 +76,10 @@ def quantities(s):
     hm, zt = s.get("halved_margins") or {}, s.get("zeta") or {}
     q = {k: num(s.get(k)) for k in ("z", "z_no_rattlers", "rattler_fraction", "phi", "alpha", "alpha_err",
                                     "n_bulk", "overlap_median", "overlap_max", "step")}
+    bb, iso, od = s.get("backbone") or {}, s.get("isostatic") or {}, s.get("order") or {}
     q.update(mobilised_fraction=num(zt.get("mobilised_fraction")), z_halved=num(hm.get("z")),
-             phi_halved=num(hm.get("phi")))
+             phi_halved=num(hm.get("phi")), z_backbone=num(bb.get("z")),
+             z_iso=num(iso.get("z_iso")) if "n_m" in iso else NAN, crystal_fraction=num(od.get("crystal_fraction")))
     return q
 
 

@@ -1,0 +1,139 @@
+"""The force-bearing backbone of a pile under gravity (docs/model.md 6.2).
+
+A count threshold (d + 1 = 4 contacts) is the rattler rule of packings without
+gravity. In a pile a sphere's weight is one more constraint: a frictionless
+sphere rests on 3 contacts, a frictional one on fewer. The backbone is found
+from forces and force balance instead:
+
+1. contacts whose normal force is below ``force_fraction`` of the mean normal
+   force of their depth band (the load grows with depth) are dropped;
+2. then, repeatedly, a mobile sphere that cannot balance its own weight with
+   the contacts it has left is removed with its contacts, and its partners are
+   tested again.
+
+"Can balance its weight": some non-negative contact forces along the remaining
+contacts' directions (at mu = 0: along the normals; at mu > 0: inside each
+Coulomb cone, approximated from inside by a pyramid of ``CONE_SIDES`` edges)
+sum to m g up (non-negative least squares, residual below ``BALANCE_TOL``).
+It needs no force values, only directions, so it holds for any load from
+above. The bed is never removed.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import nnls
+
+CONE_SIDES = 16       # edges of the inner pyramid of a Coulomb cone (cos(pi/16) = 0.98 of its radius)
+BALANCE_TOL = 1e-9    # residual |sum f u - z_hat| below which the weight counts as balanced [m g]
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def _generators(u, mu):
+    """(3, k) directions whose non-negative combinations are the forces contacts along ``u`` can push with.
+
+    ``u`` (k, 3): unit normals pointing into the sphere. At mu = 0 the normals
+    themselves; at mu > 0 the edges of a pyramid inscribed in each cone of
+    half-angle atan(mu).
+    """
+    if mu <= 0:
+        return u.T
+    ref = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(u, ref)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = np.cross(u, e1)
+    phi = 2.0 * math.pi * np.arange(CONE_SIDES) / CONE_SIDES
+    g = (u[:, None, :] + mu * (np.cos(phi)[None, :, None] * e1[:, None, :]
+                               + np.sin(phi)[None, :, None] * e2[:, None, :]))
+    return g.reshape(-1, 3).T
+
+
+def balances_weight(u, mu, up=UP):
+    """True if contacts along unit normals ``u`` (k, 3), pointing into the sphere, can hold its weight.
+
+    Parameters
+    ----------
+    u : (k, 3) unit vectors from each partner's centre towards the sphere's
+    mu : friction coefficient (0: normal forces only)
+    up : (3,) the direction opposite to gravity
+    """
+    if len(u) == 0:
+        return False
+    A = _generators(np.asarray(u, float), mu)
+    _, res = nnls(A, np.asarray(up, float))
+    return res < BALANCE_TOL
+
+
+def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0.01, up=UP):
+    """Spheres and contacts that carry the pile's weight.
+
+    Parameters
+    ----------
+    n_rows : int
+    pairs : (M, 2) int row indices of the contacts; nrm : (M, 3) unit normal from pairs[:, 1] to pairs[:, 0]
+    F_n : (M,) normal forces [m g]; ref_force : (M,) the mean normal force each is compared with
+        (its depth band's)
+    removable : (n_rows,) bool, False for spheres never removed (the bed)
+    mu : friction coefficient
+    force_fraction : contacts with F_n < force_fraction x ref_force are dropped first
+
+    Returns
+    -------
+    kept : (n_rows,) bool, spheres of the backbone (and every sphere not removable)
+    live : (M,) bool, contacts of the backbone (both ends kept, force above the cut)
+    counts : (n_rows,) int, backbone contacts per sphere
+    weak : (M,) bool, the contacts dropped by the force cut
+    """
+    pairs = np.asarray(pairs, np.int64)
+    weak = ~(np.asarray(F_n) >= force_fraction * np.asarray(ref_force))
+    kept = np.ones(n_rows, bool)
+    M = len(pairs)
+    # each sphere's contacts: (contact, direction into the sphere)
+    ends = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    which = np.concatenate([np.arange(M), np.arange(M)])
+    sign = np.concatenate([np.ones(M), -np.ones(M)])
+    order = np.argsort(ends, kind="stable")
+    start = np.searchsorted(ends[order], np.arange(n_rows + 1))
+    todo = np.flatnonzero(removable)
+    while todo.size:
+        live = ~weak & kept[pairs[:, 0]] & kept[pairs[:, 1]]
+        drop = []
+        for s in todo:
+            if not kept[s]:
+                continue
+            mine = order[start[s]:start[s + 1]]
+            c = which[mine]
+            on = live[c]
+            if not balances_weight(sign[mine][on, None] * nrm[c[on]], mu, up):
+                drop.append(s)
+        if not drop:
+            break
+        drop = np.asarray(drop, np.int64)
+        kept[drop] = False
+        # the partners of removed spheres are tested again
+        sel = np.concatenate([order[start[s]:start[s + 1]] for s in drop])
+        other = np.where(ends[sel] == pairs[which[sel], 0], pairs[which[sel], 1], pairs[which[sel], 0])
+        todo = np.unique(other[kept[other] & removable[other]])
+    live = ~weak & kept[pairs[:, 0]] & kept[pairs[:, 1]]
+    counts = np.bincount(pairs[live].ravel(), minlength=n_rows)
+    return kept, live, counts, weak
+
+
+def of_packing(pk, cf, h, band_width, force_fraction):
+    """``backbone`` of a Packing, each contact's force compared with the mean of its depth band.
+
+    Parameters
+    ----------
+    pk : Packing; cf : its ContactForces; h : free surface [d]; band_width : [d]
+
+    Returns
+    -------
+    dict: kept, live, counts, weak (as ``backbone``) and ref_force (M,) [m g]
+    """
+    from .contacts import band_index, local_mean, n_bands
+    B = n_bands(h, pk.z_bed, band_width)
+    mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
+    ref = local_mean(cf.F_n, band_index(mid, h, band_width, B), B)
+    kept, live, counts, weak = backbone(len(pk.x), pk.pairs, cf.nrm, cf.F_n, ref, pk.mobile, pk.mu, force_fraction)
+    return {"kept": kept, "live": live, "counts": counts, "weak": weak, "ref_force": ref}
