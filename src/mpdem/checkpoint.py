@@ -40,6 +40,7 @@ import numpy as np
 
 from .errors import MpdemError
 from .parallel import channel
+from .rundir import starts_with
 
 FORMAT = "mpdem-state"
 VERSION = 2
@@ -345,8 +346,4 @@ def read_attrs(path):
 
 def is_state_file(path):
     """True if ``path`` looks like HDF5 (by its signature)."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(8) == b"\x89HDF\r\n\x1a\n"
-    except OSError:
-        return False
+    return starts_with(path, b"\x89HDF\r\n\x1a\n")

@@ -21,6 +21,7 @@ import zipfile
 import numpy as np
 
 from .errors import MpdemError
+from .rundir import starts_with
 
 FORMAT = "mpdem-packing"
 VERSION = 1
@@ -35,11 +36,7 @@ class PackingFileError(MpdemError, ValueError):
 
 def is_packing(path):
     """True if ``path`` is a zip archive (a packing file, by its signature)."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(4) == b"PK\x03\x04"
-    except OSError:
-        return False
+    return starts_with(path, b"PK\x03\x04")
 
 
 def write(path, arrays, attrs):

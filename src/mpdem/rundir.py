@@ -36,6 +36,15 @@ def write_atomic(path, chunks):
     os.replace(tmp, path)
 
 
+def starts_with(path, magic):
+    """True if the file ``path`` begins with the bytes ``magic`` (a format's signature)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(magic)) == magic
+    except OSError:
+        return False
+
+
 def _cell(v):
     """One CSV cell: full precision, empty for nan or None (not available)."""
     if v is None:
