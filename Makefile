@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
 
-.PHONY: setup run test test-fast test-serial test-mpi test-validation bench reproduce collect-dev reproduce-paper collect-paper clean
+.PHONY: setup run test test-fast lint test-serial test-mpi test-validation bench reproduce collect-dev reproduce-paper collect-paper clean
 
 setup:
 	@bash tools/setup.sh
@@ -16,9 +16,13 @@ run: setup
 	$(PY) -m mpdem analyze runs/example
 
 # Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
-test: setup test-serial test-mpi test-validation
+test: setup lint test-serial test-mpi test-validation
 
-test-fast: setup test-serial test-mpi
+test-fast: setup lint test-serial test-mpi
+
+# pyflakes and pycodestyle errors (pyproject.toml [tool.ruff])
+lint:
+	$(VENV)/bin/ruff check src tests mpi_tests tools
 
 # the default selection: pyproject.toml's addopts deselect -m validation
 test-serial:

@@ -4,7 +4,6 @@ import math
 import os
 
 import numpy as np
-from mpi4py import MPI
 
 from mpdem import checkpoint, config
 from mpdem.analysis import bulk, report
@@ -65,6 +64,7 @@ def test_analysis_does_not_depend_on_the_writers(comm):
                {k: v for k, v in one.items() if k not in VOLATILE}
         assert many["zeta"]["n_contacts"] > 0 and 0 < many["z"] <= 12
         for name in ("profile", "coordination", "gofr", "gofr_near", "zeta"):
-            with open(os.path.join(d, "a-many", f"{name}.csv")) as a, open(os.path.join(d, "a-one", f"{name}.csv")) as b:
+            with open(os.path.join(d, "a-many", f"{name}.csv")) as a, \
+                    open(os.path.join(d, "a-one", f"{name}.csv")) as b:
                 assert a.read() == b.read(), name
     comm.Barrier()

@@ -124,7 +124,9 @@ def fake_segment_mpdem(path, log):
     arguments to ``log``, one line per call, and finishes as ``mpdem run --out DIR`` does, with
     DIR/summary.json (the helper takes exit 0 without it for a launch that never started)."""
     path.write_text('printf "%s\\n" "$*" >> ' + shlex.quote(str(log)) + '\n'
-                    'while (( $# )); do [[ $1 != --out ]] || { mkdir -p "$2"; echo "{}" > "$2/summary.json"; }; shift; done\n')
+                    'while (( $# )); do\n'
+                    '  [[ $1 != --out ]] || { mkdir -p "$2"; echo "{}" > "$2/summary.json"; }; shift\n'
+                    'done\n')
     return f"bash {path}"
 
 

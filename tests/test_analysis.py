@@ -90,7 +90,8 @@ def test_fcc_has_twelve_contacts_and_its_packing_fraction():
     top = x[:, 2].max()
     assert s["z_bed"] == pytest.approx(0.75 * a) and abs(s["h"] - top) <= 0.5
     assert s["margin_bottom"] == pytest.approx(min(max(0.2 * (s["h"] - s["z_bed"]), 3), 10))
-    assert s["z1"] == pytest.approx(s["z_bed"] + s["margin_bottom"]) and s["z2"] == pytest.approx(s["h"] - s["margin_top"])
+    assert s["z1"] == pytest.approx(s["z_bed"] + s["margin_bottom"])
+    assert s["z2"] == pytest.approx(s["h"] - s["margin_top"])
     assert s["n_bulk"] == int(((x[:, 2] >= s["z1"]) & (x[:, 2] <= s["z2"]) & (fixed == 0)).sum())
     assert s["z"] == 12.0 and s["z_no_rattlers"] == 12.0 and s["rattler_fraction"] == 0.0
     assert s["P_z"][12] == 1.0
@@ -405,4 +406,5 @@ def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
         packing.read(str(tmp_path / "other.npz"))
     # a state without a contact list (a checkpoint) has no packing
     with pytest.raises(packing.PackingFileError, match="no contact list"):
-        packing.write(str(tmp_path / "c.npz"), {k: v for k, v in full.items() if k not in checkpoint.PAIR_FIELDS}, fattrs)
+        no_pairs = {k: v for k, v in full.items() if k not in checkpoint.PAIR_FIELDS}
+        packing.write(str(tmp_path / "c.npz"), no_pairs, fattrs)

@@ -89,7 +89,8 @@ def make_run(run, p, z, phi, alpha, rng, converged=True):
     s["alpha_local"] = nearcontact.local_slope(gaps, [3e-3, 1e-2])
     depth = np.arange(8) * 2.5
     delta = (depth + 1.25) * 1e-5 * 2e5 / p["contact.k_n"]
-    s["bands"] = {"depth_lo": depth.tolist(), "depth_hi": (depth + 2.5).tolist(), "in_bulk": [False] + [True] * 6 + [False],
+    s["bands"] = {"depth_lo": depth.tolist(), "depth_hi": (depth + 2.5).tolist(),
+                  "in_bulk": [False] + [True] * 6 + [False],
                   "z": (OVERLAP_TRUE["z_c"] + OVERLAP_TRUE["A"] * np.sqrt(delta) + rng.normal(0, 0.01, 8)).tolist(),
                   "overlap_mean": delta.tolist()}
     for col in ("z_backbone", "phi", "sigma_zz", "crystal_fraction", "rattler_fraction"):
@@ -245,7 +246,8 @@ def test_alpha_pooled_over_seeds_on_every_window_with_a_bootstrap_error(tree):
     res = json.loads((tree["out"] / "collect.json").read_text())["sets"]
     sid = next(k for k, v in res.items() if v["params"]["mu"] == 0 and v["params"]["k_n"] == 2e5)
     e = sets[sid]
-    assert e["n_runs"] == 3 and [(w["xi_lo"], w["xi_hi"]) for w in e["windows"]] == [(1e-3, 1e-2), (1e-2, 5e-2), (1e-3, 5e-2)]
+    assert e["n_runs"] == 3
+    assert [(w["xi_lo"], w["xi_hi"]) for w in e["windows"]] == [(1e-3, 1e-2), (1e-2, 5e-2), (1e-3, 5e-2)]
     whole = e["windows"][2]
     # three seeds of 1500 gaps each drawn at alpha = 0.52 +- 0.01
     assert whole["n"] == 4500 and abs(whole["alpha"] - 0.52) < 4 * math.hypot(whole["alpha_err"], 0.01)
@@ -355,7 +357,8 @@ def test_sweep_tables_pass_the_sweep_helper(tmp_path):
     assert {m for m, _ in mus} >= {0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1, 2, 10} and {e for _, e in mus} == {0.88, 0.26}
     fam = {}
     for v in cfgs["fig7.tsv"]:
-        fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {}).setdefault(v["contact.k_n"], set()).add(v["run.seed"])
+        by_kn = fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {})
+        by_kn.setdefault(v["contact.k_n"], set()).add(v["run.seed"])
     assert set(fam) == {(0.0, 0.88), (0.5, 0.88), (0.5, 0.5), (0.5, 0.26), (10.0, 0.26)}
     assert all(sorted(k) == KN and all(len(s) >= 2 for s in k.values()) for k in fam.values())
     assert all(v["run.max_steps"] >= 3e6 for v in cfgs["fig7.tsv"])

@@ -51,8 +51,8 @@ def test_the_backbone_drops_weak_contacts_then_spheres_that_lose_their_support_i
     legs = tripod(np.radians(35))
     pairs, nrm = [], []
     for bed, u in zip((0, 1, 2), legs):
-        pairs.append((3, bed)); nrm.append(u)
-        pairs.append((4, bed)); nrm.append(u)
+        pairs += [(3, bed), (4, bed)]
+        nrm += [u, u]
     pairs += [(5, 4), (6, 3)]
     nrm += [[0, 0, 1.0], [0, 0, 1.0]]
     pairs, nrm = np.array(pairs), np.array(nrm)

@@ -510,7 +510,8 @@ def test_time_left_read_from_slurm(cl, left, expect):
 SCONTROL = """if [[ $1 == -o ]]; then
   # an array's other task first: only this job's record counts
   echo "JobId=9${@: -1} JobName=other NumTasks=8 TimeLimit=09:00:00 Partition=long"
-  echo "JobId=${@: -1} JobName=mpdem-chain UserId=u(1) Account=(null) QOS=normal Partition=short TimeLimit=00:03:00 NumNodes=1 NumCPUs=2 NumTasks=2 CPUs/Task=1 Command=$MPDEM_FAKE_COMMAND WorkDir=/x"
+  echo "JobId=${@: -1} JobName=mpdem-chain UserId=u(1) Account=(null) QOS=normal Partition=short \\
+TimeLimit=00:03:00 NumNodes=1 NumCPUs=2 NumTasks=2 CPUs/Task=1 Command=$MPDEM_FAKE_COMMAND WorkDir=/x"
 else
   printf '   JobId=%s JobName=mpdem-chain\\n   Command=%s\\n' "${@: -1}" "$MPDEM_FAKE_COMMAND"
 fi

@@ -53,7 +53,9 @@ def edit_data(tmp_path, fn, name="edited.data"):
 
 
 def test_sizes_masses_and_styles_outside_the_model_are_refused(tmp_path):
-    first = lambda t, k, v: t[:k] + [v] + t[k + 1:] if t[0] == "1509" else t
+    def first(t, k, v):
+        return t[:k] + [v] + t[k + 1:] if t[0] == "1509" else t
+
     with pytest.raises(InputError, match=r"atom 1509 has diameter 1\.1; mpdem's spheres all have diameter 1"):
         lammps.read(edit_data(tmp_path, lambda t: first(t, 2, "1.1")), (2,))
     with pytest.raises(InputError, match=r"atom 1509 has mass 0\.52.*mass 1"):

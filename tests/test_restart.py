@@ -137,7 +137,9 @@ def _pids_of(run, n):
     out = subprocess.run(["pgrep", "-f", f"mpdem run .*--out {run}"], capture_output=True, text=True).stdout
     pids = [int(p) for p in out.split() if int(p) != os.getpid()]
     # the mpiexec process matches too: keep the python ones
-    return [p for p in pids if "python" in Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="replace").split("\0")[0]][:n]
+    def program(p):
+        return Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="replace").split("\0")[0]
+    return [p for p in pids if "python" in program(p)][:n]
 
 
 def _wait_for(path, text, timeout=120):
@@ -175,8 +177,7 @@ def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path
     # half the straight run's time: the limit falls inside the run however fast the machine is
     limit = max(1.0, 0.5 * STRAIGHT_SECONDS["run"])
     t = time.monotonic()
-    p = mpdem("run", *sets(), "--out", out, "--walltime", f"{limit:.2f}", "--walltime-margin", "0", "--quiet",
-              check=75)
+    mpdem("run", *sets(), "--out", out, "--walltime", f"{limit:.2f}", "--walltime-margin", "0", "--quiet", check=75)
     assert time.monotonic() - t < limit + 30     # stopped at the limit, not at the end of the run
     log = (out / "log.txt").read_text()
     assert "stop: the wall time" in log and "restart" in log

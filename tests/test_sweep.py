@@ -57,7 +57,8 @@ def test_the_development_tables():
     assert all(len(s) == 3 for s in sets.values())
     fam = {}
     for v in by_table["fig7.tsv"]:
-        fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {}).setdefault(v["contact.k_n"], set()).add(v["run.seed"])
+        by_kn = fam.setdefault((v["contact.mu"], v["contact.epsilon"]), {})
+        by_kn.setdefault(v["contact.k_n"], set()).add(v["run.seed"])
     assert set(fam) == {(0.0, 0.88), (0.5, 0.88)}
     assert all(sorted(k) == [2e5, 2e6, 2e7, 2e8] and all(len(s) == 2 for s in k.values()) for k in fam.values())
     assert sorted({v["pour.phi_i"] for v in by_table["fig9.tsv"]}) == [0.02, 0.05, 0.08, 0.13, 0.20, 0.30]
@@ -90,7 +91,8 @@ def test_the_paper_tables():
             if table.startswith("dev"):
                 # the same row (so the same bits) as in the development tables
                 assert dev[r.name] == r.sets
-    size = [config.load(str(P / "size.toml"), r.sets).values for r in sweep.plan([str(P / "size.tsv")], str(P / "size.toml"))]
+    size = [config.load(str(P / "size.toml"), r.sets).values
+            for r in sweep.plan([str(P / "size.tsv")], str(P / "size.toml"))]
     assert sum(v["contact.mu"] == 0 and v["contact.epsilon"] == 0.88 for v in size) == 3
     assert sum(v["contact.mu"] == 0.5 for v in size) == 2
 
@@ -171,7 +173,8 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     assert (tmp_path / "collect" / "runs.csv").exists()
 
     ref = tmp_path / "ref"
-    r = mpdem("run", "--out", ref, "--quiet", *sum((["--set", s] for s in SMALL + ["contact.mu=0.5", "run.seed=1"]), []),
+    one = SMALL + ["contact.mu=0.5", "run.seed=1"]
+    r = mpdem("run", "--out", ref, "--quiet", *sum((["--set", s] for s in one), []),
               clean=True)
     assert r.returncode == 0, r.stderr
     assert digest(read_state(str(run1 / "final.h5"))[0]) == digest(read_state(str(ref / "final.h5"))[0])

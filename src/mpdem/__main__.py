@@ -351,7 +351,8 @@ def parser():
                     help="a value for every row, under the row's own (repeatable)")
     sw.add_argument("--jobs", type=positive_int("--jobs"), default=None, metavar="J",
                     help="rows at a time (default cores / (R T))")
-    sw.add_argument("--ranks", type=positive_int("--ranks"), default=1, metavar="R", help="MPI ranks per row (default 1)")
+    sw.add_argument("--ranks", type=positive_int("--ranks"), default=1, metavar="R",
+                    help="MPI ranks per row (default 1)")
     sw.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
                     help="numba threads per rank (default 1)")
     sw.add_argument("--progress", type=seconds("--progress"), default=300.0, metavar="SECONDS",

@@ -57,10 +57,16 @@ def _k(section, name, default, doc, kind=float, choices=(), *, restart=False, ph
 
 
 SCHEMA = (
-    _k("run", "max_steps", REQUIRED, "hard cap on time steps (required); a run that hits it is 'not converged'", int, restart=True, physics=False),
+    _k("run", "max_steps", REQUIRED,
+       "hard cap on time steps (required); a run that hits it is 'not converged'", int, restart=True, physics=False),
     _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int, physics=False, param=11),
-    _k("run", "initial_file", "", "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text dump (recognised by their content)", str, physics=False),
-    _k("run", "fixed_types", (), "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one", tuple, physics=False),
+    _k("run", "initial_file", "",
+       "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x "
+       "y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data "
+       "file (atom_style sphere) or text dump (recognised by their content)", str, physics=False),
+    _k("run", "fixed_types", (),
+       "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one",
+       tuple, physics=False),
     _k("box", "L_x", 20.0, "periodic box length in x [d]", param=12),
     _k("box", "L_y", 20.0, "periodic box length in y [d]", param=13),
     _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
@@ -72,14 +78,25 @@ SCHEMA = (
     _k("contact", "k_t", DERIVED, "tangential spring constant [m g / d]; default 2 k_n / 7", param=4),
     _k("contact", "epsilon", 0.88, "coefficient of restitution of a free pair; sets gamma_n (eq. 4-5)", param=2),
     _k("contact", "gamma_n", DERIVED, "normal damping [sqrt(g/d)]; default from epsilon and k_n", param=5),
-    _k("contact", "gamma_t", 0.0, "tangential damping [sqrt(g/d)]; 0 as in the method, gamma_n/2 the documented alternative", param=6),
+    _k("contact", "gamma_t", 0.0,
+       "tangential damping [sqrt(g/d)]; 0 as in the method, gamma_n/2 the documented alternative", param=6),
     _k("contact", "mu", 0.5, "Coulomb friction coefficient (0 = frictionless)", param=1),
     _k("contact", "limit_damping", False, "clip an attractive normal force to 0 (off in the reference model)", bool),
-    _k("contact", "history", "project", "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|", str, ("project", "rotate")),
-    _k("bed", "file", "", "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
-    _k("bed", "wall", False, "a plane at z = 0 under the bed with the pile's contact law and a tangential history of its own (LAMMPS wall/gran hooke/history zplane 0): a backstop under a sparse bed; without it a mobile sphere below the bed is an error", bool),
-    _k("bed", "thickness", 1.0, "thickness of the slab cut from the settled packing [d]; docs/model.md 5.2 says 1.2, which holds ~1.34 per d^2 of a dense packing, above the 1.0-1.3 check"),
-    _k("bed", "gap", 4.0, "height of the cut slab's bottom above the temporary floor [d] (>= 2; the floor layers the packing up to ~3 d)"),
+    _k("contact", "history", "project",
+       "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|",
+       str, ("project", "rotate")),
+    _k("bed", "file", "",
+       "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
+    _k("bed", "wall", False,
+       "a plane at z = 0 under the bed with the pile's contact law and a tangential history of its own "
+       "(LAMMPS wall/gran hooke/history zplane 0): a backstop under a sparse bed; without it a mobile sphere"
+       " below the bed is an error", bool),
+    _k("bed", "thickness", 1.0,
+       "thickness of the slab cut from the settled packing [d]; docs/model.md 5.2 says 1.2, which holds "
+       "~1.34 per d^2 of a dense packing, above the 1.0-1.3 check"),
+    _k("bed", "gap", 4.0,
+       "height of the cut slab's bottom above the temporary floor [d] (>= 2; the floor layers the packing up"
+       " to ~3 d)"),
     _k("bed", "settle_density", 8.0, "spheres settled per unit floor area to make the bed [1/d^2]"),
     _k("bed", "settle_k_n", 2e3, "spring constant of the bed-making settle [m g / d]"),
     _k("bed", "settle_epsilon", 0.1, "restitution of the bed-making settle"),
@@ -87,44 +104,94 @@ SCHEMA = (
     _k("bed", "density_min", 1.0, "warn if the bed's areal density is below this [1/d^2]"),
     _k("bed", "density_max", 1.3, "warn if the bed's areal density is above this [1/d^2]"),
     _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)", param=14),
-    _k("integration", "skin", 0.2, "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
-    _k("integration", "contact_slots", 16, "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints load)", int, physics=False),
-    _k("stop", "E_stop", DERIVED, "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
-    _k("stop", "rule", "window", "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop", str, ("window", "instantaneous"), restart=True),
-    _k("stop", "energy", "total", "the kinetic energy the rule tests: 'total' (translational + rotational, the paper's) or 'translational' (a settled pile can keep a sphere spinning about the line through two contacts, which nothing in the contact model damps: docs/model.md 5.4)", str, ("total", "translational"), restart=True),
+    _k("integration", "skin", 0.2,
+       "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
+    _k("integration", "contact_slots", 16,
+       "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints "
+       "load)", int, physics=False),
+    _k("stop", "E_stop", DERIVED,
+       "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
+    _k("stop", "rule", "window",
+       "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop",
+       str, ("window", "instantaneous"), restart=True),
+    _k("stop", "energy", "total",
+       "the kinetic energy the rule tests: 'total' (translational + rotational, the paper's) or "
+       "'translational' (a settled pile can keep a sphere spinning about the line through two contacts, "
+       "which nothing in the contact model damps: docs/model.md 5.4)", str, ("total", "translational"), restart=True),
     _k("stop", "window", 1.0, "averaging window of the stop rule [tau]", restart=True),
-    _k("stop", "sample_interval", 0.1, "kinetic-energy sampling interval [tau] (also the thermo table's)", restart=True),
-    _k("checks", "overlap_warn", 0.05, "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one warning (a settled pile), deeper ones refused", restart=True, physics=False),
-    _k("checks", "overlap_error", 0.3, "stop with an error when an overlap exceeds this [d]", restart=True, physics=False),
-    _k("checks", "escape_margin", 100.0, "warn when a particle rises this far above the insertion region [d]", restart=True, physics=False),
-    _k("decomp", "balance_tolerance", 0.1, "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this", restart=True, physics=False),
-    _k("decomp", "balance_damping", 0.5, "fraction of the way the slab bounds move toward balance at a rebalance", restart=True, physics=False),
+    _k("stop", "sample_interval", 0.1,
+       "kinetic-energy sampling interval [tau] (also the thermo table's)", restart=True),
+    _k("checks", "overlap_warn", 0.05,
+       "warn when an overlap exceeds this [d]; an initial table's overlaps up to this are accepted with one "
+       "warning (a settled pile), deeper ones refused", restart=True, physics=False),
+    _k("checks", "overlap_error", 0.3,
+       "stop with an error when an overlap exceeds this [d]", restart=True, physics=False),
+    _k("checks", "escape_margin", 100.0,
+       "warn when a particle rises this far above the insertion region [d]", restart=True, physics=False),
+    _k("decomp", "balance_tolerance", 0.1,
+       "rebalance the slabs at a list rebuild when max/mean owned particles > 1 + this", restart=True, physics=False),
+    _k("decomp", "balance_damping", 0.5,
+       "fraction of the way the slab bounds move toward balance at a rebalance", restart=True, physics=False),
     _k("output", "progress_every", 10000, "steps between progress lines", int, restart=True, physics=False),
-    _k("output", "checkpoint_every", 0, "steps between checkpoints (RUN/checkpoints/ckpt-NNNNN.h5); 0 = none on a step schedule", int, restart=True, physics=False),
-    _k("output", "checkpoint_seconds", 1800.0, "wall-clock seconds between checkpoints; 0 = none on a clock schedule", restart=True, physics=False),
-    _k("output", "checkpoint_keep", 3, "newest checkpoints kept; older ones are deleted", int, restart=True, physics=False),
-    _k("output", "snapshot_every", 0, "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only the final state", int, restart=True, physics=False),
-    _k("analysis", "margin_bottom", -1.0, "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 (h - z_bed), 3, 10)", restart=True, physics=False),
-    _k("analysis", "margin_top", -1.0, "bulk margin below the free surface [d]; -1 = as margin_bottom", restart=True, physics=False),
-    _k("analysis", "rattlers", "force", "rattler rule: 'force' (the backbone: contacts below analysis.force_fraction of their depth band's mean normal force dropped, then, repeatedly, spheres that cannot balance their weight with the contacts left; docs/model.md 6.2) or 'count' (fewer than analysis.n_min contacts, the rule of packings without gravity)", str, ("force", "count"), restart=True, physics=False),
-    _k("analysis", "force_fraction", 0.01, "the backbone's force cut: a contact whose normal force is below this fraction of the mean of its depth band carries no load", restart=True, physics=False),
-    _k("analysis", "band_width", 2.5, "depth bands below the free surface of the depth profile, P(f) and the backbone's force cut [d]", restart=True, physics=False),
-    _k("analysis", "n_min", -1, "threshold of the count rule (analysis.rattlers = 'count', also reported beside the backbone): fewer contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int, restart=True, physics=False),
+    _k("output", "checkpoint_every", 0,
+       "steps between checkpoints (RUN/checkpoints/ckpt-NNNNN.h5); 0 = none on a step schedule",
+       int, restart=True, physics=False),
+    _k("output", "checkpoint_seconds", 1800.0,
+       "wall-clock seconds between checkpoints; 0 = none on a clock schedule", restart=True, physics=False),
+    _k("output", "checkpoint_keep", 3,
+       "newest checkpoints kept; older ones are deleted", int, restart=True, physics=False),
+    _k("output", "snapshot_every", 0,
+       "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only "
+       "the final state", int, restart=True, physics=False),
+    _k("analysis", "margin_bottom", -1.0,
+       "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 "
+       "(h - z_bed), 3, 10)", restart=True, physics=False),
+    _k("analysis", "margin_top", -1.0,
+       "bulk margin below the free surface [d]; -1 = as margin_bottom", restart=True, physics=False),
+    _k("analysis", "rattlers", "force",
+       "rattler rule: 'force' (the backbone: contacts below analysis.force_fraction of their depth band's "
+       "mean normal force dropped, then, repeatedly, spheres that cannot balance their weight with the "
+       "contacts left; docs/model.md 6.2) or 'count' (fewer than analysis.n_min contacts, the rule of "
+       "packings without gravity)", str, ("force", "count"), restart=True, physics=False),
+    _k("analysis", "force_fraction", 0.01,
+       "the backbone's force cut: a contact whose normal force is below this fraction of the mean of its "
+       "depth band carries no load", restart=True, physics=False),
+    _k("analysis", "band_width", 2.5,
+       "depth bands below the free surface of the depth profile, P(f) and the backbone's force cut [d]",
+       restart=True, physics=False),
+    _k("analysis", "n_min", -1,
+       "threshold of the count rule (analysis.rattlers = 'count', also reported beside the backbone): fewer "
+       "contacts are removed; -1 = 4 for mu = 0, 2 for mu > 0", int, restart=True, physics=False),
     _k("analysis", "profile_bin", 0.5, "bin width of the phi(z) profile [d]", restart=True, physics=False),
-    _k("analysis", "tall_pile", 40.0, "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)", restart=True, physics=False),
+    _k("analysis", "tall_pile", 40.0,
+       "pile height h - z_bed [d] from which the automatic margins are the paper's 10 d (docs/model.md 6.1)",
+       restart=True, physics=False),
     _k("analysis", "g_dr", 0.01, "bin width of the full g(r) [d]", restart=True, physics=False),
     _k("analysis", "g_r_max", 5.0, "range of the full g(r) [d]; below half the box", restart=True, physics=False),
-    _k("analysis", "near_r_max", 1.5, "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)", restart=True, physics=False),
-    _k("analysis", "xi_min", 1e-6, "smallest xi = r/d - 1 of the logarithmic near-contact bins", restart=True, physics=False),
-    _k("analysis", "xi_per_decade", 10, "logarithmic bins per decade of xi (they run from xi_min to 1)", int, restart=True, physics=False),
-    _k("analysis", "fit_xi_hi", 5e-2, "upper end of the power-law fit window in xi (eq. 6)", restart=True, physics=False),
-    _k("analysis", "fit_xi_lo", 1e-3, "lower end of the default alpha window in xi, the same for every k_n and mu (-1, from older configs, means 1e-3)", restart=True, physics=False),
-    _k("analysis", "alpha_windows", (1e-3, 1e-2, 5e-2), "edges of the alpha windows reported side by side: each [e_i, e_i+1] and the whole [e_0, e_last] (docs/model.md 6.5)", list, restart=True, physics=False),
-    _k("analysis", "zeta_bins", 50, "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
-    _k("analysis", "mobilised", 0.99, "zeta above which a contact counts as fully mobilised", restart=True, physics=False),
+    _k("analysis", "near_r_max", 1.5,
+       "range of the near-contact g(r) [d] (a thinner excluded shell, more reference particles)",
+       restart=True, physics=False),
+    _k("analysis", "xi_min", 1e-6,
+       "smallest xi = r/d - 1 of the logarithmic near-contact bins", restart=True, physics=False),
+    _k("analysis", "xi_per_decade", 10,
+       "logarithmic bins per decade of xi (they run from xi_min to 1)", int, restart=True, physics=False),
+    _k("analysis", "fit_xi_hi", 5e-2,
+       "upper end of the power-law fit window in xi (eq. 6)", restart=True, physics=False),
+    _k("analysis", "fit_xi_lo", 1e-3,
+       "lower end of the default alpha window in xi, the same for every k_n and mu (-1, from older configs, "
+       "means 1e-3)", restart=True, physics=False),
+    _k("analysis", "alpha_windows", (1e-3, 1e-2, 5e-2),
+       "edges of the alpha windows reported side by side: each [e_i, e_i+1] and the whole [e_0, e_last] "
+       "(docs/model.md 6.5)", list, restart=True, physics=False),
+    _k("analysis", "zeta_bins", 50,
+       "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
+    _k("analysis", "mobilised", 0.99,
+       "zeta above which a contact counts as fully mobilised", restart=True, physics=False),
     _k("analysis", "order_cutoff", 1.4, "neighbour shell of the q6 bond order [d]", restart=True, physics=False),
-    _k("analysis", "order_bond", 0.7, "normalised q6 product above which a bond is solid-like", restart=True, physics=False),
-    _k("analysis", "order_bonds", 8, "solid-like bonds that make a sphere crystal-like", int, restart=True, physics=False),
+    _k("analysis", "order_bond", 0.7,
+       "normalised q6 product above which a bond is solid-like", restart=True, physics=False),
+    _k("analysis", "order_bonds", 8,
+       "solid-like bonds that make a sphere crystal-like", int, restart=True, physics=False),
 )
 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
@@ -400,7 +467,8 @@ def resolve(raw):
         derived.add("contact.k_t")
     need("contact.k_t", vals["contact.k_t"] >= 0, "k_t >= 0")
     if not math.isclose(vals["contact.k_t"], 2 * k_n / 7, rel_tol=1e-12):
-        warns.append(f"contact.k_t = {vals['contact.k_t']:g} differs from 2 k_n / 7 = {2 * k_n / 7:g} (the paper's ratio)")
+        warns.append(f"contact.k_t = {vals['contact.k_t']:g} differs from 2 k_n / 7 = {2 * k_n / 7:g} "
+                     f"(the paper's ratio)")
     eps = vals["contact.epsilon"]
     need("contact.epsilon", 0 < eps <= 1, "0 < epsilon <= 1")
     gcrit = 2.0 * math.sqrt(2.0 * k_n)
@@ -422,7 +490,8 @@ def resolve(raw):
     if mu > 10:
         warns.append(f"contact.mu = {mu:g} is above the paper's range (0 to 10)")
     if vals["contact.model"] == "hertz":
-        warns.append("contact.model = 'hertz': epsilon is nominal (velocity dependent); gamma_n is the Hookean value for it")
+        warns.append("contact.model = 'hertz': epsilon is nominal (velocity dependent); "
+                     "gamma_n is the Hookean value for it")
 
     phi = vals["pour.phi_i"]
     need("pour.phi_i", 0 < phi < 0.35, "0 < phi_i < 0.35 (random sequential addition fails near 0.38)")
@@ -463,7 +532,8 @@ def resolve(raw):
     need("stop.sample_interval", vals["stop.sample_interval"] > 0, "sample_interval > 0")
     need("stop.window", vals["stop.window"] >= vals["stop.sample_interval"], "window >= sample_interval")
     need("checks.overlap_warn", vals["checks.overlap_warn"] > 0, "overlap_warn > 0")
-    need("checks.overlap_error", vals["checks.overlap_error"] > vals["checks.overlap_warn"], "overlap_error > overlap_warn")
+    need("checks.overlap_error", vals["checks.overlap_error"] > vals["checks.overlap_warn"],
+         "overlap_error > overlap_warn")
     need("checks.escape_margin", vals["checks.escape_margin"] > 0, "escape_margin > 0")
     need("output.progress_every", vals["output.progress_every"] >= 1, "progress_every >= 1")
     for key in ("output.checkpoint_every", "output.checkpoint_seconds", "output.snapshot_every"):
@@ -488,7 +558,8 @@ def resolve(raw):
     need("analysis.xi_min", 0 < vals["analysis.xi_min"] < 1, "0 < xi_min < 1")
     need("analysis.xi_per_decade", vals["analysis.xi_per_decade"] >= 1, "xi_per_decade >= 1")
     need("analysis.fit_xi_hi", 0 < vals["analysis.fit_xi_hi"] <= 1, "0 < fit_xi_hi <= 1")
-    need("analysis.fit_xi_lo", vals["analysis.fit_xi_lo"] == -1 or 0 < vals["analysis.fit_xi_lo"] < vals["analysis.fit_xi_hi"],
+    lo = vals["analysis.fit_xi_lo"]
+    need("analysis.fit_xi_lo", lo == -1 or 0 < lo < vals["analysis.fit_xi_hi"],
          "0 < fit_xi_lo < fit_xi_hi (or -1: 1e-3)")
     w = vals["analysis.alpha_windows"]
     need("analysis.alpha_windows", len(w) >= 2 and all(0 < a < b <= 1 for a, b in zip(w, w[1:])),

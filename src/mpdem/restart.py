@@ -110,7 +110,8 @@ def restart_config(attrs, path, run, sets):
         bad = _fixed_keys_differing(new, cfg)
         if bad:
             raise config.ConfigError(
-                f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only {config.key_summary(config.RESTART_KEYS)}; "
+                f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only "
+                f"{config.key_summary(config.RESTART_KEYS)}; "
                 f"to continue with other physics start a new run with --set run.initial_file={path}")
         cfg = new
     return cfg

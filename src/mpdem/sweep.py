@@ -93,17 +93,20 @@ def read_table(path):
         else:
             raise SweepError(f"sweep table {path}: unknown column {col!r} (mu epsilon k_n phi_i seed, or section.key)")
         if k not in config.KEYS:
-            raise SweepError(f"sweep table {path}: column {col!r} is no config key; known keys: {', '.join(config.KEYS)}")
+            raise SweepError(f"sweep table {path}: column {col!r} is no config key; "
+                             f"known keys: {', '.join(config.KEYS)}")
         keys.append(k)
         short.append(t)
     rows = []
     for n, ln in enumerate(lines[1:], start=1):
         vals = ln.split()
         if len(vals) != len(header):
-            raise SweepError(f"sweep table {path} row {n}: {len(vals)} values for {len(header)} columns ({ln.strip()!r})")
+            raise SweepError(f"sweep table {path} row {n}: {len(vals)} values for {len(header)} columns "
+                             f"({ln.strip()!r})")
         for col, v in zip(header, vals):
             if not VALUE.match(v):
-                raise SweepError(f"sweep table {path} row {n}: value {v!r} of {col}: accepted letters, digits and . + -")
+                raise SweepError(f"sweep table {path} row {n}: value {v!r} of {col}: "
+                                 f"accepted letters, digits and . + -")
         rows.append(Row(path, n, [f"{k}={v}" for k, v in zip(keys, vals)],
                         "_".join(t + v for t, v in zip(short, vals))))
     if not rows:
@@ -273,7 +276,8 @@ class Sweep:
 
     def report(self):
         """One progress line: rows done, running, failed, to go, and an ETA from the rows finished so far."""
-        n = {s: sum(r.state == s for r in self.rows) for s in ("done", "not converged", "running", "failed", "todo", "stopped")}
+        states = ("done", "not converged", "running", "failed", "todo", "stopped")
+        n = {s: sum(r.state == s for r in self.rows) for s in states}
         ran = [r for r in self.rows if r.seconds and r.state in ("done", "not converged")]
         left = [r for r in self.rows if r.state in ("todo", "running")]
         eta = "ETA after the first row"

@@ -50,7 +50,10 @@ def depth_profile(pk, cf, backbone_kept, backbone_counts, crystal, h, width, z1,
     zc = pk.x[:, 2]
     mob = pk.mobile & (zc <= h) & (zc >= h - width * B)
     band = band_index(zc, h, width, B)
-    cnt = lambda w=None, sel=mob: np.bincount(band[sel], weights=None if w is None else w[sel], minlength=B)
+
+    def cnt(w=None, sel=mob):
+        return np.bincount(band[sel], weights=None if w is None else w[sel], minlength=B)
+
     n = cnt()
     kept = mob & backbone_kept
     nk = cnt(sel=kept)

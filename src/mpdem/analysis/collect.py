@@ -418,7 +418,8 @@ def collect(runs, out, analyze_missing=True, log=print):
     write_json(os.path.join(out, "fits.json"), {"source": paper.SOURCE, **fit_res})
     for kind in ("eq7", "eq9", "overlap"):
         for e in fit_res[kind]:
-            log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}" + (f" ({e['reason']})" if "reason" in e else ""))
+            why = f" ({e['reason']})" if "reason" in e else ""
+            log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}{why}")
     figs = make_figures(sets, fit_res, out, log)
     rows = comparisons(sets, fit_res)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,

@@ -166,7 +166,8 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
     L += [_table(head, [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), f"{s.p('phi_i'):g}",
                          s.p("N"), f"{s.p('L_x'):g}×{s.p('L_y'):g}", " ".join(map(str, s.seeds)),
                          fmt_pm(*s.stat("z")[:2], 3, len(s.runs)), fmt_pm(*s.stat("z_no_rattlers")[:2], 3, len(s.runs)),
-                         fmt_pm(*s.stat("phi")[:2], 4, len(s.runs)), fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
+                         fmt_pm(*s.stat("phi")[:2], 4, len(s.runs)),
+                         fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
                          fmt_pm(*s.stat("rattler_fraction")[:2], 3, len(s.runs))] for s in sets]), ""]
     L += ["## Comparison with the paper", ""]
     if rows:
@@ -219,7 +220,8 @@ def _fit_lines(e, kind):
              f"α_n = {fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; α = {fmt_pm(c['alpha'], c['alpha_err'], 3)} over "
              f"{c['n_runs']} runs, so 1 − α = {fmt_pm(c['one_minus_alpha'], c['alpha_err'], 3)}")
     else:
-        s = f"A = {fmt_pm(e['A'], e['A_err'], 4)}, B = {fmt_pm(e['B'], e['B_err'], 4)}, C = {fmt_pm(e['C'], e['C_err'], 2)}"
+        s = (f"A = {fmt_pm(e['A'], e['A_err'], 4)}, B = {fmt_pm(e['B'], e['B_err'], 4)}, "
+             f"C = {fmt_pm(e['C'], e['C_err'], 2)}")
     s += f"; χ² = {e['chi2']:.3g} for {e['dof']} degrees of freedom" + (" (weighted)" if e["weighted"] else "")
     if math.isfinite(e.get("p_value", math.nan)):
         s += f", p = {e['p_value']:.2g}"
@@ -259,7 +261,8 @@ def gravity_sections(sets, fit_res):
                      fmt_pm(*s.stat("z_iso")[:2], 3, n) if s.p("mu") > 0 else "6",
                      fmt_pm(*s.stat("crystal_fraction")[:2], 4, n)])
     L += [_table(["set", "μ", "ε", "k_n", "N", "z (all)", "z (backbone)", "rattlers (force)", "rattlers (count rule)",
-                  "isostatic count", "crystal-like"], rows), ""] if rows else         ["No run has the backbone measures (analysed before they existed: `mpdem analyze` again).", ""]
+                  "isostatic count", "crystal-like"], rows), ""] if rows else \
+        ["No run has the backbone measures (analysed before they existed: `mpdem analyze` again).", ""]
     al = _by_id(fit_res.get("alpha", []))
     L += ["## Near-contact exponent α (eq. 6) on fixed windows", "",
           "Maximum likelihood on the gaps ξ = r/d − 1 of every bulk pair in the window (docs/model.md 6.5), the "
@@ -274,13 +277,14 @@ def gravity_sections(sets, fit_res):
             continue
         cells = [s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), s.p("N"), e["n_runs"]]
         for w in e["windows"]:
-            txt = (f"{w['alpha']:.3f} ± {w['alpha_err']:.3f}" + (f" ± {w['boot_err']:.3f}" if math.isfinite(w["boot_err"]) else "")
-                   if math.isfinite(w["alpha"]) else "—")
+            boot = f" ± {w['boot_err']:.3f}" if math.isfinite(w["boot_err"]) else ""
+            txt = f"{w['alpha']:.3f} ± {w['alpha_err']:.3f}{boot}" if math.isfinite(w["alpha"]) else "—"
             cells.append(txt + (" soft" if w["soft"] else ""))
         rows.append(cells)
     if rows:
         wins = next(e for e in fit_res["alpha"])["windows"]
-        L += [_table(["set", "μ", "ε", "k_n", "N", "seeds"] + [f"[{w['xi_lo']:g}, {w['xi_hi']:g}]" for w in wins], rows), ""]
+        head = ["set", "μ", "ε", "k_n", "N", "seeds"] + [f"[{w['xi_lo']:g}, {w['xi_hi']:g}]" for w in wins]
+        L += [_table(head, rows), ""]
     else:
         L += ["No run has window statistics.", ""]
     L += ["## z against the overlap (docs/model.md 6.6)", "",
@@ -290,7 +294,8 @@ def gravity_sections(sets, fit_res):
     ov = [e for e in fit_res.get("overlap", []) if e["status"] == "fitted"]
     L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)}, "
           f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs, δ/d from "
-          f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}" for e in ov] or         ["- no family with depth profiles of 2 runs or more"]
+          f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}" for e in ov] or \
+        ["- no family with depth profiles of 2 runs or more"]
     pf = _by_id(fit_res.get("P_f", []))
     L += ["", "## Normal forces P(f) (docs/model.md 6.10)", "",
           "f = F_n / the mean F_n of its depth band, bulk contacts, seeds pooled: the fraction with f < 0.1 and the "

@@ -446,9 +446,11 @@ class Figures:
             if e["status"] == "fitted":
                 xs = np.sqrt(np.array([0.0, e["delta_max"]]))
                 bx.plot(xs, e["z_c"] + e["A"] * xs, "-", lw=1,
-                        label=f"z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)} (μ = {e['family']['mu']:g}, N = {e['family']['N']})")
+                        label=f"z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)} "
+                              f"(μ = {e['family']['mu']:g}, N = {e['family']['N']})")
         bx.axhline(6.0, color="k", ls=":", lw=1, label="isostatic (μ = 0): 6")
-        ax.set(xlabel="depth below the surface [d]", ylabel="z (band)", title="z per depth band (circled: in the bulk slab)")
+        ax.set(xlabel="depth below the surface [d]", ylabel="z (band)",
+               title="z per depth band (circled: in the bulk slab)")
         bx.set(xlabel="(δ/d)^(1/2), δ the band's mean overlap", ylabel="z (band)",
                title="z − z_c = A (δ/d)^(1/2) over the bulk bands")
         self._legend(ax)

@@ -81,7 +81,10 @@ def ml_alpha(n, S, a, b):
     if n < N_MIN or not (0 < a < b):
         return math.nan, math.nan
     target = S / n
-    f = lambda al: _moments(al, a, b)[0] - target
+
+    def f(al):
+        return _moments(al, a, b)[0] - target
+
     lo, hi = ALPHA_RANGE
     if not f(lo) > 0 > f(hi):
         return math.nan, math.nan

@@ -47,8 +47,9 @@ def q6_vectors(x, L_x, L_y, cutoff):
     for m in range(L + 1):
         y = sph_harm_y(L, m, theta, phi)
         # the bond seen from j points the other way: Y6m(-r) = (-1)^6 Y6m(r) = Y6m(r)
-        q[:, m] = np.bincount(pairs[:, 0], weights=y.real, minlength=n) + np.bincount(pairs[:, 1], weights=y.real, minlength=n) \
-            + 1j * (np.bincount(pairs[:, 0], weights=y.imag, minlength=n) + np.bincount(pairs[:, 1], weights=y.imag, minlength=n))
+        for w, part in ((1.0, y.real), (1j, y.imag)):
+            q[:, m] += w * (np.bincount(pairs[:, 0], weights=part, minlength=n)
+                            + np.bincount(pairs[:, 1], weights=part, minlength=n))
     n_nb = np.bincount(pairs.ravel(), minlength=n)
     q /= np.maximum(n_nb, 1)[:, None]
     return q, pairs, n_nb

@@ -351,8 +351,8 @@ def describe(s):
           f"in xi [{s['alpha_fit']['xi_lo']:.2g}, {s['alpha_fit']['xi_hi']:.2g}]); "
           + ", ".join(f"[{w['xi_lo']:.0e}, {w['xi_hi']:.0e}]: {w['alpha']:.3f}" for w in s["alpha_windows"])
           if math.isfinite(s["alpha"]) else "alpha: not estimated")
-    zt = (f"; P(zeta): {s['zeta']['n_contacts']} bulk contacts, {100 * s['zeta']['mobilised_fraction']:.1f}% fully mobilised"
-          if s.get("zeta") else "")
+    zt = (f"; P(zeta): {s['zeta']['n_contacts']} bulk contacts, "
+          f"{100 * s['zeta']['mobilised_fraction']:.1f}% fully mobilised" if s.get("zeta") else "")
     iso = s.get("isostatic") or {}
     zi = (f"; generalized isostatic 4 + 2 n_m / 3 = {iso['z_iso']:.3f}" if "n_m" in iso else "")
     return (f"bulk z in [{s['z1']:.2f}, {s['z2']:.2f}] ({s['n_bulk']} particles): z = {s['z']:.3f}, "

@@ -261,10 +261,10 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
         ty = 0.0
         tz = 0.0
         for k in range(np.uint64(nbr_start[i]), np.uint64(nbr_start[i + 1])):
-            l = link[k]
-            g = np.uint64(slot_of(l))
+            lk = link[k]
+            g = np.uint64(slot_of(lk))
             # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
-            sign = 1.0 + 2.0 * (l >> 31)
+            sign = 1.0 + 2.0 * (lk >> 31)
             fx += sign * pair[g, 0]
             fy += sign * pair[g, 1]
             fz += sign * pair[g, 2]

@@ -23,9 +23,9 @@ def stamp_of(epoch):
 
 
 @njit(cache=True, inline="always")
-def slot_of(l):
+def slot_of(lk):
     """The slot of a ``link`` value: g for g >= 0, and g for ~g (branch-free)."""
-    return l ^ (l >> 31)
+    return lk ^ (lk >> 31)
 
 
 @njit(cache=True, parallel=True)
@@ -78,11 +78,11 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, stamp, epoch, 
         for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
             p = slot_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
-                l = link[k]
-                h = slot_of(l)
+                lk = link[k]
+                h = slot_of(lk)
                 if stamp[h] == now:
                     slot_id[p] = ids[nbr_list[k]]
-                    if l < 0:
+                    if lk < 0:
                         for a in range(3):
                             slot_ds[p, a] = -hist[h, a] + 0.0
                     else:
