@@ -146,7 +146,7 @@ def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
     ("run.seed=2", False), ("run.initial_file=x.h5", False),
 ])
 def test_a_restart_set_may_change_only_restart_keys(tmp_path, item, allowed):
-    from mpdem import restart
+    from mpdem import resume as restart
     attrs = {"config": cfg().to_toml()}
     if allowed:
         key, value = config.parse_set(item)

@@ -2,7 +2,16 @@
 
 Reduced units throughout: particle diameter d = 1, mass m = 1, gravity g = 1.
 The model is described in docs/model.md; the code map and its invariants in
-ARCHITECTURE.md.
+ARCHITECTURE.md. The Python API (docs/python.md)::
+
+    import mpdem
+    cfg = mpdem.load_config(**{"pour.N": 200, "run.max_steps": 20000})
+    r = mpdem.run(cfg, out="runs/small")
+    a = mpdem.analyze(r.final)
+    s = mpdem.read_state(r.final)
+
+``load_config``, ``run``, ``restart``, ``read_state``, ``analyze``, ``collect``
+(``mpdem.api``); errors are ``mpdem.errors.MpdemError`` and its kinds.
 """
 import hashlib
 import os
@@ -22,3 +31,15 @@ def _numba_cache_dir():
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", _numba_cache_dir())
+
+
+API = ("load_config", "run", "restart", "read_state", "analyze", "collect", "RunResult", "State")
+__all__ = ["__version__", *API]
+
+
+def __getattr__(name):
+    # the API on first use: `import mpdem` stays light (no MPI, no numba) until a function is called
+    if name in API:
+        from . import api
+        return getattr(api, name)
+    raise AttributeError(f"module 'mpdem' has no attribute {name!r}")

@@ -25,7 +25,7 @@ import sys
 import time
 import tomllib
 
-from .errors import EXIT_ERROR, EXIT_NOT_CONVERGED, EXIT_OK, EXIT_RESTART
+from .errors import EXIT_ERROR, EXIT_OK, EXIT_RESTART
 
 T_START = time.monotonic()
 # stop signals received before the run loop takes over (a job may end during set-up)
@@ -86,74 +86,29 @@ def seconds(flag):
     return parse
 
 
-def writable(out, probe=65536):
-    """None if run directory ``out`` can be made and written (a ``probe``-byte file is
-    written and removed), else why not, in a few words."""
-    try:
-        os.makedirs(out, exist_ok=True)
-        path = os.path.join(out, f".mpdem-write-test-{os.getpid()}")
-        try:
-            with open(path, "wb") as fh:
-                fh.write(b"\0" * probe)
-                fh.flush()
-                os.fsync(fh.fileno())
-        finally:
-            if os.path.exists(path):
-                os.remove(path)
-    except OSError as e:
-        return f"cannot be created or written ({e.strerror or e})"
-    return None
-
-
 def default_out():
     return os.path.join("runs", time.strftime("run-%Y%m%d-%H%M%S"))
 
 
 def cmd_run(args, net):
-    from . import config, lammps
+    from . import api, config
     from .build import InputError
-    from .simulation import Run
     try:
         cfg = config.load_run_config(args.config, args.set)
-        cfg, initial = lammps.initial_for(cfg)
     except (config.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise config.AgreedError(str(e)) from None
-    out = args.out or default_out()
-    # rank 0 looks, before any rank can write there; every rank then stops with the same line
-    held, why = net.on_root(lambda: (os.path.exists(os.path.join(out, "config.toml")), writable(out)))
-    if why:
-        raise config.AgreedError(f"--out {out}: {why}")
-    if held and not args.force:
-        raise config.AgreedError(f"--out {out}: already holds a run (config.toml); "
-                                 f"choose another directory or pass --force")
-    run = Run(cfg, out, net, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
-              t_start=T_START, signals=SIGNALS)
-    run.prepare(lammps_initial=initial)
-    return _go(run)
-
-
-def _go(run):
-    """Run to the end (final state, exit 0 or 3) or to an early stop (checkpoint, exit 75)."""
-    if run.run() == "interrupted":
-        run.log.close()
-        return EXIT_RESTART
-    run.finish()
-    return EXIT_OK if run.converged else EXIT_NOT_CONVERGED
+    r = api.run(cfg, args.out or default_out(), threads=None, force=args.force, quiet=args.quiet,
+                walltime=args.walltime, walltime_margin=args.walltime_margin, net=net, t_start=T_START,
+                signals=SIGNALS)
+    return r.exit_status
 
 
 def cmd_restart(args, net):
-    from . import restart
-    from .simulation import Logger, Run
-    t = restart.open_target(args.target, net, args.set)
-    say = Logger(os.path.join(t.run_dir, "log.txt"), args.quiet, net.rank)
-    status = restart.verdict(t, say)
-    say.close()
-    if status is not None:
-        return status
-    run = Run(t.cfg, t.run_dir, net, quiet=args.quiet, walltime=args.walltime, margin=args.walltime_margin,
-              t_start=T_START, signals=SIGNALS)
-    restart.resume(run, t)
-    return _go(run)
+    from . import api
+    r = api.restart(args.target, threads=None, quiet=args.quiet, walltime=args.walltime,
+                    walltime_margin=args.walltime_margin, net=net, t_start=T_START, signals=SIGNALS,
+                    set_items=args.set)
+    return r.exit_status
 
 
 def cmd_export(args, net):

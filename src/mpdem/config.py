@@ -274,7 +274,7 @@ class Config:
                 if k.section != sec:
                     continue
                 name = f"{sec}.{k.name}"
-                text = f"{k.name} = {_toml_value(self.values[name])}"
+                text = f"{k.name} = {toml_value(self.values[name])}"
                 if name in self.derived:
                     text += "  # derived default"
                 lines.append(text)
@@ -297,9 +297,10 @@ class _Section:
         return f"<{self._name} {self.__dict__}>"
 
 
-def _toml_value(v):
-    if isinstance(v, tuple):
-        return "[" + ", ".join(_toml_value(a) for a in v) + "]"
+def toml_value(v):
+    """A value as TOML text (lists and tuples as arrays)."""
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(toml_value(a) for a in v) + "]"
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -582,7 +583,7 @@ def reference_markdown():
     rows = ["| key | default | restart | physics | meaning |", "|---|---|---|---|---|"]
     for k in SCHEMA:
         d = ("required" if k.default is REQUIRED else "derived" if k.default is DERIVED
-             else _toml_value(k.default))
+             else toml_value(k.default))
         doc = k.doc + (f" (one of {', '.join(k.choices)})" if k.choices else "")
         flags = " | ".join("yes" if f else "no" for f in (k.restart, k.physics))
         rows.append(f"| `{k.section}.{k.name}` | {d} | {flags} | {doc} |")

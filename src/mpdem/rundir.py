@@ -36,6 +36,25 @@ def write_atomic(path, chunks):
     os.replace(tmp, path)
 
 
+def writable(out, probe=65536):
+    """None if run directory ``out`` can be made and written (a ``probe``-byte file is
+    written and removed), else why not, in a few words."""
+    try:
+        os.makedirs(out, exist_ok=True)
+        path = os.path.join(out, f".mpdem-write-test-{os.getpid()}")
+        try:
+            with open(path, "wb") as fh:
+                fh.write(b"\0" * probe)
+                fh.flush()
+                os.fsync(fh.fileno())
+        finally:
+            if os.path.exists(path):
+                os.remove(path)
+    except OSError as e:
+        return f"cannot be created or written ({e.strerror or e})"
+    return None
+
+
 def starts_with(path, magic):
     """True if the file ``path`` begins with the bytes ``magic`` (a format's signature)."""
     try:

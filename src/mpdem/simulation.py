@@ -42,7 +42,7 @@ class History:
 
 
 class Run:
-    """One pile run in ``out_dir``: a new one (``prepare``) or a continued one (``restart.resume``).
+    """One pile run in ``out_dir``: a new one (``prepare``) or a continued one (``resume.resume``).
 
     Parameters
     ----------

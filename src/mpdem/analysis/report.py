@@ -302,46 +302,77 @@ def write_tables(out, s, t):
          [nr["xi_lo"], nr["xi_hi"], t["xi_c"], nr["count_xi"], nr["g_xi"]])
 
 
-def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False):
-    """Analyse a run directory or a state file; returns (summary, output directory).
-
-    ``keep_packing``: when the state is a run's final.h5, also write RUN/packing.npz
-    (``mpdem.packing``), which this function reads when final.h5 is gone.
-    """
-    t0 = time.perf_counter()
-    path, out = locate(target, out)
+def read(path, sets=()):
+    """(arrays, attrs, cfg) of a state or packing file, with ``--set analysis.*`` items applied."""
     if packing.is_packing(path):
         arrays, attrs = packing.read(path)
-        cfg = file_config(attrs, path, sets)
-    else:
-        attrs = checkpoint.read_attrs(path)
-        cfg = file_config(attrs, path, sets)
-        arrays, attrs = checkpoint.read_state(path, pairs=True)
-    t_read = time.perf_counter() - t0
-    if keep_packing and os.path.basename(path) == "final.h5":
-        packing.write(os.path.join(os.path.dirname(path), PACKING), arrays, attrs)
+        return arrays, attrs, file_config(attrs, path, sets)
+    cfg = file_config(checkpoint.read_attrs(path), path, sets)
+    arrays, attrs = checkpoint.read_state(path, pairs=True)
+    return arrays, attrs, cfg
+
+
+def summarise(arrays, attrs, cfg, source):
+    """``measure`` with the file's particulars and the run's parameters: (summary, tables)."""
     try:
         s, tables = measure(arrays, attrs, cfg)
     except ValueError as e:
-        raise AnalysisError(f"{path}: {e}") from None
-    s = {"source": os.path.abspath(path), "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
+        raise AnalysisError(f"{source}: {e}") from None
+    s = {"source": source, "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
          "time": float(attrs.get("time", 0.0)), "converged": bool(attrs.get("converged", False)),
          "written_by_ranks": int(attrs.get("ranks", 1)), "n": int(len(arrays["id"])),
          # the parameter set (config.PARAM_KEYS, what the across-runs tables group by) and the physics
          "params": {k: cfg.values[k] for k in config.PARAM_KEYS},
          "physics": {k: cfg.values[k] for k in config.PHYSICS_KEYS},
          "settings": {k: v for k, v in cfg.values.items() if k.startswith("analysis.")}, **s}
+    return s, tables
+
+
+def arrays_of(s, t):
+    """The curves of one analysis as arrays: g_r, g_xi, P_z, P_zeta (where measured), bands."""
+    out = {"P_z": (np.arange(len(s["P_z"])), np.asarray(s["P_z"])),
+           "bands": {k: np.asarray(v) for k, v in s["bands"].items()}}
+    if "gofr" in t:
+        g, nr = t["gofr"], t["near"]
+        out["g_r"] = (0.5 * (g["r_lo"] + g["r_hi"]), g["g"])
+        out["g_xi"] = (t["xi_c"], nr["g_xi"])
+    if "zeta" in t:
+        z = t["zeta"]
+        out["P_zeta"] = (0.5 * (z["edges"][:-1] + z["edges"][1:]), z["P_zeta"])
+    return out
+
+
+def write(out, s, tables, plots=True, log=print):
+    """The files of one analysis into ``out``: the tables, the plots and summary.json (written last)."""
+    t0 = time.perf_counter()
     os.makedirs(out, exist_ok=True)
     write_tables(out, s, tables)
     if plots:
         from . import plots as pl
         pl.run_plots(out, s, tables)
-    s["seconds"] = {"read": t_read, "total": time.perf_counter() - t0}
+    s.setdefault("seconds", {})["total"] = s.get("seconds", {}).get("total", 0.0) + time.perf_counter() - t0
     rundir.write_atomic(os.path.join(out, SUMMARY), json.dumps(_finite(s), indent=1) + "\n")
     for w in s["warnings"]:
         log(f"warning: {w}")
     log(describe(s))
     log(f"wrote {out}/ ({SUMMARY}, tables{' and plots' if plots else ''}) in {s['seconds']['total']:.1f} s")
+
+
+def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False):
+    """``mpdem analyze``: a run directory or a state file measured and written; (summary, output directory).
+
+    ``keep_packing``: when the state is a run's final.h5, also write RUN/packing.npz
+    (``mpdem.packing``), which this function reads when final.h5 is gone.
+    """
+    t0 = time.perf_counter()
+    path, out = locate(target, out)
+    arrays, attrs, cfg = read(path, sets)
+    t_read = time.perf_counter() - t0
+    if keep_packing and os.path.basename(path) == "final.h5":
+        packing.write(os.path.join(os.path.dirname(path), PACKING), arrays, attrs)
+    s, tables = summarise(arrays, attrs, cfg, os.path.abspath(path))
+    s["seconds"] = {"read": t_read, "total": time.perf_counter() - t0}
+    write(out, s, tables, plots, log)
     return s, out
 
 

@@ -1,0 +1,77 @@
+"""The Python API (docs/python.md): the functions the command line is built on."""
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mpdem
+from mpdem import checkpoint
+from mpdem.config import ConfigError
+from mpdem.analysis.report import AnalysisError
+from mpdem.errors import MpdemError
+
+from helpers import mpdem as cli
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = {"pour.N": 200, "box.L_x": 5.0, "box.L_y": 5.0, "pour.phi_i": 0.3, "pour.K0": 5.0,
+         "stop.sample_interval": 0.01, "run.max_steps": 30000}
+
+
+def test_load_config_takes_keys_by_name_and_raises_on_bad_values():
+    cfg = mpdem.load_config(**{"contact.mu": 0.3, "analysis.alpha_windows": [1e-3, 1e-2]})
+    assert cfg.contact.mu == 0.3 and cfg.analysis.alpha_windows == (1e-3, 1e-2)
+    assert cfg.pour.N == 1500                               # the built-in example underneath
+    with pytest.raises(ConfigError, match=r"contact.mu = -1.0: accepted"):
+        mpdem.load_config(**{"contact.mu": -1.0})
+    with pytest.raises(ConfigError, match="unknown key"):
+        mpdem.load_config(**{"contact.muu": 1.0})
+
+
+def test_run_read_analyze_and_restart_as_the_command_line_does(tmp_path):
+    cfg = mpdem.load_config(**SMALL)
+    r = mpdem.run(cfg, str(tmp_path / "api"))
+    assert r.status == "max_steps" and r.steps == 30000 and r.exit_status == 3
+    assert r.final == str(tmp_path / "api" / "final.h5") and os.path.exists(r.final)
+    assert r.digest == checkpoint.digest(checkpoint.read_state(r.final)[0]) == r.summary["digest"]
+    # the command line, same config: same digest
+    p = cli("run", "--out", tmp_path / "cli", "--quiet", *sum((["--set", f"{k}={v}"] for k, v in SMALL.items()), []))
+    assert p.returncode == 3, p.stderr
+    assert checkpoint.digest(checkpoint.read_state(str(tmp_path / "cli" / "final.h5"))[0]) == r.digest
+    # a directory that holds a run is refused unless forced
+    with pytest.raises(MpdemError, match="already holds a run"):
+        mpdem.run(cfg, str(tmp_path / "api"))
+    s = mpdem.read_state(r.final)
+    assert s["x"].shape == (len(s["id"]), 3) and np.all(np.diff(s["id"]) > 0)
+    assert len(s["id_i"]) == len(s["F_n"]) > 0 and s["L_x"] == 5.0 and s.attrs["step"] == 30000
+    a = mpdem.analyze(r.final)
+    b = mpdem.analyze(s)
+    assert a["z"] == b["z"] and a["backbone"] == b["backbone"] and a["phi"] == b["phi"]
+    n, P = a["arrays"]["P_z"]
+    assert P.sum() == pytest.approx(1.0) and len(n) == 13
+    assert not (tmp_path / "api" / "analysis").exists()     # no files unless asked
+    a = mpdem.analyze(str(tmp_path / "api"), write=True, **{"analysis.margin_bottom": 3.0})
+    assert (tmp_path / "api" / "analysis" / "summary.json").exists() and a["margin_bottom"] == 3.0
+    # at the cap: nothing to do; a higher cap goes on to the straight run's state
+    again = mpdem.restart(str(tmp_path / "api"))
+    assert again.status == "max_steps" and again.digest == r.digest and again.steps == 30000
+    more = mpdem.restart(str(tmp_path / "api"), **{"run.max_steps": 40000})
+    straight = mpdem.run(mpdem.load_config(**dict(SMALL, **{"run.max_steps": 40000})), str(tmp_path / "straight"))
+    assert more.steps == straight.steps == 40000 and more.digest == straight.digest
+    with pytest.raises(AnalysisError, match="no usable runs"):
+        mpdem.collect([str(tmp_path / "api")])
+
+
+def test_the_python_page_runs_as_written(tmp_path, monkeypatch):
+    """docs/python.md, its code blocks in order, in a fresh directory."""
+    text = (ROOT / "docs" / "python.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) >= 5
+    monkeypatch.chdir(tmp_path)
+    scope = {}
+    for code in blocks:
+        exec(compile(code, "docs/python.md", "exec"), scope)
+    r = scope["r"]
+    assert r.status == "converged" and (tmp_path / "runs" / "small" / "pile.png").exists()
+    assert float(scope["tables"]["runs"][0]["z"]) == pytest.approx(scope["a"]["z"])
