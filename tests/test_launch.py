@@ -99,3 +99,20 @@ def test_the_program_ignores_stop_signals_once_its_work_is_done(tmp_path):
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
+def test_an_uncaught_exception_in_a_script_ends_every_rank(tmp_path):
+    """Library use (issue 24): a script that calls mpdem under mpiexec and fails on one rank while
+    the other waits in a collective ends, on every rank, with the message."""
+    script = tmp_path / "script_fails.py"
+    script.write_text(
+        "import mpdem\n"
+        "from mpdem.parallel import world\n"
+        "net = world()\n"
+        "if net.rank == 1:\n"
+        "    mpdem.load_config(**{'contact.mu': -1.0})\n"
+        "net.barrier()  # without the abort, rank 0 would wait here for ever\n")
+    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script)],
+                       capture_output=True, text=True, timeout=120, env=ENV)
+    assert p.returncode != 0
+    assert "contact.mu = -1.0" in p.stderr and "uncaught exception on rank 1 of 2" in p.stderr

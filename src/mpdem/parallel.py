@@ -51,7 +51,26 @@ def world(exit_status=1):
             f"       Use the mpiexec of the MPI that mpi4py was built with (the .venv/bin/mpiexec "
             f"wrapper), or rebuild mpi4py (tools/setup.sh).\n")
         sys.exit(exit_status)
+    _abort_on_uncaught(comm)
     return Channel(comm)
+
+
+def _abort_on_uncaught(comm):
+    """An exception that no caller catches, on any rank of several, ends every rank (MPI_Abort)
+    after printing it: library use (a script or notebook under mpiexec) must not leave the other
+    ranks waiting in a collective for ever. Installed once per process."""
+    if comm.Get_size() < 2 or getattr(sys.excepthook, "_mpdem", False):
+        return
+    previous = sys.excepthook
+
+    def hook(kind, value, tb):
+        sys.stderr.write(f"mpdem: uncaught exception on rank {comm.Get_rank()} of {comm.Get_size()}; "
+                         f"aborting every rank\n")
+        previous(kind, value, tb)
+        sys.stderr.flush()
+        comm.Abort(1)
+    hook._mpdem = True
+    sys.excepthook = hook
 
 
 def channel(net):
