@@ -11,7 +11,7 @@ import numba
 import numpy as np
 import pytest
 
-from mpdem import checkpoint, config
+from mpdem import checkpoint, config, rundir
 from mpdem.analysis import bulk, fits, gofr, mobilisation, report
 from mpdem.kernels import pairdist
 
@@ -395,7 +395,7 @@ def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
     s_pack, out_dir = report.analyze(str(run), plots=False, log=lambda m: None)
     assert out_dir == str(run / "analysis") and s_pack["source"].endswith("packing.npz")
     for k in ("z", "z_no_rattlers", "phi", "alpha", "backbone", "bands", "P_f", "zeta", "order"):
-        assert report._finite(s_pack[k]) == report._finite(s_full[k]), k
+        assert rundir.json_safe(s_pack[k]) == rundir.json_safe(s_full[k]), k
     # a damaged or foreign file is refused with its name
     bad = tmp_path / "bad.npz"
     bad.write_bytes(open(out, "rb").read()[:2000])
@@ -408,3 +408,10 @@ def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
     with pytest.raises(packing.PackingFileError, match="no contact list"):
         no_pairs = {k: v for k, v in full.items() if k not in checkpoint.PAIR_FIELDS}
         packing.write(str(tmp_path / "c.npz"), no_pairs, fattrs)
+
+
+def test_the_one_json_writer_writes_nan_as_null(tmp_path):
+    import json as js
+    rundir.write_json(str(tmp_path / "s.json"), {"z": float("nan"), "a": [np.float64(1.5), np.inf], "n": np.int64(3)})
+    assert js.loads((tmp_path / "s.json").read_text()) == {"z": None, "a": [1.5, None], "n": 3}
+    assert "NaN" not in (tmp_path / "s.json").read_text() and not (tmp_path / "s.json.tmp").exists()

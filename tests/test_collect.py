@@ -97,7 +97,7 @@ def make_run(run, p, z, phi, alpha, rng, converged=True):
         s["bands"][col] = [0.5] * 8
     s["P_f"] = bands.force_distribution(rng.exponential(1.0, 3000))
     s["backbone"] = {"z": z - 0.01}
-    (an / "summary.json").write_text(json.dumps(report._finite(s)))
+    (an / "summary.json").write_text(json.dumps(rundir.json_safe(s)))
     return s
 
 

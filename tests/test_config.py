@@ -174,3 +174,14 @@ def test_every_error_said_as_one_line_is_an_mpdem_error():
     for err in (config.ConfigError, config.AgreedError, build.InputError, checkpoint.StateFileError,
                 simulation.RunError, report.AnalysisError, threads.ThreadsError, sweep.SweepError):
         assert issubclass(err, MpdemError), err
+
+
+def test_a_retired_key_in_an_older_config_loads_and_a_set_of_it_is_refused(tmp_path):
+    """integration.contact_slots is gone (issue 24): configs and state files that carry it still load."""
+    old = tmp_path / "old.toml"
+    old.write_text("[run]\nmax_steps = 10\n[integration]\ncontact_slots = 16\nskin = 0.3\n")
+    cfg = config.load(str(old))
+    assert cfg.integration.skin == 0.3 and "contact_slots" not in cfg.to_toml()
+    assert "integration.contact_slots" not in cfg.values
+    with pytest.raises(config.ConfigError, match="contact_slots: the key is retired"):
+        config.load(str(old), ["integration.contact_slots=8"])

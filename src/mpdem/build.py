@@ -15,17 +15,13 @@ import numpy as np
 from .config import gamma_n_from_epsilon
 from .decomp import Domain
 from .engine import Engine, Physics
-from .errors import MpdemError
+from .errors import InputError
 from .kernels.insert import rsa_insert
 from .rundir import write_atomic
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
 SPHERE_VOLUME = math.pi / 6.0
-
-
-class InputError(MpdemError, ValueError):
-    """An initial configuration that cannot be run."""
 
 
 def rng(seed, purpose):

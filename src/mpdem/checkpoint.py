@@ -38,7 +38,7 @@ import signal
 import h5py
 import numpy as np
 
-from .errors import MpdemError
+from .errors import StateFileError
 from .parallel import channel
 from .rundir import starts_with
 
@@ -59,10 +59,6 @@ ROWS_OF = {"particles": "id", "contacts": "partner", "wall": "wall_ds", "pairs":
 # Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
 KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
 _writes = 0
-
-
-class StateFileError(MpdemError, ValueError):
-    """A state file that cannot be used (named, with the reason)."""
 
 
 # -- order-independent checksums --

@@ -14,19 +14,10 @@ import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from .errors import MpdemError
+from .errors import AgreedError, ConfigError  # noqa: F401 (AgreedError: config.AgreedError)
 
 REQUIRED = object()   # marks a key with no default
 DERIVED = object()    # marks a default computed from other keys
-
-
-class ConfigError(MpdemError, ValueError):
-    """A configuration value that cannot be run."""
-
-
-class AgreedError(ConfigError):
-    """A ConfigError that every rank raises together, from a value all ranks were given:
-    the ranks stop without MPI_Abort, whose teardown can lose the message."""
 
 
 @dataclass(frozen=True)
@@ -106,9 +97,6 @@ SCHEMA = (
     _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)", param=14),
     _k("integration", "skin", 0.2,
        "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
-    _k("integration", "contact_slots", 16,
-       "unused since the contact history moved to the neighbour list (kept so older configs and checkpoints "
-       "load)", int, physics=False),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "rule", "window",
@@ -193,6 +181,10 @@ SCHEMA = (
     _k("analysis", "order_bonds", 8,
        "solid-like bonds that make a sphere crystal-like", int, restart=True, physics=False),
 )
+
+# keys that no longer exist: older configs and state files that carry them still load (the key is
+# left out); a --set of one is refused with the reason
+RETIRED = {"integration.contact_slots": "unused since the contact history moved to the neighbour lists"}
 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
 KEYS = MappingProxyType({f"{k.section}.{k.name}": k for k in SCHEMA})
@@ -337,6 +329,8 @@ def flatten(doc, origin="config"):
                               f"known sections: {', '.join(SECTIONS)}")
         for name, v in body.items():
             key = f"{sec}.{name}"
+            if key in RETIRED:
+                continue
             if key not in KEYS:
                 known = ", ".join(k.name for k in SCHEMA if k.section == sec)
                 raise ConfigError(f"{origin}: unknown key {key}{did_you_mean(key, KEYS)}; keys of [{sec}]: {known}")
@@ -366,6 +360,8 @@ def parse_set(item):
     if "=" not in item:
         raise ConfigError(f"--set {item!r}: expected section.key=value")
     key, text = (s.strip() for s in item.split("=", 1))
+    if key in RETIRED:
+        raise ConfigError(f"--set {key}: the key is retired ({RETIRED[key]})")
     if key not in KEYS:
         raise ConfigError(f"--set {key}: unknown key{did_you_mean(key, KEYS)}; known keys: {', '.join(KEYS)}")
     try:
@@ -509,7 +505,6 @@ def resolve(raw):
     for key in ("box.L_x", "box.L_y"):
         need(key, vals[key] >= 3.0 and vals[key] >= 2 * (1.0 + skin),
              f"L >= 3 d and L >= 2 (d + skin) = {2 * (1 + skin):g} d (minimum image)")
-    need("integration.contact_slots", vals["integration.contact_slots"] >= 1, "contact_slots >= 1")
 
     if vals["integration.dt"] is None:
         vals["integration.dt"] = 1e-4 * math.sqrt(2e5 / k_n)

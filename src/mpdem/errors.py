@@ -11,7 +11,43 @@ EXIT_RESTART = 75        # stopped on purpose (wall time or signal) after a chec
 class MpdemError(Exception):
     """An input, file or run problem, said in one line naming what and why.
 
-    Subclasses: ``config.ConfigError`` (and ``AgreedError``, ``sweep.SweepError``),
-    ``build.InputError``, ``checkpoint.StateFileError``, ``schedule.RunError``,
-    ``analysis.report.AnalysisError``, ``threads.ThreadsError``.
+    Every error mpdem raises is one of the kinds below (each also importable from the module
+    that raises it, e.g. ``config.ConfigError``).
     """
+
+
+class ConfigError(MpdemError, ValueError):
+    """A configuration value that cannot be run."""
+
+
+class AgreedError(ConfigError):
+    """A ConfigError that every rank raises together, from a value all ranks were given:
+    the ranks stop without MPI_Abort, whose teardown can lose the message."""
+
+
+class SweepError(ConfigError):
+    """A sweep table or sweep option that cannot be used (reported before any row runs)."""
+
+
+class InputError(MpdemError, ValueError):
+    """An initial configuration that cannot be run."""
+
+
+class StateFileError(MpdemError, ValueError):
+    """A state file that cannot be used (named, with the reason)."""
+
+
+class PackingFileError(MpdemError, ValueError):
+    """A packing file that cannot be read."""
+
+
+class RunError(MpdemError, RuntimeError):
+    """The run cannot go on (NaN, excessive overlap, a particle under the bed)."""
+
+
+class AnalysisError(MpdemError, ValueError):
+    """A file or a setting the analysis cannot use."""
+
+
+class ThreadsError(MpdemError, ValueError):
+    """A thread count that cannot be used."""

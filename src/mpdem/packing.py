@@ -20,7 +20,7 @@ import zipfile
 
 import numpy as np
 
-from .errors import MpdemError
+from .errors import PackingFileError
 from .rundir import starts_with
 
 FORMAT = "mpdem-packing"
@@ -28,10 +28,6 @@ VERSION = 1
 FIELDS = {"id": np.int64, "x": np.float64, "fixed": np.uint8, "id_i": np.int64, "id_j": np.int64,
           "delta": np.float64, "F_n": np.float64, "F_t": np.float64}
 SUFFIX = ".npz"
-
-
-class PackingFileError(MpdemError, ValueError):
-    """A packing file that cannot be read."""
 
 
 def is_packing(path):

@@ -55,6 +55,26 @@ def writable(out, probe=65536):
     return None
 
 
+def json_safe(obj):
+    """``obj`` with nan and inf as None (JSON has no such numbers) and numpy scalars and arrays as
+    Python numbers and lists."""
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
+def write_json(path, obj):
+    """``obj`` as JSON (``json_safe``, indented) in ``path``, written atomically: the one JSON writer."""
+    import json
+    write_atomic(path, json.dumps(json_safe(obj), indent=1) + "\n")
+
+
 def starts_with(path, magic):
     """True if the file ``path`` begins with the bytes ``magic`` (a format's signature)."""
     try:

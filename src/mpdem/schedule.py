@@ -18,11 +18,7 @@ import time
 from dataclasses import dataclass, field, fields
 
 from . import rundir
-from .errors import MpdemError
-
-
-class RunError(MpdemError, RuntimeError):
-    """The run cannot go on (NaN, excessive overlap, a particle under the bed)."""
+from .errors import RunError  # noqa: F401 (schedule.RunError, simulation.RunError)
 
 
 def from_dict(cls, d):

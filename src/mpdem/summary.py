@@ -5,7 +5,6 @@ or "max_steps" (an interrupted run ends with its checkpoint instead).
 """
 from __future__ import annotations
 
-import json
 import os
 
 from . import analysis, checkpoint, rundir
@@ -61,7 +60,7 @@ def finish(run):
             f"surface h = {bulk['h']:.2f}")
     except ValueError as e:
         log.warn(f"no bulk measurement: {e}")
-    rundir.write_atomic(os.path.join(run.out, "summary.json"), json.dumps(summary, indent=1))
+    rundir.write_json(os.path.join(run.out, "summary.json"), summary)
     log(f"wrote {path}")
     if not run.converged:
         # the exit code that follows is a result, not a crash (mpiexec reports it at length)

@@ -27,17 +27,13 @@ import time
 from dataclasses import dataclass, field
 
 from . import config, rundir
-from .errors import EXIT_RESTART
+from .errors import EXIT_RESTART, SweepError
 
 # table column -> (config key, the short name used in run directory names)
 COLUMNS = {"mu": ("contact.mu", "mu"), "epsilon": ("contact.epsilon", "eps"), "k_n": ("contact.k_n", "kn"),
            "phi_i": ("pour.phi_i", "phi"), "seed": ("run.seed", "s")}
 VALUE = re.compile(r"^[A-Za-z0-9.+-]+$")
 SUMMARY = os.path.join("analysis", "summary.json")
-
-
-class SweepError(config.ConfigError):
-    """A sweep table or sweep option that cannot be used (reported before any row runs)."""
 
 
 @dataclass

@@ -8,11 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
-from .errors import MpdemError
-
-
-class ThreadsError(MpdemError, ValueError):
-    """A thread count that cannot be used."""
+from .errors import ThreadsError  # noqa: F401 (threads.ThreadsError)
 
 
 # threads of the time-step kernels: one per rank unless asked (numba's own default is every core)

@@ -353,20 +353,8 @@ def write_sets_csv(path, sets):
     rundir.write_csv(path, head, rows)
 
 
-def _json_safe(o):
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
-    if isinstance(o, (np.floating, np.integer)):
-        return _json_safe(o.item())
-    if isinstance(o, dict):
-        return {str(k): _json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple, np.ndarray)):
-        return [_json_safe(v) for v in o]
-    return o
-
-
 def write_json(path, obj):
-    rundir.write_atomic(path, json.dumps(_json_safe(obj), indent=1) + "\n")
+    rundir.write_json(path, obj)
 
 
 # ---------------------------------------------------------------- the command

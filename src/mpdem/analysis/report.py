@@ -19,7 +19,6 @@ renamed. The analysis runs in one process (its kernels use numba threads).
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -29,15 +28,11 @@ import numpy as np
 
 from .. import checkpoint, config, packing, rundir
 from ..checkpoint import StateFileError
-from ..errors import MpdemError
+from ..errors import AnalysisError
 from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
 
 SUMMARY = "summary.json"
 PACKING = "packing.npz"     # a run's kept packing (``mpdem export --format packing``) when final.h5 is gone
-
-
-class AnalysisError(MpdemError, ValueError):
-    """A file or a setting the analysis cannot use."""
 
 
 def locate(target, out=None):
@@ -126,17 +121,6 @@ def _profile(pk, reg):
 def _csv(path, header, cols):
     """Columns (equal lengths) as a CSV file (``rundir.write_csv``)."""
     rundir.write_csv(path, header, zip(*cols))
-
-
-def _finite(obj):
-    """JSON-safe: nan and inf become null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
@@ -351,7 +335,7 @@ def write(out, s, tables, plots=True, log=print):
         from . import plots as pl
         pl.run_plots(out, s, tables)
     s.setdefault("seconds", {})["total"] = s.get("seconds", {}).get("total", 0.0) + time.perf_counter() - t0
-    rundir.write_atomic(os.path.join(out, SUMMARY), json.dumps(_finite(s), indent=1) + "\n")
+    rundir.write_json(os.path.join(out, SUMMARY), s)
     for w in s["warnings"]:
         log(f"warning: {w}")
     log(describe(s))
