@@ -202,3 +202,32 @@ def test_kill_during_checkpoint_write_then_restart(straight, tmp_path):
     mpdem("restart", out, "--quiet", n=2, check=0)
     assert summary(out)["digest"] == ref
     assert not list((out / "checkpoints").glob("*.tmp"))
+
+
+def test_one_writer_per_run_directory(straight, tmp_path):
+    """A second restart of a run directory while the first runs is refused with one line naming the
+    holder; the first is unharmed (the straight digest). A lock left by a process that died is taken
+    over, and said (issue 26)."""
+    run, ref, steps = straight
+    again = rewind(run, tmp_path / "again", keep=0)
+    first = subprocess.Popen(mpdem_argv("restart", again, "--quiet"), env=child_env(), stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    lock = again / ".lock"
+    t = time.monotonic()
+    while not (lock.exists() and lock.read_text().strip()) and time.monotonic() - t < 60:
+        time.sleep(0.05)
+    assert f"pid {first.pid}" in lock.read_text()
+    p = mpdem("restart", again, check=1)
+    line = p.stderr.strip()
+    assert len(line.splitlines()) == 1 and f"in use by pid {first.pid} on " in line and " since " in line
+    # reading is no writing: analyze and info need no lock
+    mpdem("info", str(again / "checkpoints" / "ckpt-00000.h5"), check=0)
+    out, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    assert summary(again)["digest"] == ref and lock.read_text() == ""
+    # a dead holder's lock (its file says who, no process holds it): taken over, with a line
+    stale = rewind(run, tmp_path / "stale", keep=0)
+    (stale / ".lock").write_text("pid 999999 on elsewhere since 2026-01-01 00:00:00\n")
+    p = mpdem("restart", stale, check=0)
+    assert "taking over the lock of pid 999999 on elsewhere" in p.stdout + p.stderr
+    assert summary(stale)["digest"] == ref

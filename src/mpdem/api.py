@@ -107,6 +107,32 @@ def _go(run):
     return _result(run, run.finish())
 
 
+def lock(run_dir, net):
+    """The run directory's lock (``rundir.RunLock``), taken by rank 0 for every rank.
+
+    Raises
+    ------
+    AgreedError on every rank, naming the holder, when another process writes ``run_dir``.
+    """
+    from .config import AgreedError
+    from .rundir import RunLock
+    held = RunLock(run_dir) if net.rank == 0 else None
+    why = net.on_root(held.acquire) if net.rank == 0 else net.on_root(lambda: None)
+    if why:
+        raise AgreedError(f"{run_dir}: {why}")
+    return held
+
+
+def _locked(run_dir, net, go):
+    """``go(lock)`` with the run directory locked; the lock released however it ends."""
+    held = lock(run_dir, net)
+    try:
+        return go(held)
+    finally:
+        if held is not None:
+            held.release()
+
+
 def check_out(out, net, force=False):
     """Refuse a run directory that cannot be written, or that holds a run (unless ``force``).
 
@@ -151,10 +177,15 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     except (config_mod.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise config_mod.AgreedError(str(e)) from None
     check_out(out, net, force)
-    r = Run(cfg, out, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
-            t_start=time.monotonic() if t_start is None else t_start, signals=signals)
-    r.prepare(lammps_initial=initial)
-    return _go(r)
+
+    def go(held):
+        r = Run(cfg, out, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
+                t_start=time.monotonic() if t_start is None else t_start, signals=signals)
+        if held is not None and held.taken_over:
+            r.log.warn(held.taken_over)
+        r.prepare(lammps_initial=initial)
+        return _go(r)
+    return _locked(out, net, go)
 
 
 def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, net=None, t_start=None,
@@ -175,16 +206,23 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
     _threads(threads)
     net = _net(net)
     items = list(set_items) + [f"{k}={config.toml_value(v)}" for k, v in sets.items()]
-    t = rs.open_target(out, net, items)
-    say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
-    status = rs.verdict(t, say)
-    say.close()
-    if status is not None:
-        return _finished(t, status, net)
-    r = Run(t.cfg, t.run_dir, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
-            t_start=time.monotonic() if t_start is None else t_start, signals=signals)
-    rs.resume(r, t)
-    return _go(r)
+    run_dir = net.on_root(rs.run_dir_of, out, catch=MpdemError)
+
+    def go(held):
+        # the files are chosen and read under the lock: no other writer can change them meanwhile
+        t = rs.open_target(out, net, items)
+        say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
+        if held is not None and held.taken_over:
+            say.warn(held.taken_over)
+        status = rs.verdict(t, say)
+        say.close()
+        if status is not None:
+            return _finished(t, status, net)
+        r = Run(t.cfg, t.run_dir, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
+                t_start=time.monotonic() if t_start is None else t_start, signals=signals)
+        rs.resume(r, t)
+        return _go(r)
+    return _locked(run_dir, net, go)
 
 
 def _finished(t, status, net):

@@ -73,11 +73,23 @@ def candidates(target):
                 return -1
         # newest first; at equal steps the final state (it knows the run ended)
         return sorted(files, key=lambda p: (step(p), p == rundir.final_path(run)), reverse=True), run
+    return [target], run_dir_of(target)
+
+
+def run_dir_of(target):
+    """The run directory of a restart target: the directory itself, or the run a state file is of
+    (the parent of ``checkpoints/`` or ``snapshots/``, else the directory it is in).
+
+    Raises
+    ------
+    StateFileError when ``target`` does not exist.
+    """
+    if os.path.isdir(target):
+        return target
     if not os.path.exists(target):
         raise StateFileError(f"{target}: no such file or directory")
     d = os.path.dirname(os.path.abspath(target))
-    run = os.path.dirname(d) if os.path.basename(d) in (rundir.CKPT_DIR, rundir.SNAP_DIR) else d
-    return [target], run
+    return os.path.dirname(d) if os.path.basename(d) in (rundir.CKPT_DIR, rundir.SNAP_DIR) else d
 
 
 def restart_config(attrs, path, run, sets):

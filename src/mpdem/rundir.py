@@ -55,6 +55,62 @@ def writable(out, probe=65536):
     return None
 
 
+LOCK = ".lock"
+
+
+class RunLock:
+    """One writer per run directory: an exclusive ``flock`` on RUN/.lock, held by one process for the
+    life of a run or restart and released on any exit (the kernel drops it when the process dies).
+
+    ``acquire`` returns None, or the reason it cannot: the holder's host, pid and start time, as the
+    holder wrote them into the file. A file left by a process that died (its lock gone with it) is
+    taken over; ``taken_over`` then names the old holder.
+    """
+
+    def __init__(self, run):
+        self.path = os.path.join(run, LOCK)
+        self.fh = None
+        self.taken_over = None
+
+    def acquire(self):
+        import fcntl
+        import socket
+        import time
+        fh = open(self.path, "a+")
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "another process"
+            fh.close()
+            return f"in use by {holder} ({self.path}); one run or restart at a time writes a run directory"
+        except OSError as e:        # a file system without flock: go on unlocked, and say so
+            fh.close()
+            self.taken_over = f"not locked: {self.path}: {e.strerror or e} (no flock on this file system)"
+            return None
+        fh.seek(0)
+        old = fh.read().strip()
+        if old:
+            self.taken_over = f"taking over the lock of {old}, which has ended ({self.path})"
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"pid {os.getpid()} on {socket.gethostname()} since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+        fh.flush()
+        self.fh = fh
+        return None
+
+    def release(self):
+        """Give the lock up (the file stays empty: no holder)."""
+        if self.fh is not None:
+            import fcntl
+            self.fh.seek(0)
+            self.fh.truncate()
+            self.fh.flush()
+            fcntl.flock(self.fh.fileno(), fcntl.LOCK_UN)
+            self.fh.close()
+            self.fh = None
+
+
 def json_safe(obj):
     """``obj`` with nan and inf as None (JSON has no such numbers) and numpy scalars and arrays as
     Python numbers and lists."""
