@@ -67,3 +67,15 @@ def test_tile_table_copies_and_renumbers():
     assert np.all((w["x"][:, 0] >= 0) & (w["x"][:, 0] < 12) & (w["x"][:, 1] >= 0) & (w["x"][:, 1] < 18))
     assert np.allclose(w["x"][2 * 5 + 1], [5.5 + 6.0, 5.5 + 12.0, 2.0])   # copy 5 = (i 1, j 2), y wrapped
     assert np.array_equal(w["fixed"], np.tile(t["fixed"], 6)) and np.array_equal(w["v"][3], t["v"][1])
+
+
+def test_a_gz_that_is_not_gzip_and_a_table_without_mobile_spheres_are_refused(tmp_path):
+    (tmp_path / "plain.txt.gz").write_text("id x y z\n1 1.0 1.0 1.0\n")
+    with pytest.raises(build.InputError, match=r"plain.txt.gz: named .gz but not gzip-compressed"):
+        build.read_table(tmp_path / "plain.txt.gz")
+    (tmp_path / "beds.txt").write_text("id x y z fixed\n1 1.0 1.0 0.5 1\n2 2.5 1.0 0.5 1\n")
+    cfg = config.load(None, ["run.max_steps=10", "box.L_x=6.0", "box.L_y=6.0",
+                             f'run.initial_file="{tmp_path / "beds.txt"}"'])
+    r = Run(cfg, str(tmp_path / "run"), quiet=True)
+    with pytest.raises(build.InputError, match=r"beds.txt: no mobile sphere: all 2 are bed spheres"):
+        r.prepare()

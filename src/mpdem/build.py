@@ -128,10 +128,20 @@ def make_bed(cfg, progress=None):
 
 
 def _open_text(path):
-    """A text file handle of ``path``, decompressing gzip (magic bytes 1f 8b)."""
+    """A text file handle of ``path``, decompressing gzip (magic bytes 1f 8b).
+
+    Raises
+    ------
+    InputError for a file named ``.gz`` that is not gzip-compressed.
+    """
     with open(path, "rb") as fh:
         magic = fh.read(2)
-    return gzip.open(path, "rt") if magic == b"\x1f\x8b" else open(path)
+    if magic == b"\x1f\x8b":
+        return gzip.open(path, "rt")
+    if str(path).endswith(".gz"):
+        raise InputError(f"{path}: named .gz but not gzip-compressed (it begins {magic!r}, gzip begins "
+                         f"b'\\x1f\\x8b'); compress it with gzip or drop the .gz")
+    return open(path)
 
 
 def read_table(path):

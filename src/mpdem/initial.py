@@ -93,6 +93,10 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
     out = {k: t[k] for k in ("ids", "x", "v", "omega", "fixed")}
     if all_fixed:
         out["fixed"] = np.ones(len(out["ids"]), np.uint8)
+    elif len(out["fixed"]) and np.all(out["fixed"] == 1):
+        how = f"of types {list(cfg.run.fixed_types)}" if lammps.kind(path) else "fixed = 1"
+        raise build.InputError(f"initial file {path}: no mobile sphere: all {len(out['fixed'])} are bed "
+                               f"spheres ({how})")
     out["slots"], out["wall_ds"] = slots, wall_ds
     return out
 
