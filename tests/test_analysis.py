@@ -415,3 +415,15 @@ def test_the_one_json_writer_writes_nan_as_null(tmp_path):
     rundir.write_json(str(tmp_path / "s.json"), {"z": float("nan"), "a": [np.float64(1.5), np.inf], "n": np.int64(3)})
     assert js.loads((tmp_path / "s.json").read_text()) == {"z": None, "a": [1.5, None], "n": 3}
     assert "NaN" not in (tmp_path / "s.json").read_text() and not (tmp_path / "s.json.tmp").exists()
+
+
+def test_analyze_plots_in_the_figure_formats_asked(tmp_path):
+    x, L = simple_cubic(6, 24, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    write_crystal(tmp_path / "sc.h5", x, fixed, L, ["contact.mu=0"])
+    report.analyze(str(tmp_path / "sc.h5"), out=str(tmp_path / "o"), sets=["analysis.figure_format=svg,pdf"],
+                   log=lambda m: None)
+    assert (tmp_path / "o" / "profile.svg").exists() and (tmp_path / "o" / "profile.pdf").exists()
+    assert not list((tmp_path / "o").glob("*.png"))
+    with pytest.raises(config.ConfigError, match="analysis.figure_format"):
+        report.analyze(str(tmp_path / "sc.h5"), sets=["analysis.figure_format=gif"], log=lambda m: None)

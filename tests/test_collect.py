@@ -443,3 +443,17 @@ def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
     trend = [ln for ln in (out / "README.md").read_text().splitlines() if ln.startswith("| z(mu) trend")]
     assert len(trend) == 1 and "decreasing at every step" in trend[0], trend
+
+
+def test_figures_in_several_formats(tree, tmp_path):
+    res = co.collect([str(tree["root"] / "kn")], str(tmp_path / "out"), analyze_missing=False,
+                     log=lambda m: None, figure_format="pdf,svg")
+    f7 = res["figures"]["fig7"]
+    assert f7["made"] and f7["file"] == "fig7_z_vs_kn.pdf" and f7["files"] == ["fig7_z_vs_kn.pdf", "fig7_z_vs_kn.svg"]
+    assert (tmp_path / "out" / "fig7_z_vs_kn.pdf").read_bytes()[:5] == b"%PDF-"
+    assert b"<svg" in (tmp_path / "out" / "fig7_z_vs_kn.svg").read_bytes()[:2000]
+    assert not list((tmp_path / "out").glob("*.png")) and not list((tmp_path / "out").glob("*.tmp"))
+    assert "(fig7_z_vs_kn.pdf)" in (tmp_path / "out" / "README.md").read_text()
+    with pytest.raises(AnalysisError, match="figure format 'jpg'"):
+        co.collect([str(tree["root"] / "kn")], str(tmp_path / "bad"), analyze_missing=False, log=lambda m: None,
+                   figure_format="jpg")

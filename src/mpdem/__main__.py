@@ -166,7 +166,8 @@ def cmd_collect(args, net):
     from .analysis.collect import collect
     if net.rank != 0:
         return EXIT_OK
-    collect(args.runs, args.out, analyze_missing=not args.no_analyze, log=_quiet(args.quiet))
+    collect(args.runs, args.out, analyze_missing=not args.no_analyze, log=_quiet(args.quiet),
+            figure_format=args.figure_format)
     return EXIT_OK
 
 
@@ -297,6 +298,8 @@ def parser():
     co.add_argument("--no-analyze", action="store_true",
                     help="use only runs that already have analysis/summary.json")
     co.add_argument("--quiet", action="store_true", help="print nothing")
+    co.add_argument("--figure-format", default="png", metavar="FMT[,FMT]",
+                    help="figure formats: png (default), pdf, svg, several joined by commas")
     sw = sub.add_parser("sweep", help="run the rows of sweep tables on this machine, then collect them")
     sw.add_argument("tables", nargs="+", metavar="TABLE",
                     help="sweep tables (columns mu epsilon k_n phi_i seed or section.key, one run per line)")

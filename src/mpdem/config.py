@@ -175,6 +175,9 @@ SCHEMA = (
        "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
     _k("analysis", "mobilised", 0.99,
        "zeta above which a contact counts as fully mobilised", restart=True, physics=False),
+    _k("analysis", "figure_format", "png",
+       "formats of the figures of analyze and collect: png, pdf or svg, several joined by commas "
+       "(e.g. png,pdf)", str, restart=True, physics=False),
     _k("analysis", "order_cutoff", 1.4, "neighbour shell of the q6 bond order [d]", restart=True, physics=False),
     _k("analysis", "order_bond", 0.7,
        "normalised q6 product above which a bond is solid-like", restart=True, physics=False),
@@ -562,6 +565,9 @@ def resolve(raw):
          "at least two increasing edges in (0, 1]")
     need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
     need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")
+    fmts = [f.strip().lower() for f in vals["analysis.figure_format"].split(",")]
+    need("analysis.figure_format", bool(fmts) and all(f in ("png", "pdf", "svg") for f in fmts),
+         "png, pdf or svg, several joined by commas")
     need("analysis.order_cutoff", 1 < vals["analysis.order_cutoff"] < 2, "1 < order_cutoff < 2")
     need("analysis.order_bond", -1 <= vals["analysis.order_bond"] < 1, "-1 <= order_bond < 1")
     need("analysis.order_bonds", vals["analysis.order_bonds"] >= 1, "order_bonds >= 1")

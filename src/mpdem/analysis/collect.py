@@ -359,7 +359,7 @@ def write_json(path, obj):
 
 # ---------------------------------------------------------------- the command
 
-def collect(runs, out, analyze_missing=True, log=print):
+def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
     """``mpdem collect RUN_DIR ... --out OUT``: the paper's tables and figures from many runs.
 
     Parameters
@@ -369,6 +369,7 @@ def collect(runs, out, analyze_missing=True, log=print):
     analyze_missing : run ``mpdem analyze`` (no plots) on runs without an
         up-to-date analysis/summary.json; False skips them with a warning
     log : one-line messages
+    figure_format : formats of the figures (``analysis.figure_format``: png, pdf, svg, joined by commas)
 
     Returns
     -------
@@ -408,7 +409,12 @@ def collect(runs, out, analyze_missing=True, log=print):
         for e in fit_res[kind]:
             why = f" ({e['reason']})" if "reason" in e else ""
             log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}{why}")
-    figs = make_figures(sets, fit_res, out, log)
+    from .plots import formats_of
+    fmts = formats_of(figure_format)
+    bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
+    if bad or not fmts:
+        raise AnalysisError(f"figure format {figure_format!r}: accepted png, pdf or svg, several joined by commas")
+    figs = make_figures(sets, fit_res, out, log, fmts)
     rows = comparisons(sets, fit_res)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,
             "n_runs": n_runs, "n_sets": len(sets)}
@@ -418,7 +424,7 @@ def collect(runs, out, analyze_missing=True, log=print):
            "skipped": skipped, "comparisons": rows,
            "figures": {k: v for k, v in figs.items() if not k.startswith("_")}, "figure_notes": figs["_notes"],
            "files": ["runs.csv", "sets.csv", "fits.json", "README.md", "collect.json"]
-           + [f["file"] for k, f in figs.items() if not k.startswith("_") and f["made"]]}
+           + [p for k, f in figs.items() if not k.startswith("_") and f["made"] for p in f["files"]]}
     write_json(os.path.join(out, "collect.json"), res)
     made = [k for k, f in res["figures"].items() if f["made"]]
     log(f"collect: wrote {out}/ (runs.csv, sets.csv, fits.json, README.md, collect.json; "

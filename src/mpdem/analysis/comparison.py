@@ -189,14 +189,14 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
     L += ["", "Eq. 9, φ_f = A + B exp(−C φ_i), per family of sets differing in φ_i:", ""]
     L += [_fit_lines(e, "eq9") for e in fit_res["eq9"]] or ["- no family with ≥ 2 values of φ_i"]
     L += ["", "## Figures", "", f"Figs. 2-6 and 8 use the sets at {figs['_slice']}.", ""]
-    for name, fname, shows in FIGURES:
+    for name, _, shows in FIGURES:
         f = figs[name]
-        L.append(f"- `{fname}`: {shows}. " + ("Made." if f["made"] else f"**Not made**: {f['reason']}."))
+        L.append(f"- `{f['file']}`: {shows}. " + ("Made." if f["made"] else f"**Not made**: {f['reason']}."))
     for name, notes in figs["_notes"].items():
         L += [f"  - note ({name}): {n}" for n in notes]
-    for name, fname, shows in FIGURES:
+    for name, _, shows in FIGURES:
         if figs[name]["made"]:
-            L += ["", f"![{shows}]({fname})"]
+            L += ["", f"![{shows}]({figs[name]['file']})"]
     # the findings a person wrote beside the results (OUT/NOTES.md) belong in the README
     notes = os.path.join(os.path.dirname(path), NOTES)
     if os.path.exists(notes):

@@ -51,9 +51,10 @@ def _varying(dicts):
 class Figures:
     """The paper's figures from the sets; each ``figN`` returns None when made, else why not."""
 
-    def __init__(self, sets, fit_res, out):
+    def __init__(self, sets, fit_res, out, formats=("png",)):
         from . import plots  # matplotlib only once figures are drawn
-        self.plt, self.save = plots.plt, plots.save
+        self.plt, self.formats = plots.plt, tuple(formats)
+        self.save = lambda fig, path: plots.save(fig, path, self.formats)
         self.sets, self.fits, self.out = sets, fit_res, out
         self._tables, self.notes = {}, {}
         self.slice, self.slice_text = self._mu_slice()
@@ -490,8 +491,9 @@ FIGURES = (  # name, file, what it shows
 )
 
 
-def make_figures(sets, fit_res, out, log=print):
-    """Every figure the sets have data for.
+def make_figures(sets, fit_res, out, log=print, formats=("png",)):
+    """Every figure the sets have data for, in each of ``formats`` (png, pdf, svg; the README shows
+    the PNGs when made, else the first format).
 
     Returns
     -------
@@ -499,11 +501,14 @@ def make_figures(sets, fit_res, out, log=print):
     when made), and "_notes" ({table: [what was left out]}) and "_slice" (the
     k_n and phi_i of Figs. 2-6 and 8, as text).
     """
-    figs = Figures(sets, fit_res, out)
+    figs = Figures(sets, fit_res, out, formats)
     res = {}
+    show = "png" if "png" in formats else formats[0]
     for name, fname, shows in FIGURES:
         why = getattr(figs, name)()
-        res[name] = {"file": fname, "shows": shows, "made": why is None, "reason": why}
+        stem = os.path.splitext(fname)[0]
+        res[name] = {"file": f"{stem}.{show}", "files": [f"{stem}.{f}" for f in formats], "shows": shows,
+                     "made": why is None, "reason": why}
         log(f"collect: {name}: " + (f"wrote {fname}" if why is None else f"not made ({why})"))
     for name, notes in figs.notes.items():
         for n in notes:

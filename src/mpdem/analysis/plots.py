@@ -12,12 +12,24 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def save(fig, path):
-    """Write a figure as PNG under a temporary name, then rename."""
-    tmp = f"{path}.tmp"
-    fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
+FORMATS = ("png", "pdf", "svg")
+
+
+def formats_of(text):
+    """``analysis.figure_format`` ('png', 'png,pdf', ...) as a tuple of formats (config checks each)."""
+    return tuple(dict.fromkeys(f.strip().lower() for f in str(text).split(",") if f.strip()))
+
+
+def save(fig, path, formats=("png",)):
+    """Write a figure in each of ``formats`` (``path`` with its suffix swapped), each under a
+    temporary name, then renamed. PNG at 120 dpi; PDF and SVG are vector."""
+    stem = os.path.splitext(path)[0]
+    for fmt in formats:
+        final = f"{stem}.{fmt}"
+        tmp = f"{final}.tmp"
+        fig.savefig(tmp, format=fmt, dpi=120, bbox_inches="tight")
+        os.replace(tmp, final)
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def _slab(ax, s, vertical=False):
@@ -25,7 +37,7 @@ def _slab(ax, s, vertical=False):
     span(s["z1"], s["z2"], color="tab:green", alpha=0.12, label=f"bulk [{s['z1']:.1f}, {s['z2']:.1f}]")
 
 
-def plot_profile(out, s, t):
+def plot_profile(out, s, t, formats=("png",)):
     """phi(z) and z(z) with the bulk slab, surface and phi_f."""
     reg = t["profile"]
     zc = 0.5 * (reg["edges"][:-1] + reg["edges"][1:])
@@ -43,10 +55,10 @@ def plot_profile(out, s, t):
     _slab(b, s)
     b.set(xlabel="contacts per sphere", title="coordination")
     b.legend(fontsize=8, loc="lower left")
-    save(fig, os.path.join(out, "profile.png"))
+    save(fig, os.path.join(out, "profile.png"), formats)
 
 
-def plot_coordination(out, s):
+def plot_coordination(out, s, formats=("png",)):
     """P(z) of the bulk, with and without rattlers."""
     n = np.arange(len(s["P_z"]))
     fig, ax = plt.subplots(figsize=(5, 3.5))
@@ -54,10 +66,10 @@ def plot_coordination(out, s):
     ax.bar(n + 0.2, s["P_z_no_rattlers"], 0.4, label=f"no rattlers, z = {s['z_no_rattlers']:.3f}")
     ax.set(xlabel="contacts n (last bin: n >= 12)", ylabel="P(n)", xticks=n)
     ax.legend(fontsize=8)
-    save(fig, os.path.join(out, "coordination.png"))
+    save(fig, os.path.join(out, "coordination.png"), formats)
 
 
-def plot_gofr(out, s, t):
+def plot_gofr(out, s, t, formats=("png",)):
     """g(r) on linear bins, and the near-contact g against xi with the eq. 6 fit."""
     g = t["gofr"]
     fig, ax = plt.subplots(figsize=(6, 3.5))
@@ -65,7 +77,7 @@ def plot_gofr(out, s, t):
     ax.axhline(1.0, color="grey", lw=0.5)
     ax.set(xlabel="r / d", ylabel="g(r)", xlim=(0.8, g["r_max"]),
            title=f"bulk g(r): {g['n_ref']} reference spheres")
-    save(fig, os.path.join(out, "gofr.png"))
+    save(fig, os.path.join(out, "gofr.png"), formats)
 
     nr, xi, fit = t["near"], t["xi_c"], t["fit"]
     ok = nr["g_xi"] > 0
@@ -80,10 +92,10 @@ def plot_gofr(out, s, t):
                   label=f"$\\alpha$ = {fit['alpha']:.3f} $\\pm$ {fit['alpha_err']:.3f} (max. likelihood)")
     ax.set(xlabel="$\\xi = r/d - 1$", ylabel="g", title="near contact (eq. 6)")
     ax.legend(fontsize=8)
-    save(fig, os.path.join(out, "gofr_near.png"))
+    save(fig, os.path.join(out, "gofr_near.png"), formats)
 
 
-def plot_zeta(out, s, t):
+def plot_zeta(out, s, t, formats=("png",)):
     """P(zeta) normalised by its largest bin (and F_t/F_n for mu >= 1)."""
     z = t["zeta"]
     c = 0.5 * (z["edges"][:-1] + z["edges"][1:])
@@ -94,7 +106,7 @@ def plot_zeta(out, s, t):
     ax.set(xlabel="$\\zeta$", ylabel="P / max P", ylim=(0, 1.05),
            title=f"{100 * z['mobilised_fraction']:.1f}% fully mobilised")
     ax.legend(fontsize=8)
-    save(fig, os.path.join(out, "zeta.png"))
+    save(fig, os.path.join(out, "zeta.png"), formats)
 
 
 def _spheres(ax, xy, colours, edge="none"):
@@ -106,7 +118,7 @@ def _spheres(ax, xy, colours, edge="none"):
                                         linewidths=0.2))
 
 
-def plot_packing(out, s, t, slab=2.0):
+def plot_packing(out, s, t, slab=2.0, formats=("png",)):
     """A picture of the packing: a side view of a slab coloured by contact number, the bulk marked,
     and a top view of the bed coloured by height.
 
@@ -147,15 +159,16 @@ def plot_packing(out, s, t, slab=2.0):
     b.add_patch(matplotlib.patches.Rectangle((0, 0), L_x, L_y, fill=False, lw=0.8))
     b.set(xlim=(-0.5, L_x + 0.5), ylim=(-0.5, L_y + 0.5), aspect="equal", xlabel="x [d]", ylabel="y [d]",
           title=f"bed from above\n{len(bed)} spheres, {len(bed) / (L_x * L_y):.2f} per d$^2$")
-    save(fig, os.path.join(out, "packing.png"))
+    save(fig, os.path.join(out, "packing.png"), formats)
 
 
 def run_plots(out, s, t):
-    """All plots of one analysis into ``out``."""
-    plot_packing(out, s, t)
-    plot_profile(out, s, t)
-    plot_coordination(out, s)
+    """All plots of one analysis into ``out``, in the formats of its ``analysis.figure_format``."""
+    fm = formats_of(s.get("settings", {}).get("analysis.figure_format", "png"))
+    plot_packing(out, s, t, formats=fm)
+    plot_profile(out, s, t, fm)
+    plot_coordination(out, s, fm)
     if "gofr" in t:
-        plot_gofr(out, s, t)
+        plot_gofr(out, s, t, fm)
     if "zeta" in t:
-        plot_zeta(out, s, t)
+        plot_zeta(out, s, t, fm)
