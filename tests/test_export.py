@@ -159,3 +159,48 @@ def test_unknown_format_is_named(tmp_path):
     with pytest.raises(ValueError, match=r"'vtk'.*lammps-dump.*xyz"):
         export.export_file(str(h5), "vtk")
     assert sorted(os.listdir(tmp_path)) == ["snap.h5"]
+
+
+def test_contact_network_for_paraview_and_ovito_reads_back(tmp_path):
+    """export --format contacts (XDMF Polyline grid) and lammps-local (dump local): one line (or two
+    half-lines) per contact with the file's forces; contacts across a periodic face are split."""
+    from mpdem import network
+    from mpdem.export import export_file
+    from helpers import SQUEEZE, fcc, write_crystal
+    a = 2.0 ** 0.5 * SQUEEZE
+    x, L = fcc(4, 4, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    write_crystal(tmp_path / "f.h5", x, fixed, L)
+    arr, attrs = checkpoint.read_state(str(tmp_path / "f.h5"), pairs=True)
+    P = len(arr["id_i"])
+    xmf = export_file(str(tmp_path / "f.h5"), "contacts")
+    assert xmf == str(tmp_path / "f.contacts.xmf")
+    root = ET.parse(xmf).getroot()
+    grid = root.find("Domain/Grid")
+    topo = grid.find("Topology")
+    assert topo.get("TopologyType") == "Polyline" and topo.get("NumberOfElements") == str(2 * P)
+    with h5py.File(tmp_path / "f.contacts.h5") as f:
+        pts, conn = f["points"][:], f["connectivity"][:]
+        assert conn.shape == (2 * P, 2) and pts.shape == (4 * P, 3) and conn.max() == 4 * P - 1
+        assert np.array_equal(f["cells/F_n"][::2], arr["F_n"]) and np.array_equal(f["cells/F_n"][1::2], arr["F_n"])
+        # every half-line runs from a sphere centre to a point half a contact away (no line crosses the box)
+        seg = pts[conn[:, 1]] - pts[conn[:, 0]]
+        assert np.allclose(np.linalg.norm(seg, axis=1), 0.5 * SQUEEZE, rtol=1e-6)
+        # the crystal is periodic in x and y: some contacts cross a face, and the file says how many
+        n_cross = int(f.attrs["n_crossing"])
+        names = {a_.get("Name") for a_ in grid.findall("Attribute")}
+        assert {"F_n", "F_t", "zeta", "delta", "id_i", "id_j"} <= names
+        assert np.allclose(f["cells/zeta"][:], 0.5)          # write_crystal puts F_t at half the limit
+    assert n_cross > 0 and f"{n_cross} cross a periodic face" in root.find("Domain/Information").get("Value")
+    local = export_file(str(tmp_path / "f.h5"), "lammps-local")
+    lines = open(local).read().splitlines()
+    assert lines[0] == "ITEM: TIMESTEP" and lines[3] == str(P)
+    assert lines[8] == "ITEM: ENTRIES index patom1 patom2 dist fn ft zeta delta fx fy fz"
+    rows = np.loadtxt(lines[9:], ndmin=2)
+    assert rows.shape == (P, 11) and np.array_equal(rows[:, 1], arr["id_i"]) and np.array_equal(rows[:, 4], arr["F_n"])
+    assert np.allclose(rows[:, 3], SQUEEZE) and np.allclose(rows[:, 7], 1 - SQUEEZE, atol=1e-12)
+    t, _ = network.contact_table(str(tmp_path / "f.h5"))
+    # the total force on patom1: F_n along the unit vector from patom2 to patom1, plus F_t
+    want = arr["F_n"][:, None] * t["branch"] / np.linalg.norm(t["branch"], axis=1)[:, None] + arr["F_t"]
+    assert np.allclose(rows[:, 8:11], want, rtol=1e-12, atol=1e-15)
+    assert np.all(np.abs(t["branch"]) < 1.0)                     # the minimum image, not the raw difference

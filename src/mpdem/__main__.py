@@ -6,7 +6,7 @@
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
     python -m mpdem info FILE [--digest]
-    python -m mpdem export FILE --format lammps-dump|lammps-data|xyz [--out PATH]
+    python -m mpdem export FILE --format lammps-dump|lammps-data|xyz|packing|contacts|lammps-local [--out PATH]
     python -m mpdem bench --table FILE [--steps S] [--threads T] [--tile NXxNY] [--set ...]
     python -m mpdem bench --io|--analysis [--N 1000000]
 
@@ -252,9 +252,10 @@ def parser():
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
     e.add_argument("file")
-    e.add_argument("--format", required=True, choices=("lammps-dump", "lammps-data", "xyz", "packing"))
-    e.add_argument("--out", help="output path (default: FILE with .dump, .data or .xyz; RUN/packing.npz for "
-                                 "a final.h5's packing)")
+    e.add_argument("--format", required=True,
+                   choices=("lammps-dump", "lammps-data", "xyz", "packing", "contacts", "lammps-local"))
+    e.add_argument("--out", help="output path (default: FILE with .dump, .data, .xyz, .local or .contacts.xmf; "
+                                 "RUN/packing.npz for a final.h5's packing)")
     b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",

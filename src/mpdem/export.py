@@ -206,7 +206,8 @@ def export_file(path, fmt, out=None):
     ----------
     path : str
         An mpdem state file (checksums are verified).
-    fmt : {"lammps-dump", "xyz", "lammps-data", "packing"}
+    fmt : {"lammps-dump", "xyz", "lammps-data", "packing", "contacts", "lammps-local"}
+        ``contacts`` and ``lammps-local``: the contact network (``mpdem.network``).
         ``packing``: the positions and the contact list with its forces, compressed
         (``mpdem.packing``; what ``analyze`` needs, not a restart).
     out : str, optional
@@ -225,8 +226,19 @@ def export_file(path, fmt, out=None):
                       else os.path.splitext(path)[0] + ".packing.npz")
         arrays, attrs = checkpoint.read_state(path, pairs=True)
         return packing.write(out, arrays, attrs)
+    if fmt == "contacts":
+        # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.network)
+        from .network import write_contacts_xdmf
+        return write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None)
+    if fmt == "lammps-local":
+        # the contact network for OVITO: a LAMMPS dump local of the contacts (mpdem.network)
+        from .network import lammps_local_lines
+        out = out or os.path.splitext(path)[0] + ".local"
+        write_atomic(out, lammps_local_lines(path))
+        return out
     if fmt not in FORMATS:
-        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}, packing")
+        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}, packing, contacts, "
+                         f"lammps-local")
     suffix, render = FORMATS[fmt]
     out = out or os.path.splitext(path)[0] + suffix
     arrays, attrs = checkpoint.read_state(path)
