@@ -1,6 +1,8 @@
 """The Python API under mpiexec: every rank calls mpdem.run with the same arguments."""
 import os
 
+from mpi4py import MPI
+
 import mpdem
 from mpdem import config
 
@@ -20,3 +22,9 @@ def test_api_run_and_restart_on_all_ranks_match_one_rank(comm):
     # every rank holds the result, and it is the one-rank run's
     assert more.steps == 30000 and more.digest == ref
     assert comm.allgather(more.digest) == [ref] * comm.Get_size()
+    # the unbalanced-force ratio is summed exactly: the one-rank value to the last bit
+    one = None
+    if comm.Get_rank() == 0:
+        one = mpdem.run(config.load_run_config(None, PILE + ["run.max_steps=30000"]), os.path.join(base, "one"),
+                        net=MPI.COMM_SELF).summary["force_ratio"]
+    assert more.summary["force_ratio"] == comm.bcast(one)

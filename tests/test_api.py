@@ -75,3 +75,33 @@ def test_the_python_page_runs_as_written(tmp_path, monkeypatch):
     r = scope["r"]
     assert r.status == "converged" and (tmp_path / "runs" / "small" / "pile.png").exists()
     assert float(scope["tables"]["runs"][0]["z"]) == pytest.approx(scope["a"]["z"])
+
+
+def test_the_unbalanced_force_ratio_and_its_stop_rule(tmp_path):
+    """The ratio (mean |resultant| over mean |contact force|) in thermo.csv, the progress line and
+    summary.json equals a brute-force sum over the final file's contact list; stop.rule = 'force'
+    waits until no sphere is in flight (a pouring pile has a small ratio too)."""
+    cfg = mpdem.load_config(**{"pour.N": 200, "box.L_x": 4.0, "box.L_y": 4.0, "run.max_steps": 1_000_000,
+                               "stop.rule": "force", "stop.force_ratio": 0.02, "output.progress_every": 1000})
+    r = mpdem.run(cfg, str(tmp_path / "f"))
+    assert r.status == "converged" and r.summary["force_ratio"] < 0.02
+    s = mpdem.read_state(r.final)
+    mob = s["fixed"] == 0
+    rows_i, rows_j = np.searchsorted(s["id"], s["id_i"]), np.searchsorted(s["id"], s["id_j"])
+    b = s["x"][rows_i] - s["x"][rows_j]
+    b[:, :2] -= 4.0 * np.round(b[:, :2] / 4.0)
+    F = np.linalg.norm(s["F_n"][:, None] * b / np.linalg.norm(b, axis=1)[:, None] + s["F_t"], axis=1)
+    w = mob[rows_i].astype(int) + mob[rows_j]                 # a pair counts for each mobile sphere it touches
+    brute = np.linalg.norm(s["f"][mob], axis=1).mean() / ((F * w).sum() / w.sum())
+    assert r.summary["force_ratio"] == pytest.approx(brute, rel=1e-9)
+    # every sphere has landed: each mobile sphere has a contact
+    assert np.all(np.bincount(np.concatenate([rows_i, rows_j]), minlength=len(mob))[mob] > 0)
+    rows = (tmp_path / "f" / "thermo.csv").read_text().splitlines()
+    assert rows[0].endswith(",force_ratio")
+    assert float(rows[-1].split(",")[-1]) == pytest.approx(r.summary["force_ratio"])
+    assert float(rows[1].split(",")[-1]) == float("inf")      # the first sample: no contact yet
+    assert " F_unbal " in (tmp_path / "f" / "log.txt").read_text()
+    # the energy rule (default) of the same pile stops later, and reports the ratio as well
+    e = mpdem.run(mpdem.load_config(**{k: v for k, v in cfg.values.items()
+                                       if k in ("pour.N", "box.L_x", "box.L_y", "run.max_steps")}), str(tmp_path / "e"))
+    assert e.status == "converged" and e.steps > r.steps and 0 < e.summary["force_ratio"] < r.summary["force_ratio"]

@@ -99,9 +99,14 @@ SCHEMA = (
        "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
+    _k("stop", "force_ratio", 0.01,
+       "threshold of stop.rule = 'force': the unbalanced-force ratio (mean |resultant force| on the mobile "
+       "spheres over mean |contact force|) below which the pile counts as static", restart=True),
     _k("stop", "rule", "window",
-       "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop",
-       str, ("window", "instantaneous"), restart=True),
+       "'window': mean E_k over the last `window` tau below E_stop; 'instantaneous': one sample below E_stop; "
+       "'force': one sample's unbalanced-force ratio below stop.force_ratio with every mobile sphere in "
+       "contact",
+       str, ("window", "instantaneous", "force"), restart=True),
     _k("stop", "energy", "total",
        "the kinetic energy the rule tests: 'total' (translational + rotational, the paper's) or "
        "'translational' (a settled pile can keep a sphere spinning about the line through two contacts, "
@@ -565,6 +570,7 @@ def resolve(raw):
          "at least two increasing edges in (0, 1]")
     need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
     need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")
+    need("stop.force_ratio", 0 < vals["stop.force_ratio"] < 1, "0 < force_ratio < 1")
     fmts = [f.strip().lower() for f in vals["analysis.figure_format"].split(",")]
     need("analysis.figure_format", bool(fmts) and all(f in ("png", "pdf", "svg") for f in fmts),
          "png, pdf or svg, several joined by commas")

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import history
+from .kernels.balance import force_balance
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces, wall_forces
 from .kernels.integrate import kick, kick_drift, kinetic_energy
@@ -339,6 +340,20 @@ class Engine:
         kinetic_energy(s.n_own, s.v, s.omega, s.fixed, acc, self.nchunk)
         acc = self.domain.sum_int(acc)
         return to_float(acc[0]), to_float(acc[1])
+
+    def force_ratio(self):
+        """(ratio, in flight) of the last force evaluation (``kernels.balance``), exact on any number of
+        ranks: the unbalanced-force ratio, mean |resultant| over the mobile spheres / mean |contact
+        force| (inf without contacts), and the mobile spheres without a contact. (nan, -1) before any
+        evaluation of this segment."""
+        if self._epoch == 0:
+            return math.nan, -1
+        s = self.state
+        acc = self.domain.sum_int(force_balance(s.n_own, s.f, s.fixed, self.nbr_start, self.link, self.pair,
+                                                self.stamp, self._epoch, self.nchunk))
+        res, con, n_c, free = (to_float(a) for a in acc)
+        n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
+        return ((res / max(int(n_mob), 1)) / (con / n_c) if n_c else math.inf), int(free)
 
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""

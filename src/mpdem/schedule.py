@@ -113,27 +113,32 @@ class StopRecord:
 
 
 class StopRule:
-    """Kinetic-energy stop rule of docs/model.md 5.4 on samples every n_sample steps
-    (of the total or the translational energy: ``stop.energy``)."""
+    """Stop rule of docs/model.md 5.4 on samples every n_sample steps: the kinetic energy (of the
+    total or the translational energy: ``stop.energy``) over a window or at one sample, or the
+    unbalanced-force ratio at one sample (``stop.rule = "force"``)."""
 
-    def __init__(self, E_stop, rule, window, sample_interval, dt, energy="total"):
-        self.E_stop, self.rule, self.energy = E_stop, rule, energy
+    def __init__(self, E_stop, rule, window, sample_interval, dt, energy="total", force_ratio=0.01):
+        self.E_stop, self.rule, self.energy, self.ratio_stop = E_stop, rule, energy, force_ratio
         self.n_sample = max(1, int(round(sample_interval / dt)))
         self.size = max(1, int(round(window / (self.n_sample * dt))))
         self.samples = collections.deque(maxlen=self.size)
+        self.ratio = math.nan           # the newest sample's unbalanced-force ratio
+        self.in_flight = -1             # and its mobile spheres without a contact
 
     @classmethod
     def from_config(cls, cfg, dt):
         s = cfg.stop
-        return cls(s.E_stop, s.rule, s.window, s.sample_interval, dt, s.energy)
+        return cls(s.E_stop, s.rule, s.window, s.sample_interval, dt, s.energy, s.force_ratio)
 
     def due(self, step):
         return step % self.n_sample == 0
 
-    def add(self, e_trans, e_rot, N):
+    def add(self, e_trans, e_rot, N, ratio=math.nan, in_flight=-1):
         """A sample: of the translational and rotational kinetic energy [m g d] of N
-        particles, the part ``energy`` names, per particle."""
+        particles, the part ``energy`` names, per particle; the unbalanced-force ratio and the
+        mobile spheres without a contact."""
         self.samples.append((e_trans if self.energy == "translational" else e_trans + e_rot) / N)
+        self.ratio, self.in_flight = ratio, in_flight
 
     @property
     def last(self):
@@ -145,6 +150,9 @@ class StopRule:
         return sum(self.samples) / len(self.samples) if self.samples else math.inf
 
     def satisfied(self):
+        if self.rule == "force":
+            # under gravity a sphere without a contact is not at rest: a pouring pile's ratio is small too
+            return self.in_flight == 0 and self.ratio < self.ratio_stop
         if self.rule == "instantaneous":
             return bool(self.samples) and self.samples[-1] < self.E_stop
         return len(self.samples) == self.size and self.mean < self.E_stop
@@ -171,23 +179,30 @@ class Thermo:
     """RUN/thermo.csv: one line per stop-rule sample (rank 0 writes; a restart truncates it first)."""
 
     HEADER = ("step,time,ek,ek_trans,ek_rot,ek_window,max_overlap,contacts_per_particle,"
-              "z_max,rebuilds,wall_seconds\n")
+              "z_max,rebuilds,wall_seconds,force_ratio\n")
 
     def __init__(self, out_dir, rank):
         self.fh = None
+        self.ratio = True
         if rank == 0:
             path = os.path.join(out_dir, "thermo.csv")
             new = not os.path.exists(path) or os.path.getsize(path) == 0
+            if not new:
+                # a table begun before the force_ratio column keeps its columns
+                with open(path) as fh:
+                    self.ratio = fh.readline().rstrip("\n").endswith(",force_ratio")
             self.fh = open(path, "a")
             if new:
                 self.fh.write(self.HEADER)
 
     def write(self, st, et, er, N, stop, info, rebuilds, wall):
-        """One line: energies per mobile particle, the stop window's mean, the step's figures."""
+        """One line: energies per mobile particle, the stop window's mean, the step's figures, the
+        unbalanced-force ratio."""
         if self.fh:
             self.fh.write(f"{st.step},{st.time:.10g},{(et + er) / N:.6e},{et / N:.6e},{er / N:.6e},"
                           f"{stop.mean:.6e},{info.max_overlap:.6e},{info.n_contacts / N:.5f},"
-                          f"{info.z_max:.6g},{rebuilds},{wall:.3f}\n")
+                          f"{info.z_max:.6g},{rebuilds},{wall:.3f}"
+                          + (f",{stop.ratio:.6e}\n" if self.ratio else "\n"))
 
     def flush(self):
         if self.fh:
@@ -225,7 +240,8 @@ class Progress:
         # no E_k before the first sample: a dash, not "inf"
         ek = stop.last
         ek_text = f"{ek:9.3e}" if math.isfinite(ek) else f"{'-':>9}"
-        self.log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek_text}  "
+        fr_text = f"{stop.ratio:8.2e}" if math.isfinite(stop.ratio) else f"{'-':>8}"
+        self.log(f"step {st.step:>9d}  t {st.time:9.3f}  E_k/N {ek_text}  F_unbal {fr_text}  "
                  f"max_delta {info.max_overlap:8.2e}  contacts/N {info.n_contacts / self.N:5.2f}  "
                  f"{rate:7.0f} steps/s{par}  eta cap {fmt_seconds((self.max_steps - st.step) / rate)}  "
                  f"stop ~{fmt_seconds(t_stop)}")

@@ -167,6 +167,7 @@ class Run:
         self.wall = time.perf_counter() - self.t0
         et, er = eng.kinetic()
         self.ek = (et + er) / N
+        self.force_ratio = eng.force_ratio()[0]
         return self.status
 
     def _start(self):
@@ -191,7 +192,7 @@ class Run:
     def _sample(self, info, N):
         """A stop-rule sample and its thermo line; True if the rule holds."""
         et, er = self.engine.kinetic()
-        self.stop.add(et, er, N)
+        self.stop.add(et, er, N, *self.engine.force_ratio())
         self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total())
         return self.stop.satisfied()
 

@@ -34,7 +34,7 @@ def finish(run):
     steps = st.step
     ns = 1e9 * run.wall / max((steps - run.first_step) * max(run.n_mobile, 1), 1)
     summary = {"steps": steps, "time": st.time, "converged": run.converged, "status": run.status,
-               "E_k_per_particle": run.ek, "wall_seconds": run.wall_total(),
+               "E_k_per_particle": run.ek, "force_ratio": run.force_ratio, "wall_seconds": run.wall_total(),
                "segments": run.history.segments,
                "ns_per_particle_step": ns, "ranks": dom.size,
                "comm_share": dom.comm_seconds / max(run.wall, 1e-9),

@@ -1,0 +1,59 @@
+"""The unbalanced-force ratio of a pile: exact sums of resultant and contact forces.
+
+The ratio (YADE's "unbalanced force") is the mean magnitude of the resultant
+force on the mobile spheres over the mean magnitude of a contact force:
+
+    R = ( sum_i |f_i| / N ) / ( sum_i sum_{c of i} |F_c| / sum_i n_i )
+
+over the mobile rows i a rank owns and their contacts c (a pair counts once
+for each mobile sphere it touches). It tends to 0 as a pile comes to rest.
+Each row's terms are added to fixed-point accumulators (``exactsum``), so
+the sums, and a stop decision taken on them, are the same bits on any number
+of ranks and threads. Spheres in flight are counted too: under gravity a
+sphere without a contact is not at rest, so a pile is static only with none.
+"""
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .exactsum import NLIMBS, add_exact
+from .history import slot_of, stamp_of
+
+
+@njit(cache=True, parallel=True)
+def force_balance(n_own, f, fixed, nbr_start, link, pair, stamp, epoch, nchunk):
+    """Exact sums of the resultant and the contact forces of the owned mobile rows.
+
+    Parameters
+    ----------
+    f : (n, 3) forces of the last evaluation (contacts and gravity) [m g]
+    nbr_start, link : the rows' list entries and their slots; pair : (K, 6) slot forces
+        (columns 0-2 the contact force); stamp : (K,) uint32; epoch : int, the last evaluation
+    nchunk : int, chunks of rows (the sums do not depend on it)
+
+    Returns
+    -------
+    (4, NLIMBS) int64 accumulators: sum |f_i|, sum |F_c| over the rows' contacts, their number,
+    and the mobile rows without a contact
+    """
+    now = stamp_of(epoch)
+    part = np.zeros((nchunk, 4, NLIMBS), np.int64)
+    for c in prange(nchunk):
+        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+            if fixed[i]:
+                continue
+            add_exact(part[c, 0], math.sqrt(f[i, 0] ** 2 + f[i, 1] ** 2 + f[i, 2] ** 2))
+            m = 0
+            for k in range(nbr_start[i], nbr_start[i + 1]):
+                g = slot_of(link[k])
+                if stamp[g] == now:
+                    add_exact(part[c, 1], math.sqrt(pair[g, 0] ** 2 + pair[g, 1] ** 2 + pair[g, 2] ** 2))
+                    m += 1
+            add_exact(part[c, 2], float(m))
+            if m == 0:
+                add_exact(part[c, 3], 1.0)
+    acc = np.zeros((4, NLIMBS), np.int64)
+    for c in range(nchunk):
+        acc += part[c]
+    return acc
