@@ -117,7 +117,7 @@ def lock(run_dir, net):
     from .config import AgreedError
     from .rundir import RunLock
     held = RunLock(run_dir) if net.rank == 0 else None
-    why = net.on_root(held.acquire) if net.rank == 0 else net.on_root(lambda: None)
+    why = net.on_root(lambda: held.acquire())
     if why:
         raise AgreedError(f"{run_dir}: {why}")
     return held
