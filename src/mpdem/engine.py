@@ -345,15 +345,19 @@ class Engine:
         """(ratio, in flight) of the last force evaluation (``kernels.balance``), exact on any number of
         ranks: the unbalanced-force ratio, mean |resultant| over the mobile spheres / mean |contact
         force| (inf without contacts), and the mobile spheres without a contact. (nan, -1) before any
-        evaluation of this segment."""
+        evaluation of this segment, or once the slot forces are freed (``sync_slots``)."""
         if self._epoch == 0:
             return math.nan, -1
         s = self.state
+        if len(self.pair) < len(self.hist):
+            # the slot forces were freed when the history was packed (a state file written since)
+            return math.nan, -1
         acc = self.domain.sum_int(force_balance(s.n_own, s.f, s.fixed, self.nbr_start, self.link, self.pair,
                                                 self.stamp, self._epoch, self.nchunk))
         res, con, n_c, free = (to_float(a) for a in acc)
         n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
-        return ((res / max(int(n_mob), 1)) / (con / n_c) if n_c else math.inf), int(free)
+        # no contact, or contacts that carry no force yet (the first evaluation of a touching pair)
+        return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)
 
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
