@@ -72,3 +72,109 @@ def test_select_contacts_takes_the_right_segments():
     assert np.array_equal(d, ds[[5, 0, 1, 2, 3, 4]])
     c, p, d = select_contacts(counts, partner, ds, [])
     assert len(c) == len(p) == len(d) == 0
+
+
+# ---- kernel round trips (issue 24): a fault says which kernel it is in ----------------------
+
+def _lists(n=300, L=5.0, nchunk=3, seed=9):
+    """A random set of rows (all owned, a fifth of them bed) with their lists and links."""
+    from mpdem.kernels.neighbours import link_entries
+    g = np.random.default_rng(seed)
+    x = np.column_stack([g.random(n) * L, g.random(n) * L, g.random(n) * 6.0])
+    fixed = (g.random(n) < 0.2).astype(np.uint8)
+    ids = g.permutation(n).astype(np.int64) * 2 + 5
+    start = np.zeros(n + 1, np.int64)
+    lst = np.zeros(build_neighbours(x, n, n, fixed, ids, L, L, 1.2, start, np.zeros(1, np.int32), nchunk), np.int32)
+    build_neighbours(x, n, n, fixed, ids, L, L, 1.2, start, lst, nchunk)
+    link = np.zeros(len(lst), np.int32)
+    comp_start = np.zeros(n + 1, np.int64)
+    comp_list = np.zeros(1, np.int32)
+    k = int(link_entries(n, fixed, ids, start, lst, nchunk, link, comp_start, comp_list))
+    comp_list = np.zeros(k, np.int32)
+    assert link_entries(n, fixed, ids, start, lst, nchunk, link, comp_start, comp_list) == k
+    return dict(n=n, x=x, fixed=fixed, ids=ids, start=start, lst=lst, link=link, comp_start=comp_start,
+                comp_list=comp_list, k=k, nchunk=nchunk)
+
+
+@pytest.mark.parametrize("nchunk", [1, 3, 7])
+def test_link_entries_give_each_pair_one_computing_row_in_a_chunk(nchunk):
+    t = _lists(nchunk=nchunk)
+    n, start, lst, link = t["n"], t["start"], t["lst"], t["link"]
+    chunk = np.zeros(n, np.int64)
+    for c in range(nchunk):
+        chunk[c * n // nchunk:(c + 1) * n // nchunk] = c
+    entry = {(i, int(j)): int(link[e]) for i in range(n) for e, j in zip(range(start[i], start[i + 1]),
+                                                                        lst[start[i]:start[i + 1]])}
+    computed = [v for v in entry.values() if v >= 0]
+    assert sorted(computed) == list(range(t["k"]))                 # each slot computed exactly once
+    assert len(computed) < len(entry)                               # and some entries take theirs
+    for (i, j), v in entry.items():
+        if (j, i) in entry and chunk[i] == chunk[j]:
+            # two mobile rows of one chunk: the lower row computes, the other takes the same slot
+            lo, hi = (i, j) if i < j else (j, i)
+            assert entry[(lo, hi)] >= 0 and entry[(hi, lo)] == ~entry[(lo, hi)]
+        else:
+            assert v >= 0                                           # bed partner or other chunk: its own
+    for i in range(n):
+        mine = [int(j) for e, j in zip(range(start[i], start[i + 1]), lst[start[i]:start[i + 1]]) if link[e] >= 0]
+        assert t["comp_list"][t["comp_start"][i]:t["comp_start"][i + 1]].tolist() == mine
+
+
+def test_history_slots_round_trip_through_the_list_entries():
+    from mpdem.kernels import history
+    t = _lists(nchunk=4)
+    n, k, epoch = t["n"], t["k"], 41
+    g = np.random.default_rng(3)
+    hist = g.standard_normal((k, 3))
+    stamp = np.where(g.random(k) < 0.6, history.stamp_of(epoch), history.stamp_of(epoch - 1)).astype(np.uint32)
+    slot_n = np.zeros(n, np.int32)
+    total = history.count_contacts(n, t["start"], t["link"], stamp, epoch, slot_n, 4)
+    slot_start = np.zeros(n + 1, np.int64)
+    np.cumsum(slot_n, out=slot_start[1:])
+    slot_id, slot_ds = np.empty(total, np.int64), np.empty((total, 3))
+    history.entries_to_slots(n, t["ids"], t["start"], t["lst"], t["link"], hist, stamp, epoch, slot_start,
+                             slot_id, slot_ds, 4)
+    # each row's slots: its partners in contact, by id, with Delta s from its own side
+    for i in range(n):
+        want = [(int(t["ids"][j]), (hist[lk] if lk >= 0 else -hist[~lk]).tolist())
+                for e, j in zip(range(t["start"][i], t["start"][i + 1]), t["lst"][t["start"][i]:t["start"][i + 1]])
+                for lk in [int(t["link"][e])] if stamp[lk if lk >= 0 else ~lk] == history.stamp_of(epoch)]
+        got = [(int(a), b.tolist()) for a, b in zip(slot_id[slot_start[i]:slot_start[i + 1]],
+                                                    slot_ds[slot_start[i]:slot_start[i + 1]])]
+        assert got == want
+    # and back: the slots in contact get their history and the stamp, the others zero and the one before
+    hist2, stamp2 = np.full((k, 3), 7.0), np.zeros(k, np.uint32)
+    history.slots_to_entries(n, t["ids"], t["start"], t["lst"], t["link"], slot_start, slot_id, slot_ds, hist2,
+                             stamp2, epoch, 4)
+    on = stamp == history.stamp_of(epoch)
+    assert np.array_equal(stamp2, stamp) and np.array_equal(hist2[on], hist[on]) and np.all(hist2[~on] == 0.0)
+
+
+def test_kick_drift_is_a_half_kick_a_drift_and_a_wrap():
+    from mpdem.kernels.integrate import kick_drift
+    g = np.random.default_rng(4)
+    n, L, dt = 400, 6.0, 1e-3
+    x = np.column_stack([g.random(n) * L, g.random(n) * L, 1 + g.random(n) * 5])
+    x[0, 0], x[1, 1] = L - 1e-9, 1e-9                           # two that leave the box this step
+    v, omega = g.standard_normal((n, 3)), g.standard_normal((n, 3))
+    v[0, 0], v[1, 1] = 1.0, -1.0
+    f, torque = g.standard_normal((n, 3)), g.standard_normal((n, 3))
+    fixed = (g.random(n) < 0.1).astype(np.uint8)
+    fixed[:2] = 0
+    x_ref = x - 0.01 * g.standard_normal((n, 3))
+    want = {k: a.copy() for k, a in dict(x=x, v=v, omega=omega).items()}
+    mob = fixed == 0
+    want["v"][mob] += 0.5 * dt * f[mob]
+    want["omega"][mob] += 0.5 * dt * torque[mob] / 0.1
+    want["x"][mob] += dt * want["v"][mob]
+    want["x"][:, :2] %= L
+    d = want["x"][mob] - x_ref[mob]
+    d[:, :2] -= L * np.round(d[:, :2] / L)
+    for nchunk in (1, 5):
+        xs, vs, ws = x.copy(), v.copy(), omega.copy()
+        d2, zlo, zhi = kick_drift(n, xs, vs, ws, f, torque, fixed, x_ref, dt, L, L, np.zeros((nchunk, 3)))
+        assert np.allclose(xs, want["x"], rtol=0, atol=1e-12) and np.array_equal(vs, want["v"])
+        assert np.allclose(ws, want["omega"], rtol=1e-15) and np.array_equal(xs[~mob], x[~mob])
+        assert 0 <= xs[0, 0] < L and 0 <= xs[1, 1] < L
+        assert d2 == pytest.approx((d ** 2).sum(axis=1).max(), rel=1e-9)
+        assert (zlo, zhi) == (xs[mob, 2].min(), xs[mob, 2].max())
