@@ -116,3 +116,21 @@ def test_an_uncaught_exception_in_a_script_ends_every_rank(tmp_path):
                        capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "contact.mu = -1.0" in p.stderr and "uncaught exception on rank 1 of 2" in p.stderr
+
+
+def test_the_mpi_test_suite_stops_at_the_first_failure_on_any_rank(tmp_path):
+    """mpi_tests/conftest.py: a test that fails on rank 1 while rank 0 waits in a collective ends
+    both ranks with the failure shown, instead of hanging (issue 24)."""
+    import shutil
+    shutil.copy(Path(__file__).parents[1] / "mpi_tests" / "conftest.py", tmp_path / "conftest.py")
+    (tmp_path / "test_fails.py").write_text(
+        "def test_rank_one_fails(comm):\n"
+        "    assert comm.Get_rank() != 1, 'rank 1 says no'\n"
+        "    comm.Barrier()\n"
+        "def test_never_reached(comm):\n"
+        "    comm.Barrier()\n")
+    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                        str(tmp_path)], capture_output=True, text=True, timeout=120, env=ENV, cwd=tmp_path)
+    assert p.returncode != 0
+    out = p.stdout + p.stderr
+    assert "test_rank_one_fails failed on rank 1 of 2" in out and "rank 1 says no" in out
