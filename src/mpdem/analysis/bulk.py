@@ -193,11 +193,10 @@ class Packing:
         self.kept_count, self.counts_count = remove_rattlers(n, self.pairs, self.mobile, self.n_min)
         self.rule = "count"
         self.kept, self.counts_nr = self.kept_count, self.counts_count
-        self.live = None
 
-    def use_backbone(self, kept, live, counts):
+    def use_backbone(self, kept, counts):
         """Rattlers from now on by the force-based backbone (``backbone.of_packing``)."""
-        self.rule, self.kept, self.live, self.counts_nr = "force", kept, live, counts
+        self.rule, self.kept, self.counts_nr = "force", kept, counts
 
     def in_slab(self, z1, z2):
         """(n,) bool: mobile particles with centres in [z1, z2]."""
@@ -256,7 +255,7 @@ def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_
         from . import backbone, contacts
         cf = contacts.contact_forces(pk, {}, k_n, mu, model)
         bb = backbone.of_packing(pk, cf, reg["h"], band_width, force_fraction)
-        pk.use_backbone(bb["kept"], bb["live"], bb["counts"])
+        pk.use_backbone(bb["kept"], bb["counts"])
     out = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     out["n_min"] = pk.n_min
     out.update(pk.measure(reg["z1"], reg["z2"]))

@@ -189,7 +189,7 @@ def measure(arrays, attrs, cfg):
     cf = contacts.contact_forces(pk, arrays, c.k_n, c.mu, c.model)
     bb = backbone.of_packing(pk, cf, h, a.band_width, a.force_fraction)
     if a.rattlers == "force":
-        pk.use_backbone(bb["kept"], bb["live"], bb["counts"])
+        pk.use_backbone(bb["kept"], bb["counts"])
     s = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
     s["n_min"] = pk.n_min
     s.update(pk.measure(z1, z2))
