@@ -28,10 +28,16 @@ def test_error_on_ranks_exits_all_ranks(tmp_path):
     assert "contact.mu = -1" in p.stderr
 
 
+def on_two_ranks(path, text):
+    """Write the script ``text`` to ``path`` and run it under ``mpiexec -n 2`` (a hang fails at 120 s)."""
+    path.write_text(text)
+    return subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(path)],
+                          capture_output=True, text=True, timeout=120, env=ENV)
+
+
 def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
     """Rank 1 fails while rank 0 waits in a collective: all ranks end, with the message."""
-    script = tmp_path / "one_rank_fails.py"
-    script.write_text(
+    p = on_two_ranks(tmp_path / "one_rank_fails.py",
         "import sys\n"
         "import mpdem.__main__ as cli\n"
         "def handler(args, net):\n"
@@ -41,8 +47,6 @@ def test_exception_on_one_rank_aborts_all_ranks(tmp_path):
         "    return 0\n"
         "cli.cmd_info = handler\n"
         "sys.exit(cli.main(['info', 'nothing.h5']))\n")
-    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script)],
-                       capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "boom on rank 1" in p.stderr and "internal error on rank 1" in p.stderr
 
@@ -104,16 +108,14 @@ def test_the_program_ignores_stop_signals_once_its_work_is_done(tmp_path):
 def test_an_uncaught_exception_in_a_script_ends_every_rank(tmp_path):
     """Library use (issue 24): a script that calls mpdem under mpiexec and fails on one rank while
     the other waits in a collective ends, on every rank, with the message."""
-    script = tmp_path / "script_fails.py"
-    script.write_text(
+    p = on_two_ranks(
+        tmp_path / "script_fails.py",
         "import mpdem\n"
         "from mpdem.parallel import world\n"
         "net = world()\n"
         "if net.rank == 1:\n"
         "    mpdem.load_config(**{'contact.mu': -1.0})\n"
         "net.barrier()  # without the abort, rank 0 would wait here for ever\n")
-    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable, str(script)],
-                       capture_output=True, text=True, timeout=120, env=ENV)
     assert p.returncode != 0
     assert "contact.mu = -1.0" in p.stderr and "uncaught exception on rank 1 of 2" in p.stderr
 
