@@ -86,6 +86,15 @@ if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v a
     || say "shellcheck not installed; the lint test of jobs/ will be skipped"
 fi
 
+# LAMMPS (its GRANULAR package): `export --format lammps-input` and `lammps-local` are checked against a
+# real LAMMPS run in the tests (tests/test_lammps_input.py); best effort, as root with apt
+if ! command -v lmp >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  say "installing lammps (the LAMMPS input and contact dump are tested against a real LAMMPS)"
+  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null 2>&1 \
+    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null; } \
+    || say "lammps not installed; the LAMMPS comparison tests will say so and not run"
+fi
+
 mpi_version=$("$mpiexec_real" --version 2>&1 | head -n 1 | tr -c 'A-Za-z0-9.' '_')
 hdf5_version=$(pkg-config --modversion "$h5pc")
 key="py$("$python" -c 'import sys; print("%d%d" % sys.version_info[:2])')-$flavour-$mpi_version-hdf5_$hdf5_version"
