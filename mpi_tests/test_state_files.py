@@ -69,3 +69,28 @@ def test_damaged_file_is_refused_on_every_rank(comm, landed):
     with pytest.raises(StateFileError, match="checksum mismatch in /particles"):
         checkpoint.read(bad, comm)
     comm.Barrier()
+
+
+def test_without_parallel_hdf5_rank_0_writes_the_same_file(comm, landed, monkeypatch):
+    """h5py without ``mpio`` (pip's wheel, docs/install.md): the rows go to rank 0, which writes the
+    file alone, and every rank reads its share plainly; the datasets and attributes are those of the
+    collective write."""
+    r, ref = landed
+    src = rundir.checkpoint_path(r.out, 0)
+    local, attrs = checkpoint.read(src, comm)
+    monkeypatch.setattr(checkpoint, "parallel_hdf5", lambda: False)
+    path = os.path.join(os.path.dirname(src), "through-root.h5")
+    checkpoint.write(path, local, attrs, comm)
+    again, attrs2 = checkpoint.read(path, comm)
+    assert attrs2["ranks"] == comm.Get_size()
+    for k in local:
+        assert np.array_equal(np.asarray(local[k]).reshape(np.shape(again[k])), again[k]), k
+    comm.Barrier()
+    if comm.Get_rank() == 0:
+        with h5py.File(src) as a, h5py.File(path) as b:
+            names = []
+            a.visit(lambda n: names.append(n) if isinstance(a[n], h5py.Dataset) else None)
+            assert names and all(np.array_equal(a[n][()], b[n][()]) for n in names)
+            assert {k: str(v) for k, v in a.attrs.items()} == {k: str(v) for k, v in b.attrs.items()}
+        whole, _ = checkpoint.read_state(path)
+        assert checkpoint.digest(whole) == ref

@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import os
 import signal
+import sys
 
 import h5py
 import numpy as np
@@ -59,6 +60,7 @@ ROWS_OF = {"particles": "id", "contacts": "partner", "wall": "wall_ds", "pairs":
 # Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
 KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
 _writes = 0
+_said_funnel = False       # rank 0 said once that it writes for every rank (no mpio)
 
 
 # -- order-independent checksums --
@@ -140,9 +142,15 @@ def gather_state(state):
     return out
 
 
+def parallel_hdf5():
+    """Whether h5py has the ``mpio`` driver (built on parallel HDF5); without it, several ranks write
+    their state files through rank 0 (``write``) and read them each on its own."""
+    return bool(h5py.get_config().mpi)
+
+
 def _open(path, mode, net):
-    """The file, opened by every rank of ``net`` with parallel HDF5 (one rank: plainly)."""
-    if net.parallel:
+    """The file, opened by every rank of ``net`` with parallel HDF5 (one rank, or no ``mpio``: plainly)."""
+    if net.parallel and parallel_hdf5():
         return h5py.File(path, mode, driver="mpio", comm=net.comm)
     return h5py.File(path, mode)
 
@@ -164,8 +172,34 @@ def write(path, local, attrs, net=None):
         Attributes, identical on every rank.
     net : parallel.Channel, mpi4py communicator or None
     """
-    global _writes
     net = channel(net)
+    if net.parallel and not parallel_hdf5():
+        return _write_through_root(path, local, attrs, net)
+    _write(path, local, attrs, net, net.size)
+
+
+def _write_through_root(path, local, attrs, net):
+    """``write`` without parallel HDF5: every rank's rows go to rank 0, which writes the file alone.
+
+    The rows are concatenated in rank order, as the ranks' slices of a collective write, and the
+    file says the same number of ranks: the same file, bit for bit. Rank 0 says so once per process.
+    """
+    global _said_funnel
+    parts = net.gather({k: np.asarray(v) for k, v in local.items()})
+    if net.rank == 0:
+        if not _said_funnel:
+            print("mpdem: h5py has no MPI driver (serial HDF5): state files are written through rank 0",
+                  file=sys.stderr, flush=True)
+            _said_funnel = True
+        whole = {k: np.concatenate([p[k].reshape((-1, 3) if k in WIDE else (-1,)) for p in parts])
+                 for k in parts[0]}
+        _write(path, whole, attrs, channel(None), net.size)
+    net.barrier()
+
+
+def _write(path, local, attrs, net, ranks):
+    """The collective write of ``write`` by the ranks of ``net``; the file says ``ranks`` wrote it."""
+    global _writes
     groups = [g for g in GROUPS if ROWS_OF[g] in local]
     lengths = np.array([len(local[ROWS_OF[g]]) for g in groups], np.int64)
     all_len = np.array(net.allgather(lengths)).reshape(-1, len(groups))
@@ -180,7 +214,7 @@ def write(path, local, attrs, net=None):
         for k, v in attrs.items():
             f.attrs[k] = v
         # how many ranks wrote the file is a fact of this write, not of the caller
-        f.attrs["ranks"] = net.size
+        f.attrs["ranks"] = ranks
         for gi, g in enumerate(groups):
             grp = f.create_group(g)
             f.attrs[f"checksum_{g}"] = sums[gi]

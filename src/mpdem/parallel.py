@@ -22,9 +22,11 @@ runs without MPI never import it.
 """
 from __future__ import annotations
 
+import atexit
 import os
 import sys
 import time
+import weakref
 
 import numpy as np
 
@@ -215,8 +217,10 @@ class Channel:
         self.seconds += time.perf_counter() - t
 
     def ghost_plan(self, send_rows, recv_rows, n_fields=3):
-        """A ``GhostPlan`` on this communicator (see there)."""
-        return GhostPlan(self, send_rows, recv_rows, n_fields)
+        """A ``GhostPlan`` on this communicator (see there); freed at exit if still live."""
+        plan = GhostPlan(self, send_rows, recv_rows, n_fields)
+        _LIVE_PLANS.add(plan)
+        return plan
 
     # -- pickled objects (once per run or per checkpoint) --
     def allgather(self, obj):
@@ -396,3 +400,15 @@ class GhostPlan:
         for r in self.requests:
             r.Free()
         self.requests, self.sends, self.recvs = [], [], []
+        _LIVE_PLANS.discard(self)
+
+
+# plans not yet freed: their persistent requests are released at exit, before mpi4py finalizes MPI
+# (MPICH reports each one left: "freeing inactive persistent request")
+_LIVE_PLANS = weakref.WeakSet()
+
+
+@atexit.register
+def _free_live_plans():
+    for plan in list(_LIVE_PLANS):
+        plan.free()
