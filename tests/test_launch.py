@@ -1,5 +1,6 @@
 """Launch mistakes give one clear error and never hang."""
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -57,13 +58,14 @@ def test_wrapper_unbinds_ranks_that_ask_for_threads():
     import pytest
     if os.cpu_count() < 2 or "mpiexec.openmpi" not in MPIEXEC.read_text():
         pytest.skip("needs Open MPI (it binds ranks to cores) and 2 cores to see a binding")
-    probe = ["-c", "import os; print(len(os.sched_getaffinity(0)))"]
+    # each rank's answer tagged: Open MPI's output forwarding may join two ranks' lines ("22")
+    probe = ["-c", "import os; print(f'cores={len(os.sched_getaffinity(0))};')"]
 
     def cores(*args, mpi=()):
         p = subprocess.run([str(MPIEXEC), *mpi, "-n", "2", sys.executable, *probe, *args],
                            capture_output=True, text=True, timeout=120, env=ENV)
         assert p.returncode == 0, p.stderr
-        return sorted(int(v) for v in p.stdout.split())
+        return sorted(int(v) for v in re.findall(r"cores=(\d+);", p.stdout))
 
     assert cores() == [1, 1]
     assert cores("--threads", "2") == [os.cpu_count()] * 2
@@ -76,11 +78,19 @@ def test_threads_warnings_name_binding_and_oversubscription(monkeypatch):
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
     monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "2")
     assert threads_warnings(2, 4) == []
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
     bound = threads_warnings(2, 1)
-    assert len(bound) == 1 and "--bind-to none" in bound[0]
+    assert len(bound) == 2 and "--bind-to none" in bound[0] and "OMP_WAIT_POLICY=PASSIVE" in bound[1]
     monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "4")
     over = threads_warnings(2, 4)
-    assert len(over) == 1 and "4 rank(s) x 2 threads on this node's 4 cores" in over[0]
+    assert len(over) == 2 and "4 rank(s) x 2 threads on this node's 4 cores" in over[0]
+    assert "waiting threads sleep" in over[1]
+    # one thread never oversubscribes; the passive policy is set only when threads outnumber cores
+    from mpdem import threads
+    assert threads.oversubscribed(2, 4) and not threads.oversubscribed(1, 4)
+    monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "2")
+    assert not threads.oversubscribed(1, 1) and threads.oversubscribed(2, 1) and not threads.oversubscribed(2, 4)
+    assert threads.oversubscribed(3, 4)
 
 
 def test_the_program_ignores_stop_signals_once_its_work_is_done(tmp_path):

@@ -362,11 +362,14 @@ def threads_warnings(n, cores):
     if n > cores:
         out.append(f"--threads {n}, but this process may run on {cores} core(s), so its threads share them "
                    f"(under Open MPI's mpiexec: --bind-to none, or --map-by slot:PE={n})")
-    local = int(os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE") or os.environ.get("MPI_LOCALNRANKS") or 1)
-    node = os.cpu_count() or 1
+    from .threads import PASSIVE, oversubscribed, ranks_on_node
+    local, node = ranks_on_node(), os.cpu_count() or 1
     if local * n > node:
-        out.append(f"{local} rank(s) x {n} threads on this node's {node} cores: every parallel loop then "
-                   f"waits for a time slice, far slower than fewer threads")
+        out.append(f"{local} rank(s) x {n} threads on this node's {node} cores")
+    if oversubscribed(n, cores):
+        policy = ", ".join(f"{k}={os.environ.get(k, v)}" for k, v in PASSIVE.items())
+        out.append(f"threads outnumber cores, so waiting threads sleep ({policy}): slower than fewer threads "
+                   f"in proportion, no faster than --threads 1")
     return out
 
 

@@ -26,6 +26,11 @@ def configure(n):
     """
     if not isinstance(n, int) or n < 1:
         raise ThreadsError(f"--threads {n!r}: accepted an integer >= 1")
+    if oversubscribed(n):
+        # before numba loads its OpenMP layer (at its first set_num_threads): waiting threads sleep
+        # instead of spinning, so threads that share a core do not starve the one that works
+        for key, value in PASSIVE.items():
+            os.environ.setdefault(key, value)
     if "numba" not in sys.modules:
         # numba sizes its pool at import, to the cores this process may use: make room for n threads
         have = int(os.environ.get("NUMBA_NUM_THREADS", "0") or 0)
@@ -40,6 +45,23 @@ def configure(n):
     global _requested
     _requested = n
     return n
+
+
+# the wait policy of an oversubscribed process: GNU and LLVM OpenMP, and Intel's (numba's omp layer)
+PASSIVE = {"OMP_WAIT_POLICY": "PASSIVE", "KMP_BLOCKTIME": "0"}
+
+
+def ranks_on_node():
+    """Ranks of this launch on this node, as the launcher says (1 when it says nothing)."""
+    return int(os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE") or os.environ.get("MPI_LOCALNRANKS")
+               or os.environ.get("PMI_LOCAL_SIZE") or 1)
+
+
+def oversubscribed(n, cores=None):
+    """Whether ``n`` threads per rank outnumber the cores: this process's (``cores``, default its
+    affinity), or the node's over its ranks."""
+    cores = usable_cores() if cores is None else cores
+    return n > 1 and (n > cores or ranks_on_node() * n > (os.cpu_count() or 1))
 
 
 def apply():
