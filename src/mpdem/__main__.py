@@ -369,7 +369,7 @@ def threads_warnings(n, cores):
     if oversubscribed(n, cores):
         policy = ", ".join(f"{k}={os.environ.get(k, v)}" for k, v in PASSIVE.items())
         out.append(f"threads outnumber cores, so waiting threads sleep ({policy}): slower than fewer threads "
-                   f"in proportion, no faster than --threads 1")
+                   f"in proportion; expect little or no gain over --threads 1")
     return out
 
 
