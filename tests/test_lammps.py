@@ -28,7 +28,7 @@ def test_the_data_file_and_the_dump_lammps_wrote_of_one_state_read_alike():
     a = lammps.read(LMP_DATA, (2,))
     b = lammps.read(LMP_DUMP, (2,))
     order = [np.argsort(t["id"]) for t in (a, b)]
-    for key in ("ids", "types", "x", "v", "omega", "fixed"):
+    for key in ("id", "types", "x", "v", "omega", "fixed"):
         assert np.array_equal(a[key][order[0]], b[key][order[1]]), key
     assert len(a["id"]) == 369 and a["fixed"].sum() == 106 and set(a["types"][a["fixed"] == 1]) == {2}
     assert a["L_x"] == a["L_y"] == 10.0 and a["kind"] == "data" and b["kind"] == "dump"
