@@ -37,15 +37,15 @@ def test_particles_and_contacts_are_conserved(comm):
     st = r.state
     n_total = int(r.domain.sum_int(np.array([st.n_own]))[0])
     assert n_total == r.n_mobile + r.n_bed
-    ids = np.concatenate(comm.allgather(st.ids[:st.n_own].copy()))
+    ids = np.concatenate(comm.allgather(st.id[:st.n_own].copy()))
     assert len(np.unique(ids)) == len(ids) == n_total
     # every contact slot has its mirror on the partner's owner, exactly negated
     slots = {}
-    for part in comm.allgather([(int(st.ids[i]), int(jid), ds.copy())
+    for part in comm.allgather([(int(st.id[i]), int(jid), ds.copy())
                                 for i in range(st.n_own) for jid, ds in zip(*st.slots_of(i))]):
         for a, b, ds in part:
             slots[(a, b)] = ds
-    fixed_ids = set(np.concatenate(comm.allgather(st.ids[:st.n_own][st.fixed[:st.n_own] == 1])).tolist())
+    fixed_ids = set(np.concatenate(comm.allgather(st.id[:st.n_own][st.fixed[:st.n_own] == 1])).tolist())
     assert len(slots) > 0
     for (a, b), ds in slots.items():
         if b in fixed_ids:
@@ -61,19 +61,19 @@ def test_ghosts_equal_a_brute_force_search(comm):
     r.run()
     r.engine.rebuild()
     st, dom = r.state, r.domain
-    everything = comm.allgather((st.ids[:st.n_own].copy(), st.x[:st.n_own].copy()))
+    everything = comm.allgather((st.id[:st.n_own].copy(), st.x[:st.n_own].copy()))
     all_ids = np.concatenate([e[0] for e in everything])
     all_x = np.concatenate([e[1] for e in everything])
     lo = dom.bounds[comm.Get_rank()] - dom.r_list
     hi = dom.bounds[comm.Get_rank() + 1] + dom.r_list
-    mine = set(st.ids[:st.n_own].tolist())
+    mine = set(st.id[:st.n_own].tolist())
     want = {int(i) for i, z in zip(all_ids, all_x[:, 2]) if lo <= z < hi and int(i) not in mine}
-    ghosts = st.ids[st.n_own:st.n_rows]
+    ghosts = st.id[st.n_own:st.n_rows]
     assert set(ghosts.tolist()) == want and len(ghosts) == len(want)
     # ghost coordinates are exact copies of the owners'
     where = {int(i): k for k, i in enumerate(all_ids)}
     for k in range(st.n_own, st.n_rows):
-        assert np.array_equal(st.x[k], all_x[where[int(st.ids[k])]])
+        assert np.array_equal(st.x[k], all_x[where[int(st.id[k])]])
 
 
 def test_pile_too_small_for_the_ranks(comm):

@@ -6,7 +6,8 @@ carried, ghosts exact copies after a refresh.
 """
 import numpy as np
 
-from mpdem.decomp import Domain
+from mpdem.decomp import Domain, merge_sorted
+from mpdem.state import FIELDS, MOVE_FIELDS, ROW, SLOT
 
 N = 160
 
@@ -23,7 +24,7 @@ def column():
 def gather_owned(comm, st):
     """{id: (x, v, omega, slot ids, slot Delta s)} of every owned particle of every rank."""
     own = {}
-    for part in comm.allgather([(int(st.ids[i]), st.x[i].copy(), st.v[i].copy(), st.omega[i].copy(),
+    for part in comm.allgather([(int(st.id[i]), st.x[i].copy(), st.v[i].copy(), st.omega[i].copy(),
                                  *(a.copy() for a in st.slots_of(i))) for i in range(st.n_own)]):
         for i, *rest in part:
             assert i not in own, f"particle {i} owned twice"
@@ -38,10 +39,10 @@ def check_ghosts(comm, dom, st, members=True):
     if members:
         b, r = dom.bounds, comm.Get_rank()
         want = {i for i, (x, *_) in own.items() if b[r] - dom.r_list <= x[2] < b[r + 1] + dom.r_list}
-        want -= set(st.ids[:st.n_own].tolist())
-        assert sorted(st.ids[st.n_own:st.n_rows].tolist()) == sorted(want)
+        want -= set(st.id[:st.n_own].tolist())
+        assert sorted(st.id[st.n_own:st.n_rows].tolist()) == sorted(want)
     for k in range(st.n_own, st.n_rows):
-        x, v, w = own[int(st.ids[k])][:3]
+        x, v, w = own[int(st.id[k])][:3]
         assert st.x[k].tobytes() == x.tobytes() and st.v[k].tobytes() == v.tobytes()
         assert st.omega[k].tobytes() == w.tobytes()
     return own
@@ -57,17 +58,17 @@ def test_halo_talks_to_slabs_in_reach_and_refresh_copies_exactly(comm):
     assert set(to.tolist()) == set(frm.tolist()) == {q for q in (r - 1, r + 1) if 0 <= q < P}
     if P > 1:
         assert dom._plan.peers == 2 * len(to)
-    ghosts = st.ids[st.n_own:st.n_rows].copy()
+    ghosts = st.id[st.n_own:st.n_rows].copy()
     # owners change x, v, omega in place (ghost rows untouched): a refresh brings the ghosts along
     for step in range(3):
         n = st.n_own
-        st.x[:n] += 1e-3 * (step + 1) * np.sin(st.ids[:n, None] * [1.0, 2.0, 3.0])
+        st.x[:n] += 1e-3 * (step + 1) * np.sin(st.id[:n, None] * [1.0, 2.0, 3.0])
         st.v[:n] *= -1.5
         st.omega[:n, 2] = np.nextafter(st.omega[:n, 2], np.inf)
         t = dom.comm_seconds
         dom.refresh(st)
         assert dom.comm_seconds > t or P == 1
-        assert np.array_equal(st.ids[st.n_own:st.n_rows], ghosts)
+        assert np.array_equal(st.id[st.n_own:st.n_rows], ghosts)
         check_ghosts(comm, dom, st, members=False)
 
 
@@ -76,7 +77,7 @@ def test_migration_moves_rows_with_their_slots(comm):
     st = dom.scatter(column(), 5.0, 5.0)
     n = st.n_own
     # slots: each particle in contact with the next two ids, Delta s from the id (with a -0.0)
-    partner = np.repeat(st.ids[:n], 2) + np.tile([1, 2], n)
+    partner = np.repeat(st.id[:n], 2) + np.tile([1, 2], n)
     ds = np.column_stack([partner * 1e-3, -partner * 1e-4, np.full(2 * n, -0.0)])
     st.set_contacts(np.full(n, 2), partner, ds)
     dom.rebuild(st)
@@ -96,3 +97,28 @@ def test_migration_moves_rows_with_their_slots(comm):
         assert sds.tobytes() == sds0.tobytes()
     moved = int(dom.sum_int(np.array([dom.n_migrated]))[0])
     assert moved > 0 or comm.Get_size() == 1
+
+
+def test_migration_carries_every_migrating_field(comm):
+    """Every field the registry says migrates (forces, torques, wall histories, slots, ...) arrives bit for bit."""
+    dom = Domain(comm, r_list=1.2)
+    st = dom.scatter(column(), 5.0, 5.0)
+    n = st.n_own
+    rng = np.random.default_rng([7, comm.Get_rank()])
+    for f in ROW:
+        if f.dtype == np.float64 and f.name != "x":
+            getattr(st, f.name)[:n] = rng.normal(size=(n,) + f.shape)
+    counts = rng.integers(0, 4, n)
+    m = int(counts.sum())
+    st.set_contacts(counts, **{f.name: (rng.integers(0, N, (m,) + f.shape) if f.dtype == np.int64
+                                        else rng.normal(size=(m,) + f.shape)) for f in SLOT})
+    dom.rebuild(st)
+    moving = [f for f in FIELDS if f.migrates]
+    st.x[:st.n_own, 2] += 25.0
+    before = merge_sorted(comm.allgather(st.select(st.id_order(), moving)))
+    dom.rebuild(st)
+    after = merge_sorted(comm.allgather(st.select(st.id_order(), moving)))
+    assert set(after) == set(before) == set(MOVE_FIELDS)
+    for k in MOVE_FIELDS:
+        assert after[k].dtype == before[k].dtype and after[k].tobytes() == before[k].tobytes(), k
+    assert int(dom.sum_int(np.array([dom.n_migrated]))[0]) > 0 or comm.Get_size() == 1

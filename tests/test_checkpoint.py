@@ -163,7 +163,7 @@ def test_clock_checkpoints_and_a_restart_from_one_give_the_straight_digest(small
 
 def _pair_forces_sum(st, phys, pairs):
     """Per-row force rebuilt from the contact list: gravity + sum of pair forces."""
-    row = {int(i): k for k, i in enumerate(st.ids[:st.n_rows])}
+    row = {int(i): k for k, i in enumerate(st.id[:st.n_rows])}
     f = np.zeros((st.n_own, 3))
     f[:, 2] = -phys.gravity
     for a in range(len(pairs["id_i"])):
@@ -207,7 +207,7 @@ def test_contact_list_reproduces_the_step_forces(engine_factory, model, gamma_t)
     # each contact once, and as many as the slots hold (mobile-mobile pairs in two slots)
     assert len(set(zip(pairs["id_i"].tolist(), pairs["id_j"].tolist()))) == len(pairs["id_i"])
     n_bed = int(np.sum(pairs["id_j"] >= len(g)))          # bed ids follow the block's
-    assert 2 * (len(pairs["id_i"]) - n_bed) + n_bed == st.slot_n[:st.n_own][mobile].sum()
+    assert 2 * (len(pairs["id_i"]) - n_bed) + n_bed == st.count[:st.n_own][mobile].sum()
 
 
 def test_snapshots_on_schedule_and_info(tmp_path, capsys):

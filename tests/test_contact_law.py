@@ -195,7 +195,7 @@ def test_pile_contacts_are_mirror_exact():
     slots = {}
     for i in range(st.n_own):
         for jid, ds in zip(*st.slots_of(i)):
-            slots[(int(st.ids[i]), int(jid))] = ds
+            slots[(int(st.id[i]), int(jid))] = ds
     assert len(slots) > 2 * n
     nonzero = 0
     for (a, b), s in slots.items():
@@ -203,7 +203,7 @@ def test_pile_contacts_are_mirror_exact():
         nonzero += bool(np.any(s))
     assert nonzero > len(slots) // 2
     pairs, r = find_contacts(st.x[:n], L, L)
-    ids = st.ids[:n]
+    ids = st.id[:n]
     assert ({(int(min(ids[a], ids[b])), int(max(ids[a], ids[b]))) for a, b in pairs}
             == {(a, b) for (a, b) in slots if a < b})
     for i in range(st.n_own):

@@ -59,11 +59,11 @@ def test_gzip_table_reads_as_the_plain_one(tmp_path):
 
 
 def test_tile_table_copies_and_renumbers():
-    t = {"ids": np.array([4, 1]), "x": np.array([[0.5, 1.5, 1.0], [5.5, -0.5, 2.0]]),
+    t = {"id": np.array([4, 1]), "x": np.array([[0.5, 1.5, 1.0], [5.5, -0.5, 2.0]]),
          "v": np.array([[1.0, 0, 0], [0, 2.0, 0]]), "fixed": np.array([0, 1], np.uint8)}
     w = build.tile_table(t, 6.0, 6.0, 2, 3)
-    assert len(w["ids"]) == 12 and len(np.unique(w["ids"])) == 12
-    assert w["ids"][:2].tolist() == [4, 1]                       # copy 0 keeps the ids
+    assert len(w["id"]) == 12 and len(np.unique(w["id"])) == 12
+    assert w["id"][:2].tolist() == [4, 1]                       # copy 0 keeps the ids
     assert np.all((w["x"][:, 0] >= 0) & (w["x"][:, 0] < 12) & (w["x"][:, 1] >= 0) & (w["x"][:, 1] < 18))
     assert np.allclose(w["x"][2 * 5 + 1], [5.5 + 6.0, 5.5 + 12.0, 2.0])   # copy 5 = (i 1, j 2), y wrapped
     assert np.array_equal(w["fixed"], np.tile(t["fixed"], 6)) and np.array_equal(w["v"][3], t["v"][1])

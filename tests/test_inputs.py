@@ -26,7 +26,7 @@ def test_table_round_trip(tmp_path):
     p = tmp_path / "t.txt"
     build.write_table(p, ids, x, v, fixed)
     t = build.read_table(p)
-    assert np.array_equal(t["ids"], ids) and np.array_equal(t["x"], x)
+    assert np.array_equal(t["id"], ids) and np.array_equal(t["x"], x)
     assert np.array_equal(t["v"], v) and np.array_equal(t["fixed"], fixed)
 
 
@@ -34,7 +34,7 @@ def test_table_without_header_and_bad_tables(tmp_path):
     p = tmp_path / "t.txt"
     p.write_text("1 0.5 0.5 3.0\n2 2.5 0.5 3.0\n")
     t = build.read_table(p)
-    assert t["ids"].tolist() == [1, 2] and np.all(t["v"] == 0) and np.all(t["fixed"] == 0)
+    assert t["id"].tolist() == [1, 2] and np.all(t["v"] == 0) and np.all(t["fixed"] == 0)
     p.write_text("id x y z fixed\n1 0.5 0.5 3.0 2\n")
     with pytest.raises(build.InputError, match="fixed must be 0 or 1"):
         build.read_table(p)
@@ -90,7 +90,7 @@ def test_run_from_text_table_continues_exactly(tmp_path):
     r0.prepare()
     st = r0.state
     n = st.n_own
-    build.write_table(tmp_path / "init.txt", st.ids[:n], st.x[:n], st.v[:n], st.fixed[:n])
+    build.write_table(tmp_path / "init.txt", st.id[:n], st.x[:n], st.v[:n], st.fixed[:n])
     out_b, rb, sb = run_small(tmp_path, "b", f'run.initial_file="{tmp_path / "init.txt"}"')
     assert sb["digest"] == s["digest"]
     # and from the final state file: the run continues from where it stopped

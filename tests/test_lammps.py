@@ -27,10 +27,10 @@ def test_files_are_recognised_by_their_content(tmp_path):
 def test_the_data_file_and_the_dump_lammps_wrote_of_one_state_read_alike():
     a = lammps.read(LMP_DATA, (2,))
     b = lammps.read(LMP_DUMP, (2,))
-    order = [np.argsort(t["ids"]) for t in (a, b)]
-    for key in ("ids", "types", "x", "v", "omega", "fixed"):
+    order = [np.argsort(t["id"]) for t in (a, b)]
+    for key in ("id", "types", "x", "v", "omega", "fixed"):
         assert np.array_equal(a[key][order[0]], b[key][order[1]]), key
-    assert len(a["ids"]) == 369 and a["fixed"].sum() == 106 and set(a["types"][a["fixed"] == 1]) == {2}
+    assert len(a["id"]) == 369 and a["fixed"].sum() == 106 and set(a["types"][a["fixed"] == 1]) == {2}
     assert a["L_x"] == a["L_y"] == 10.0 and a["kind"] == "data" and b["kind"] == "dump"
     # the pile was moving: velocities and angular velocities are read, not zeros
     assert np.abs(a["v"][a["fixed"] == 0]).max() > 0 and np.abs(a["omega"][a["fixed"] == 0]).max() > 0
@@ -62,7 +62,7 @@ def test_sizes_masses_and_styles_outside_the_model_are_refused(tmp_path):
         lammps.read(edit_data(tmp_path, lambda t: first(t, 3, "1.0")), (2,))
     # a density written with 7 digits is LAMMPS's rounding of mass 1: accepted
     rounded = lammps.read(edit_data(tmp_path, lambda t: t[:3] + ["1.909859"] + t[4:]), (2,))
-    assert len(rounded["ids"]) == 369
+    assert len(rounded["id"]) == 369
     text = open(LMP_DATA).read()
     (tmp_path / "atomic.data").write_text(text.replace("Atoms # sphere", "Atoms # atomic"))
     with pytest.raises(InputError, match="atom_style atomic; mpdem reads atom_style sphere"):
@@ -113,7 +113,7 @@ def test_export_to_a_lammps_data_file_reads_back_to_the_same_particles(tmp_path)
     assert out == str(tmp_path / "state.data") and lammps.kind(out) == "data"
     back = lammps.read(out, (2,))
     order = np.argsort(ids)
-    assert np.array_equal(back["ids"], ids[order])
+    assert np.array_equal(back["id"], ids[order])
     for key in ("x", "v", "omega", "fixed"):
         assert np.array_equal(back[key], local[key][order]), key
     assert (back["L_x"], back["L_y"]) == (6.0, 7.5)
@@ -122,7 +122,7 @@ def test_export_to_a_lammps_data_file_reads_back_to_the_same_particles(tmp_path)
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_a_run_from_the_lammps_data_file_has_the_digest_of_the_same_state_as_a_table(tmp_path, mu):
     t = lammps.read(LMP_DATA, (2,))
-    build.write_table(tmp_path / "same.txt", t["ids"], t["x"], t["v"], t["fixed"], omega=t["omega"])
+    build.write_table(tmp_path / "same.txt", t["id"], t["x"], t["v"], t["fixed"], omega=t["omega"])
     common = ["--set", "run.max_steps=400", "--set", f"contact.mu={mu}", "--set", "output.progress_every=100"]
     p = mpdem("run", "--out", "from_data", "--set", f'run.initial_file="{LMP_DATA}"',
               "--set", "run.fixed_types=[2]", *common, cwd=tmp_path)

@@ -58,9 +58,9 @@ def assert_same_trajectory(run, out):
     ours, attrs = checkpoint.read_state(str(run / "final.h5"))
     assert int(attrs["step"]) == STEPS
     assert open(out / "final.dump").read().split("\n", 2)[1] == str(STEPS)     # ITEM: TIMESTEP, then the step
-    order = np.argsort(theirs["ids"])
+    order = np.argsort(theirs["id"])
     # LAMMPS's atom ids are mpdem's + 1 when mpdem's start at 0 (lammps.ID_SHIFT_NOTE)
-    assert np.array_equal(theirs["ids"][order] - (1 if ours["id"].min() == 0 else 0), ours["id"])
+    assert np.array_equal(theirs["id"][order] - (1 if ours["id"].min() == 0 else 0), ours["id"])
     assert np.array_equal(theirs["fixed"][order], ours["fixed"])
     for key, tol in (("x", 1e-9), ("v", 1e-7), ("omega", 1e-7)):
         err = np.abs(theirs[key][order] - ours[key]).max()

@@ -51,21 +51,21 @@ def _state_with_slots():
 
 def test_packed_rows_come_back_bit_for_bit():
     st = _state_with_slots()
-    layout = decomp._row_layout(st)
     part = st.take(np.array([0, 3, 4, 5]))
-    floats, ints = decomp._pack(part, layout)
-    m, slots = len(part["ids"]), len(part["slot_id"])
-    fb, ib = decomp._empty_packed(m, slots, layout)
+    floats, ints = decomp._pack(part)
+    m, slots = len(part["id"]), len(part["partner"])
+    fb, ib = decomp._empty_packed(m, slots)
     assert fb.shape == floats.shape and ib.shape == ints.shape
     fb[:], ib[:] = floats, ints
-    got = decomp._unpack(fb, ib, m, layout)
-    for f in MOVE_FIELDS + ("slot_n", "slot_id", "slot_ds"):
+    got = decomp._unpack(fb, ib, m, slots)
+    assert set(got) == set(MOVE_FIELDS) == set(part)
+    for f in MOVE_FIELDS:
         assert got[f].dtype == np.asarray(part[f]).dtype, f
         assert np.asarray(got[f]).tobytes() == np.asarray(part[f]).astype(got[f].dtype).tobytes(), f
     other = State(np.zeros(0, np.int64), np.zeros((0, 3)), L_x=5.0, L_y=5.0)
     assert other.append([got]) == 4
-    assert np.array_equal(other.slot_n[:4], [2, 3, 0, 1])
-    assert np.array_equal(other.slots_of(1)[0], part["slot_id"][2:5])
+    assert np.array_equal(other.count[:4], [2, 3, 0, 1])
+    assert np.array_equal(other.slots_of(1)[0], part["partner"][2:5])
 
 
 def _domain(bounds, rank, r_list=1.2):

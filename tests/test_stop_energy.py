@@ -27,7 +27,7 @@ def spinner_table(path):
     top = int(np.argmax(np.where(t["fixed"] == 0, t["x"][:, 2], -np.inf)))
     omega = np.zeros_like(t["x"])
     omega[top, 2] = SPIN
-    build.write_table(path, t["ids"], t["x"], t["v"], t["fixed"], omega)
+    build.write_table(path, t["id"], t["x"], t["v"], t["fixed"], omega)
     return top
 
 
@@ -69,7 +69,7 @@ def test_a_spinning_sphere_holds_the_total_rule_but_not_the_translational_one(tm
     r, status, top = run_pile(tmp_path, "total", "total")
     assert status == "max_steps"
     # frictionless: no torque, so the spin is kept to the bit, and it is all the energy left
-    assert r.state.omega[r.state.ids == top + 1][0].tolist() == [0.0, 0.0, SPIN]
+    assert r.state.omega[r.state.id == top + 1][0].tolist() == [0.0, 0.0, SPIN]
     e_rot = 0.5 * 0.1 * SPIN ** 2 / 216
     assert r.ek > e_rot > 100 * r.cfg.stop.E_stop
     assert r.ek - e_rot < r.cfg.stop.E_stop

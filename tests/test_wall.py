@@ -66,9 +66,9 @@ def under_the_bed(tmp_path):
     keep = (np.linalg.norm(d, axis=2).min(axis=1) > 1.0)
     keep[moved] = True
     out = tmp_path / "under.data"
-    out.write_text("".join(lammps.data_lines(t["ids"][keep], t["x"][keep], t["v"][keep], t["omega"][keep],
+    out.write_text("".join(lammps.data_lines(t["id"][keep], t["x"][keep], t["v"][keep], t["omega"][keep],
                                              t["fixed"][keep], 10.0, 10.0, "three spheres under the bed")))
-    return str(out), t["ids"][moved]
+    return str(out), t["id"][moved]
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])

@@ -31,7 +31,7 @@ from . import build, checkpoint, config, initial
 from .decomp import Domain
 from .engine import Engine, Physics
 from .parallel import channel
-from .state import State
+from .state import FIELDS, INITIAL, PAIR, PARTICLE, State
 
 LANDING_TIME = 25.0   # [tau] from the pour at phi_i = 0.3 to the landed pile
 
@@ -160,12 +160,12 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     fixed = t["fixed"]
     z_floor = float(t["x"][fixed == 1, 2].mean()) if fixed.any() else -np.inf
-    build.check_initial(t["ids"], t["x"], fixed, L_x, L_y, z_floor,
+    build.check_initial(t["id"], t["x"], fixed, L_x, L_y, z_floor,
                         overlap_warn=cfg.checks.overlap_warn, warn=say)
     nx, ny = tile
     if (nx, ny) != (1, 1):
         t = build.tile_table(t, L_x, L_y, nx, ny)
-    whole = {"id": t["ids"], "x": t["x"], "v": t["v"], "omega": t["omega"], "fixed": t["fixed"]}
+    whole = {k: t[k] for k in INITIAL}
     return whole, nx * L_x, ny * L_y
 
 
@@ -287,12 +287,15 @@ def synthetic_share(N, rank, size, slots=6, seed=0):
     side = 90
     g = np.column_stack([ids % side, (ids // side) % side, ids // side ** 2]) * 1.1
     n = hi - lo
-    a = {"id": ids, "x": g + 0.01 * rng.random((n, 3)), "v": rng.standard_normal((n, 3)),
-         "omega": rng.standard_normal((n, 3)), "f": rng.standard_normal((n, 3)),
-         "torque": rng.standard_normal((n, 3)), "fixed": np.zeros(n, np.uint8),
-         "count": np.full(n, slots, np.int64)}
-    a["partner"] = rng.integers(0, N, n * slots)
-    a["ds"] = 1e-3 * rng.standard_normal((n * slots, 3))
+    given = {"id": lambda: ids, "x": lambda: g + 0.01 * rng.random((n, 3)), "fixed": lambda: np.zeros(n, np.uint8),
+             "count": lambda: np.full(n, slots, np.int64), "partner": lambda: rng.integers(0, N, n * slots)}
+    a = {}
+    # every stored field of the particles and their slots (registry order: the draws' order); the rest random
+    for f in FIELDS:
+        if f.group and f.per != PAIR and not f.optional:
+            rows = n if f.per == PARTICLE else n * slots
+            a[f.name] = given[f.name]() if f.name in given else rng.standard_normal((rows,) + f.shape)
+    a["ds"] *= 1e-3
     return a
 
 
@@ -357,10 +360,10 @@ def tiled_pile(a, L, N, mu, k_n, seed=0):
     x = (x0[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
     n = len(x)
     out = {"id": np.arange(n, dtype=np.int64), "x": x, "fixed": np.tile(a["fixed"], nx * ny)}
-    for f in ("v", "omega", "f", "torque"):
-        out[f] = np.zeros((n, 3))
-    out["count"] = np.zeros(n, np.int64)
-    out["partner"], out["ds"] = np.zeros(0, np.int64), np.zeros((0, 3))
+    # the other stored fields of the particles and the slots: zeros, no slots
+    for f in FIELDS:
+        if f.group and f.per != PAIR and not f.optional and f.name not in out:
+            out[f.name] = np.zeros(((n if f.per == PARTICLE else 0),) + f.shape, f.array_dtype)
     pairs, r = find_contacts(x, nx * L, ny * L)
     rng = np.random.default_rng(seed)
     delta = 1.0 - r
@@ -389,9 +392,10 @@ def run_analysis_bench(args, net):
     t0 = time.perf_counter()
     whole, nx, ny = tiled_pile(a, L, args.N, cfg.contact.mu, cfg.contact.k_n)
     n, m = len(whole["id"]), len(whole["id_i"])
-    share = {k: whole[k][rank * n // size:(rank + 1) * n // size] for k in checkpoint.PARTICLE_FIELDS + ("count",)}
-    share["partner"], share["ds"] = whole["partner"], whole["ds"]
-    share.update({k: whole[k][rank * m // size:(rank + 1) * m // size] for k in checkpoint.PAIR_FIELDS})
+    # each rank writes a share of the particle rows and of the pairs (there are no slots)
+    rows, pairs = slice(rank * n // size, (rank + 1) * n // size), slice(rank * m // size, (rank + 1) * m // size)
+    share = {f.name: whole[f.name][pairs if f.per == PAIR else rows if f.per == PARTICLE else slice(None)]
+             for f in FIELDS if f.name in whole}
     n_mob = int((whole["fixed"] == 0).sum())
     tcfg = config.load(None, ["run.max_steps=1", f"pour.N={n_mob}", f"box.L_x={nx * L}", f"box.L_y={ny * L}",
                               f"contact.mu={cfg.contact.mu}"])

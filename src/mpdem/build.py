@@ -18,7 +18,7 @@ from .engine import Engine, Physics
 from .errors import InputError
 from .kernels.insert import rsa_insert
 from .rundir import write_atomic
-from .state import State
+from .state import INITIAL, State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
 SPHERE_VOLUME = math.pi / 6.0
@@ -157,7 +157,7 @@ def read_table(path):
 
     Returns
     -------
-    dict with ids (N,) int64, x (N, 3), v (N, 3), omega (N, 3) (zero when
+    dict with id (N,) int64, x (N, 3), v (N, 3), omega (N, 3) (zero when
     not in the table), fixed (N,) uint8.
     """
     try:
@@ -206,7 +206,7 @@ def read_table(path):
     fixed = col.get("fixed", np.zeros(n))
     if np.any((fixed != 0) & (fixed != 1)):
         raise InputError(f"{path}: column fixed must be 0 or 1")
-    return {"ids": ids, "x": np.stack([col["x"], col["y"], col["z"]], axis=1), "v": v, "omega": omega,
+    return {"id": ids, "x": np.stack([col["x"], col["y"], col["z"]], axis=1), "v": v, "omega": omega,
             "fixed": fixed.astype(np.uint8)}
 
 
@@ -242,7 +242,7 @@ def tile_table(table, L_x, L_y, nx, ny):
     Parameters
     ----------
     table : dict
-        ``read_table``'s arrays: ids (N,) int64, x (N, 3) [d], v (N, 3)
+        ``read_table``'s arrays: id (N,) int64, x (N, 3) [d], v (N, 3)
         [sqrt(g d)], fixed (N,) uint8, in a box periodic in [0, L_x) x [0, L_y).
     L_x, L_y : float
         The table's box [d].
@@ -262,12 +262,12 @@ def tile_table(table, L_x, L_y, nx, ny):
     x0[:, 1] %= L_y
     k = np.arange(nx * ny)
     shift = np.stack([(k % nx) * L_x, (k // nx) * L_y, np.zeros(nx * ny)], axis=1)   # (K, 3)
-    span = int(table["ids"].max(initial=-1)) + 1
-    return {"ids": (table["ids"][None, :] + span * k[:, None]).reshape(-1),
-            "x": (x0[None, :, :] + shift[:, None, :]).reshape(-1, 3),
-            "v": np.tile(table["v"], (nx * ny, 1)),
-            "omega": np.tile(table.get("omega", np.zeros_like(table["x"])), (nx * ny, 1)),
-            "fixed": np.tile(table["fixed"], nx * ny)}
+    span = int(table["id"].max(initial=-1)) + 1
+    # every field of the table copied as it is, then ids and positions shifted
+    out = {k: np.tile(table[k], (nx * ny,) + (1,) * (np.ndim(table[k]) - 1)) for k in INITIAL if k in table}
+    out["id"] = (table["id"][None, :] + span * k[:, None]).reshape(-1)
+    out["x"] = (x0[None, :, :] + shift[:, None, :]).reshape(-1, 3)
+    return out
 
 
 def check_initial(ids, x, fixed, L_x, L_y, z_floor, allow_overlap=False, overlap_warn=0.0, warn=None,

@@ -17,6 +17,9 @@ collectively by all ranks (h5py ``mpio`` driver), rows in rank order:
     every contact once: ids, overlap [d], normal force (signed, along the
     unit vector from j to i) [m g], tangential force on i (P, 3) [m g],
     Delta s of i (P, 3) [d];
+The groups, datasets, dtypes and widths are the stored fields of the
+registry (``state.FIELDS``, in its order), under the names the State and the
+state-array dicts use;
 attributes: ``format``, ``version``, ``kind`` (checkpoint, snapshot, final),
 ``step``, ``time``, ``n``, ``n_mobile``, ``n_bed``, ``L_x``, ``L_y``,
 ``config`` (the resolved TOML), ``checksum_<group>`` and the run's own
@@ -39,6 +42,7 @@ import sys
 import h5py
 import numpy as np
 
+from . import state
 from .errors import StateFileError
 from .parallel import channel
 from .rundir import starts_with
@@ -46,16 +50,19 @@ from .rundir import starts_with
 FORMAT = "mpdem-state"
 VERSION = 2
 KINDS = ("checkpoint", "snapshot", "final")
-PARTICLE_FIELDS = ("id", "x", "v", "omega", "f", "torque", "fixed")
-CONTACT_FIELDS = ("count", "partner", "ds")
-PAIR_FIELDS = ("id_i", "id_j", "delta", "F_n", "F_t", "ds_i")
-WALL_FIELDS = ("wall_ds",)
-GROUPS = {"particles": PARTICLE_FIELDS, "contacts": CONTACT_FIELDS, "wall": WALL_FIELDS, "pairs": PAIR_FIELDS}
-DTYPES = {"id": np.int64, "fixed": np.uint8, "count": np.int32, "partner": np.int64,
-          "id_i": np.int64, "id_j": np.int64, "delta": np.float64, "F_n": np.float64}
-WIDE = {"x", "v", "omega", "f", "torque", "ds", "F_t", "ds_i", "wall_ds"}     # (n, 3) datasets
-# the row-length dataset of each group (contacts' slot rows are counted by count)
-ROWS_OF = {"particles": "id", "contacts": "partner", "wall": "wall_ds", "pairs": "id_i"}
+# the groups and datasets of the format, from the field registry (``state.FIELDS``), in its order
+GROUPS = state.groups()
+PARTICLE_FIELDS = GROUPS["particles"]
+CONTACT_FIELDS = GROUPS["contacts"]
+PAIR_FIELDS = GROUPS["pairs"]
+WALL_FIELDS = GROUPS["wall"]
+DTYPES = {f.name: f.dtype for f in state.stored()}
+WIDE = {f.name for f in state.stored() if f.width > 1}
+# the row-length dataset of each group: its first field with rows of its own (contacts: partner)
+ROWS_OF = {g: next((n for n in names if state.FIELD[n].per != state.PARTICLE), names[0])
+           for g, names in GROUPS.items()}
+# the salt of each group's row hashes
+SALTS = {"particles": 1, "contacts": 2, "pairs": 3, "wall": 4}
 
 # Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
 KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
@@ -94,52 +101,70 @@ def _row_hashes(cols, n, salt):
         return h
 
 
+def _hashed(local, g):
+    """The columns of group ``g`` that its checksum hashes per row, and the row count.
+
+    Particles: every per-particle field of the particle rows (``/particles`` and
+    ``/contacts/count``); contact slots: the owner's id, then the per-contact
+    fields; an optional per-particle group (``/wall``): the id, then its
+    fields; pairs: their fields.
+    """
+    kinds = {state.FIELD[n].per for n in GROUPS[g]}
+    if "id" in GROUPS[g]:
+        return [local[f.name] for f in state.stored(per=state.PARTICLE) if f.optional is None], len(local["id"])
+    if state.CONTACT in kinds:
+        owner = np.repeat(np.asarray(local["id"], np.int64), np.asarray(local["count"], np.int64))
+        return [owner] + [local[f.name] for f in state.stored(g, state.CONTACT)], len(owner)
+    if kinds == {state.PARTICLE}:
+        return [local["id"]] + [local[n] for n in GROUPS[g]], len(local["id"])
+    return [local[n] for n in GROUPS[g]], len(local[ROWS_OF[g]])
+
+
+def present(local):
+    """The groups whose data ``local`` holds (its row-length dataset), in file order."""
+    return [g for g in GROUPS if ROWS_OF[g] in local]
+
+
 def checksums(local):
     """Partial checksums of this rank's rows, one uint64 per group present.
 
     Particles hash (id, fields, count) per row; contact slots hash
-    (owner id, partner, Delta s) per slot; pairs hash all their columns.
+    (owner id, partner, Delta s) per slot; the wall (id, wall_ds) per row;
+    pairs hash all their columns.
     """
-    n = len(local["id"])
-    out = {"particles": _row_hashes([local[k] for k in PARTICLE_FIELDS] + [local["count"]], n, 1)}
-    owner = np.repeat(np.asarray(local["id"], np.int64), np.asarray(local["count"], np.int64))
-    out["contacts"] = _row_hashes([owner, local["partner"], local["ds"]], len(owner), 2)
-    if "id_i" in local:
-        out["pairs"] = _row_hashes([local[k] for k in PAIR_FIELDS], len(local["id_i"]), 3)
-    if "wall_ds" in local:
-        out["wall"] = _row_hashes([local["id"], local["wall_ds"]], n, 4)
+    out = {g: _row_hashes(*_hashed(local, g), SALTS[g]) for g in present(local)}
     return {g: np.sum(h, dtype=np.uint64) for g, h in out.items()}
 
 
 def digest(arrays):
     """SHA-256 over the state sorted by id (positions, velocities, angular
     velocities, forces, torques, contact slots, and the wall histories of a
-    run with the wall), as hex."""
+    run with the wall), as hex.
+
+    Hashes, for every stored per-particle and per-contact field in registry
+    order (optional ones when present): its name, its shape and its bytes
+    (little endian; narrow integers as int64).
+    """
     h = hashlib.sha256()
-    for name in PARTICLE_FIELDS + CONTACT_FIELDS + tuple(k for k in WALL_FIELDS if k in arrays):
-        a = np.ascontiguousarray(arrays[name])
-        if name == "count":
-            a = a.astype(np.int64)
+    for f in state.stored():
+        if f.per == state.PAIR or (f.optional and f.name not in arrays):
+            continue
+        a = np.ascontiguousarray(arrays[f.name])
+        if f.array_dtype != np.dtype(f.dtype):
+            a = a.astype(f.array_dtype)
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)
-        h.update(name.encode())
+        h.update(f.name.encode())
         h.update(str(a.shape).encode())
         h.update(a.tobytes())
     return h.hexdigest()
 
 
-def gather_state(state):
-    """The owned particles of a State as id-sorted arrays (this rank's rows)."""
-    n = state.n_own
-    counts, partner, ds, order = state.contacts_flat()
-    out = {
-        "id": state.ids[:n][order], "x": state.x[:n][order], "v": state.v[:n][order],
-        "omega": state.omega[:n][order], "f": state.f[:n][order],
-        "torque": state.torque[:n][order], "fixed": state.fixed[:n][order],
-        "count": counts, "partner": partner, "ds": ds,
-    }
-    if state.wall:
-        out["wall_ds"] = state.wall_ds[:n][order]
-    return out
+def gather_state(st):
+    """The owned particles of a State as id-sorted arrays (this rank's rows): every
+    stored field (optional ones when the State has them)."""
+    flags = st.flags()
+    fields = [f for f in state.stored() if f.per != state.PAIR and state.optional_in(f, flags)]
+    return st.select(st.id_order(), fields)
 
 
 def parallel_hdf5():
@@ -191,7 +216,8 @@ def _write_through_root(path, local, attrs, net):
             print("mpdem: h5py has no MPI driver (serial HDF5): state files are written through rank 0",
                   file=sys.stderr, flush=True)
             _said_funnel = True
-        whole = {k: np.concatenate([p[k].reshape((-1, 3) if k in WIDE else (-1,)) for p in parts])
+        width = {k: state.FIELD[k].width if k in state.FIELD else 1 for k in parts[0]}
+        whole = {k: np.concatenate([p[k].reshape((-1, width[k]) if width[k] > 1 else (-1,)) for p in parts])
                  for k in parts[0]}
         _write(path, whole, attrs, channel(None), net.size)
     net.barrier()
@@ -200,7 +226,7 @@ def _write_through_root(path, local, attrs, net):
 def _write(path, local, attrs, net, ranks):
     """The collective write of ``write`` by the ranks of ``net``; the file says ``ranks`` wrote it."""
     global _writes
-    groups = [g for g in GROUPS if ROWS_OF[g] in local]
+    groups = present(local)
     lengths = np.array([len(local[ROWS_OF[g]]) for g in groups], np.int64)
     all_len = np.array(net.allgather(lengths)).reshape(-1, len(groups))
     rank = net.rank
@@ -219,11 +245,12 @@ def _write(path, local, attrs, net, ranks):
             grp = f.create_group(g)
             f.attrs[f"checksum_{g}"] = sums[gi]
             for name in GROUPS[g]:
-                # per-particle counts follow the particle rows, slots their own
-                k = 0 if name == "count" else gi
+                fd = state.FIELD[name]
+                # per-particle fields follow the particle rows (group 0), slots and pairs their own
+                k = 0 if fd.per == state.PARTICLE else gi
                 a, b = int(start[k]), int(start[k] + lengths[k])
-                shape = (int(total[k]), 3) if name in WIDE else (int(total[k]),)
-                ds = grp.create_dataset(name, shape=shape, dtype=DTYPES.get(name, np.float64))
+                shape = (int(total[k]),) + fd.shape
+                ds = grp.create_dataset(name, shape=shape, dtype=fd.dtype)
                 if b > a:
                     ds[a:b] = np.asarray(local[name]).reshape((b - a,) + shape[1:])
             if g == "particles" and os.environ.get(KILL_ENV) == str(_writes) and attrs.get("kind") == "checkpoint":
@@ -261,7 +288,7 @@ def _check_layout(f, path):
             if name not in f[g]:
                 return None, f"{path}: missing dataset /{g}/{name}"
             m = f[g][name].shape[0]
-            if (g == "contacts" and name == "count") or g == "wall":
+            if g != "particles" and state.FIELD[name].per == state.PARTICLE:
                 # aligned with the particle rows
                 if m != f["particles"]["id"].shape[0]:
                     return None, f"{path}: /{g}/{name} has {m} rows, /particles {f['particles']['id'].shape[0]}"
@@ -310,11 +337,9 @@ def read(path, net=None, pairs=False):
         try:
             n = f["particles"]["id"].shape[0]
             lo, hi = r * n // P, (r + 1) * n // P
-            for name in PARTICLE_FIELDS:
-                local[name] = f["particles"][name][lo:hi]
-            local["count"] = f["contacts"]["count"][lo:hi].astype(np.int64)
-            if "wall" in groups:
-                local["wall_ds"] = f["wall"]["wall_ds"][lo:hi]
+            for fd in state.stored(per=state.PARTICLE):
+                if fd.group in groups:
+                    local[fd.name] = f[fd.group][fd.name][lo:hi].astype(fd.array_dtype, copy=False)
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
         net.agree(err, StateFileError)
@@ -323,18 +348,18 @@ def read(path, net=None, pairs=False):
         try:
             a = int(before[:r].sum())
             b = a + int(before[r])
-            if b > f["contacts"]["partner"].shape[0]:
+            if b > f["contacts"][ROWS_OF["contacts"]].shape[0]:
                 raise OSError("contact counts exceed the slot datasets")
-            local["partner"] = f["contacts"]["partner"][a:b]
-            local["ds"] = f["contacts"]["ds"][a:b]
+            for fd in state.stored(per=state.CONTACT):
+                local[fd.name] = f[fd.group][fd.name][a:b]
             if pairs and "pairs" in groups:
-                m = f["pairs"]["id_i"].shape[0]
+                m = f["pairs"][ROWS_OF["pairs"]].shape[0]
                 for name in PAIR_FIELDS:
                     local[name] = f["pairs"][name][r * m // P:(r + 1) * m // P]
         except (OSError, KeyError, ValueError) as e:
             err = f"{path}: unreadable ({e}); the file is truncated or damaged"
         net.agree(err, StateFileError)
-    have = ["particles", "contacts"] + (["pairs"] if "id_i" in local else []) + (["wall"] if "wall_ds" in local else [])
+    have = present(local)
     sums = net.sum_u64([checksums(local)[g] for g in have])
     bad = [g for g, s in zip(have, sums) if int(s) != int(attrs[f"checksum_{g}"])]
     if bad:
@@ -344,11 +369,7 @@ def read(path, net=None, pairs=False):
 
 def sort_by_id(local):
     """Rows (with their contact slots and pairs) in ascending id order."""
-    from .state import select_contacts
-    order = np.argsort(local["id"], kind="stable")
-    out = {k: local[k][order] for k in PARTICLE_FIELDS + WALL_FIELDS if k in local}
-    out["count"], out["partner"], out["ds"] = select_contacts(local["count"], local["partner"],
-                                                              local["ds"], order)
+    out = state.select_rows(local, np.argsort(local["id"], kind="stable"))
     if "id_i" in local:
         po = np.lexsort((local["id_j"], local["id_i"]))
         out.update({k: local[k][po] for k in PAIR_FIELDS})

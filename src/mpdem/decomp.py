@@ -28,11 +28,10 @@ import math
 import numpy as np
 
 from .parallel import channel
-from .checkpoint import PARTICLE_FIELDS, WALL_FIELDS
-from .state import MOVE_FIELDS, select_contacts
+from .state import FIELDS, PARTICLE, State, concat_rows, select_rows
 
-# the per-particle arrays of a state-array dict (``checkpoint.read``); wall_ds only with the wall
-ROW_KEYS = PARTICLE_FIELDS + WALL_FIELDS
+# what travels with a particle that changes rank: per-particle fields, then per-contact ones
+MOVING = tuple(f for f in FIELDS if f.migrates)
 
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11
@@ -183,23 +182,22 @@ class Domain:
         n = state.n_own
         owner = self.owner_of(state.x[:n, 2])
         leave = owner != self.rank
-        layout = _row_layout(state)
         counts = np.zeros((self.size, 2), np.int64)
         sends = {}
         if leave.any():
             rows = np.flatnonzero(leave)
             for r in np.unique(owner[rows]):
                 part = state.take(rows[owner[rows] == r])
-                counts[r] = len(part["ids"]), len(part["slot_id"])
-                sends[int(r)] = list(_pack(part, layout))
+                counts[r] = len(part["id"]), int(part["count"].sum())
+                sends[int(r)] = list(_pack(part))
         got = self.net.alltoall_counts(counts)
-        recvs = {s: list(_empty_packed(m, slots, layout)) for s, (m, slots) in enumerate(got) if m}
+        recvs = {s: list(_empty_packed(m, slots)) for s, (m, slots) in enumerate(got) if m}
         self.net.exchange(sends, recvs, TAG_MIGRATE)
         keep = np.flatnonzero(~leave)
         if len(keep) != n:
             state.keep(keep)
         # arrivals in ascending rank order of their senders (the order changes no result)
-        parts = [_unpack(*recvs[s], got[s, 0], layout) for s in sorted(recvs)]
+        parts = [_unpack(*recvs[s], *got[s]) for s in sorted(recvs)]
         self.n_migrated += state.append(parts)
 
     def reach(self):
@@ -247,8 +245,8 @@ class Domain:
         if k > state.capacity:
             state.grow(rows=int(k * 1.2) + 16)
         # ids and fixed flags straight into the ghost rows
-        self.net.exchange({r: [state.ids[rows], state.fixed[rows]] for r, rows in send.items()},
-                          {s: [state.ids[a:a + m], state.fixed[a:a + m]] for s, (a, m) in recv.items()},
+        self.net.exchange({r: [state.id[rows], state.fixed[rows]] for r, rows in send.items()},
+                          {s: [state.id[a:a + m], state.fixed[a:a + m]] for s, (a, m) in recv.items()},
                           TAG_HALO_ROWS)
         state.n_rows = k
         self._plan = self.net.ghost_plan(send, recv)
@@ -287,93 +285,75 @@ class Domain:
 
 def merge_sorted(parts):
     """Concatenate id-sorted state arrays of several ranks into one id-sorted set."""
-    ids = np.concatenate([p["id"] for p in parts])
-    order = np.argsort(ids, kind="stable")
-    out = {k: np.concatenate([p[k] for p in parts])[order] for k in ROW_KEYS if k in parts[0]}
-    counts = np.concatenate([p["count"] for p in parts])
-    partner = np.concatenate([p["partner"] for p in parts])
-    ds = np.concatenate([np.asarray(p["ds"]).reshape(-1, 3) for p in parts])
-    out["count"], out["partner"], out["ds"] = select_contacts(counts, partner, ds, order)
-    return out
+    a = concat_rows(parts)
+    return select_rows(a, np.argsort(a["id"], kind="stable"))
 
 
 def _subset(a, rows):
     """Rows of a state-array dict, with their contact slots."""
-    out = {k: a[k][rows] for k in ROW_KEYS if k in a}
-    out["count"], out["partner"], out["ds"] = select_contacts(a["count"], a["partner"], a["ds"], rows)
-    return out
+    return select_rows(a, rows)
 
 
 def _local_state(a, rows, L_x, L_y):
     """A State of the given rows of a state-array dict (forces and slots if present)."""
-    from .state import State
-    st = State(a["id"][rows], a["x"][rows], a["v"][rows], a["omega"][rows], a["fixed"][rows],
-               L_x, L_y, capacity=int(1.1 * len(rows)) + 64)
-    for k in ("f", "torque", "wall_ds"):
-        if k in a:
-            getattr(st, k)[:len(rows)] = a[k][rows]
-    if "count" in a:
-        st.set_contacts(*select_contacts(a["count"], a["partner"], a["ds"], rows))
-    return st
+    return State.from_arrays(select_rows(a, rows), L_x, L_y, capacity=int(1.1 * len(rows)) + 64)
 
 
-def _row_layout(state):
-    """How ``MOVE_FIELDS`` travel: [(name, float?, columns, row shape, dtype)].
-
-    Float fields go as float64 columns, the others as int64 columns; the
-    receiver reads the same layout from its own state.
-    """
-    out = []
-    for f in MOVE_FIELDS:
-        a = getattr(state, f)
-        out.append((f, a.dtype.kind == "f", int(np.prod(a.shape[1:], dtype=np.int64)), a.shape[1:], a.dtype))
-    return out
+def _columns(part, fields, n, dtype):
+    """The fields' columns side by side: (n, total width) of ``dtype``."""
+    if not fields:
+        return np.zeros((n, 0), dtype)
+    return np.hstack([np.asarray(part[f.name]).reshape(n, f.width).astype(dtype, copy=False) for f in fields])
 
 
-def _widths(layout):
-    """float64 and int64 columns per row (the int columns end with the slot count)."""
-    wf = sum(w for _, isf, w, _, _ in layout if isf)
-    return wf, sum(w for _, isf, w, _, _ in layout if not isf) + 1
+def _split(fields):
+    """(per-particle float, per-particle other, per-contact float, per-contact other) fields."""
+    def isf(f):
+        return np.dtype(f.dtype).kind == "f"
+    rows = [f for f in fields if f.per == PARTICLE]
+    slots = [f for f in fields if f.per != PARTICLE]
+    return ([f for f in rows if isf(f)], [f for f in rows if not isf(f)],
+            [f for f in slots if isf(f)], [f for f in slots if not isf(f)])
 
 
-def _pack(part, layout):
+def _widths():
+    """float64 and int64 columns per particle row and per contact slot: (wf, wi, cf, ci)."""
+    return tuple(sum(f.width for f in group) for group in _split(MOVING))
+
+
+def _pack(part):
     """A ``State.take`` dict as two flat arrays.
 
     Returns
     -------
-    floats : (m * wf + 3 M,) float64
-        The float fields row by row, then ``slot_ds``.
-    ints : (m * wi + M,) int64
-        The other fields and ``slot_n`` row by row, then ``slot_id``.
+    floats : (m * wf + M * cf,) float64
+        The float fields (``MOVING``) of the particles row by row, then those of the slots.
+    ints : (m * wi + M * ci,) int64
+        The other fields (as int64) likewise.
     """
-    m = len(part["ids"])
-    fcols = [part[f].reshape(m, w) for f, isf, w, _, _ in layout if isf]
-    icols = [part[f].reshape(m, w) for f, isf, w, _, _ in layout if not isf] + [part["slot_n"].reshape(m, 1)]
-    floats = np.concatenate([np.hstack(fcols).ravel(), np.asarray(part["slot_ds"], np.float64).ravel()])
-    ints = np.concatenate([np.hstack(icols).astype(np.int64).ravel(), np.asarray(part["slot_id"], np.int64)])
+    m, M = len(part["id"]), int(np.sum(part["count"]))
+    rf, ri, sf, si = _split(MOVING)
+    floats = np.concatenate([_columns(part, rf, m, np.float64).ravel(), _columns(part, sf, M, np.float64).ravel()])
+    ints = np.concatenate([_columns(part, ri, m, np.int64).ravel(), _columns(part, si, M, np.int64).ravel()])
     return floats, ints
 
 
-def _empty_packed(m, slots, layout):
+def _empty_packed(m, slots):
     """Receive arrays for ``m`` packed rows with ``slots`` contact slots in all."""
-    wf, wi = _widths(layout)
-    return np.empty(m * wf + 3 * slots), np.empty(m * wi + slots, np.int64)
+    wf, wi, cf, ci = _widths()
+    return np.empty(m * wf + slots * cf), np.empty(m * wi + slots * ci, np.int64)
 
 
-def _unpack(floats, ints, m, layout):
-    """The ``State.append`` dict of ``m`` rows packed by ``_pack``."""
-    m = int(m)
-    wf, wi = _widths(layout)
-    fb, ib = floats[:m * wf].reshape(m, wf), ints[:m * wi].reshape(m, wi)
-    part, cf, ci = {}, 0, 0
-    for f, isf, w, shape, dtype in layout:
-        if isf:
-            part[f] = fb[:, cf:cf + w].astype(dtype).reshape((m,) + shape)
-            cf += w
-        else:
-            part[f] = ib[:, ci:ci + w].astype(dtype).reshape((m,) + shape)
-            ci += w
-    part["slot_n"] = ib[:, ci].copy()
-    part["slot_id"] = ints[m * wi:]
-    part["slot_ds"] = floats[m * wf:].reshape(-1, 3)
+def _unpack(floats, ints, m, slots):
+    """The ``State.append`` dict of ``m`` rows with ``slots`` contact slots, packed by ``_pack``."""
+    m, M = int(m), int(slots)
+    wf, wi, cf, ci = _widths()
+    part = {}
+    for (fields, flat, n, w, at) in zip(_split(MOVING), (floats, ints, floats, ints), (m, m, M, M), (wf, wi, cf, ci),
+                                        (0, 0, m * wf, m * wi)):
+        block = flat[at:at + n * w].reshape(n, w)
+        c = 0
+        for f in fields:
+            part[f.name] = block[:, c:c + f.width].astype(f.array_dtype).reshape((n,) + f.shape)
+            c += f.width
     return part

@@ -142,20 +142,18 @@ class Engine:
         # made (forces() takes them back), so the peak memory holds the history once
         self.pair = np.zeros((0, 6))
         n = s.n_own
-        total = history.count_contacts(n, self.nbr_start, self.link, self.stamp, self._epoch, s.slot_n,
+        total = history.count_contacts(n, self.nbr_start, self.link, self.stamp, self._epoch, s.count,
                                        self.nchunk)
         start = s.slot_offsets()
-        slot_id = np.empty(total, np.int64)
-        slot_ds = np.empty((total, 3))
-        history.entries_to_slots(n, s.ids, self.nbr_start, self.nbr_list, self.link, self.hist, self.stamp,
-                                 self._epoch, start, slot_id, slot_ds, self.nchunk)
-        s.slot_id, s.slot_ds = slot_id, slot_ds
+        s.alloc_slots(total)
+        history.entries_to_slots(n, s.id, self.nbr_start, self.nbr_list, self.link, self.hist, self.stamp,
+                                 self._epoch, start, s.partner, s.ds, self.nchunk)
         s.slots_current = True
 
     def _unpack_slots(self):
         s = self.state
-        history.slots_to_entries(s.n_own, s.ids, self.nbr_start, self.nbr_list, self.link, s.slot_offsets(),
-                                 s.slot_id, s.slot_ds, self.hist, self.stamp, self._epoch, self.nchunk)
+        history.slots_to_entries(s.n_own, s.id, self.nbr_start, self.nbr_list, self.link, s.slot_offsets(),
+                                 s.partner, s.ds, self.hist, self.stamp, self._epoch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
@@ -177,11 +175,11 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
+        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, s.L_x, s.L_y,
                                 self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
         if need > len(self.nbr_list):
             self._alloc_lists(int(need * 1.1) + 64)
-            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.ids, s.L_x, s.L_y,
+            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, s.L_x, s.L_y,
                              self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
         if longest > self._width:
@@ -202,7 +200,7 @@ class Engine:
         s = self.state
         if len(self.comp_start) < s.n_own + 1:
             self.comp_start = np.zeros(s.capacity + 1, np.int64)
-        args = (s.n_own, s.fixed, s.ids, self.nbr_start, self.nbr_list, self.nchunk, self.link, self.comp_start)
+        args = (s.n_own, s.fixed, s.id, self.nbr_start, self.nbr_list, self.nchunk, self.link, self.comp_start)
         k = int(link_entries(*args, self.comp_list))
         if k > len(self.comp_list):
             self.comp_list = np.zeros(int(k * 1.1) + 64, np.int32)
@@ -269,7 +267,7 @@ class Engine:
         set-up's rebuild is not counted).
         """
         s = self.state
-        self._contacts = int(s.slot_n[:s.n_own][s.fixed[:s.n_own] == 0].sum())
+        self._contacts = int(s.count[:s.n_own][s.fixed[:s.n_own] == 0].sum())
         self.rebuild()
         self.n_rebuilds = n_rebuilds
         self.last_overlap = max_overlap

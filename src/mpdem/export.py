@@ -19,14 +19,13 @@ import numpy as np
 from . import checkpoint
 from .kernels.forces import R      # particle radius [d]
 from .rundir import write_atomic
+from .state import FIELDS, PARTICLE
 
 # XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads
 # "UInt" as 32-bit whatever its Precision, so one unsigned byte is "UChar".
 XDMF_TYPES = {"f8": ("Float", "8"), "i8": ("Int", "8"), "i4": ("Int", "4"), "u1": ("UChar", "1")}
-# node attributes of the XDMF grid: name -> dataset (all aligned with /particles)
-XDMF_ATTRIBUTES = {"id": "particles/id", "fixed": "particles/fixed", "v": "particles/v",
-                   "omega": "particles/omega", "f": "particles/f", "torque": "particles/torque",
-                   "contacts": "contacts/count"}
+# node attributes of the XDMF grid: name -> dataset (the exported per-particle fields of the registry)
+XDMF_ATTRIBUTES = {f.exported: f"{f.group}/{f.name}" for f in FIELDS if f.exported and f.per == PARTICLE}
 
 
 # -- XDMF --

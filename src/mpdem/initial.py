@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import build, checkpoint, lammps
+from . import build, checkpoint, lammps, state
 
 
 @dataclass
@@ -41,9 +41,10 @@ class Initial:
     Attributes
     ----------
     whole : dict of arrays
-        ``Domain.scatter``'s input: id (N,), x, v, omega (N, 3), fixed (N,)
-        uint8; with contact slots count, partner, ds from a state file, and
-        wall_ds (N, 3) when it has them and the run has the wall.
+        ``Domain.scatter``'s input, a state-array dict: the ``state.INITIAL``
+        fields id (N,), x, v, omega (N, 3), fixed (N,) uint8; from a state
+        file also its contact history (``Field.history``: count, partner, ds,
+        and wall_ds (N, 3) when it has them and the run has the wall).
     pile : Pile
     n_mobile, n_bed : int
     """
@@ -71,16 +72,14 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
 
     Returns
     -------
-    dict with ids (N,) int64, x, v, omega (N, 3) float64, fixed (N,) uint8,
-    slots (count, partner, ds) of a state file or None, wall_ds (N, 3) or None.
+    A state-array dict: id (N,) int64, x, v, omega (N, 3) float64, fixed (N,)
+    uint8 (``state.INITIAL``); from a state file also the contact history it
+    has (``Field.history``: count, partner, ds, wall_ds).
     """
-    slots = wall_ds = None
     if not os.path.exists(path):
         raise build.InputError(f"initial file {path}: no such file")
     if checkpoint.is_state_file(path):
-        a, _ = checkpoint.read_state(path)
-        t = {"ids": a["id"], "x": a["x"], "v": a["v"], "omega": a["omega"], "fixed": a["fixed"]}
-        slots, wall_ds = (a["count"], a["partner"], a["ds"]), a.get("wall_ds")
+        t, _ = checkpoint.read_state(path)
     elif lammps.kind(path):
         t = lammps_table
         if t is None or all_fixed:
@@ -90,14 +89,13 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
             f"read {path}: {t['note']}; {int(t['fixed'].sum())} bed spheres (types {list(cfg.run.fixed_types)})")
     else:
         t = build.read_table(path)
-    out = {k: t[k] for k in ("ids", "x", "v", "omega", "fixed")}
+    out = {f.name: t[f.name] for f in state.FIELDS if (f.initial or f.history) and f.name in t}
     if all_fixed:
-        out["fixed"] = np.ones(len(out["ids"]), np.uint8)
+        out["fixed"] = np.ones(len(out["id"]), np.uint8)
     elif len(out["fixed"]) and np.all(out["fixed"] == 1):
         how = f"of types {list(cfg.run.fixed_types)}" if lammps.kind(path) else "fixed = 1"
         raise build.InputError(f"initial file {path}: no mobile sphere: all {len(out['fixed'])} are bed "
                                f"spheres ({how})")
-    out["slots"], out["wall_ds"] = slots, wall_ds
     return out
 
 
@@ -129,9 +127,8 @@ def pour(cfg, b, log):
     vm = build.initial_velocities(build.rng(cfg.run.seed, build.STREAM_VELOCITY), N, cfg.pour.K0)
     nb = len(b.x)
     x = np.concatenate([xm, b.x])
-    return {"ids": np.arange(N + nb, dtype=np.int64), "x": x, "v": np.concatenate([vm, np.zeros((nb, 3))]),
-            "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)]),
-            "slots": None, "wall_ds": None}, H
+    return {"id": np.arange(N + nb, dtype=np.int64), "x": x, "v": np.concatenate([vm, np.zeros((nb, 3))]),
+            "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)])}, H
 
 
 def initial_state(cfg, net, log, lammps_table=None):
@@ -166,13 +163,10 @@ def initial_state(cfg, net, log, lammps_table=None):
         fixed, x = p["fixed"], p["x"]
         z_bed = b.z_top
         z_floor = z_bed + 0.5
-    build.check_initial(p["ids"], x, fixed, L_x, L_y, z_floor, allow_overlap=p["slots"] is not None,
+    build.check_initial(p["id"], x, fixed, L_x, L_y, z_floor, allow_overlap="count" in p,
                         overlap_warn=cfg.checks.overlap_warn, warn=log.warn, wall=cfg.bed.wall)
-    whole = {"id": p["ids"], "x": x, "v": p["v"], "omega": p["omega"], "fixed": fixed}
-    if cfg.bed.wall and p["wall_ds"] is not None:
-        whole["wall_ds"] = p["wall_ds"]
-    if p["slots"] is not None:
-        whole.update(zip(("count", "partner", "ds"), p["slots"]))
+    # the fields of this run: without the wall, a state file's wall histories are left out
+    whole = {k: a for k, a in p.items() if state.optional_in(state.FIELD[k], {"wall": cfg.bed.wall})}
     n_bed = len(b.x)
     pile = Pile(z_bed=z_bed, z_bed_mean=b.z_mean if n_bed else -math.inf, h_insert=h_insert)
     return Initial(whole, pile, n_mobile=int((fixed == 0).sum()), n_bed=n_bed)

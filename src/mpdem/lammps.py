@@ -74,7 +74,7 @@ def read(path, fixed_types, what="run.initial_file"):
 
     Returns
     -------
-    dict with ids (N,) int64, x (N, 3) [d] in [0, L_x) x [0, L_y) x R,
+    dict with id (N,) int64, x (N, 3) [d] in [0, L_x) x [0, L_y) x R,
     v (N, 3) [sqrt(g d)], omega (N, 3) [sqrt(g/d)] (zero if the file has
     none), fixed (N,) uint8, types (N,) int64, L_x, L_y [d], kind, note.
     """
@@ -191,7 +191,7 @@ def _read_data(path):
     if len(atoms) != n:
         raise InputError(f"{path}: the header says {n} atoms, the Atoms section has {len(atoms)}")
     ids = atoms[:, 0] - (1 if ID_SHIFT_NOTE in lines[0] else 0)
-    out = {"ids": ids, "types": atoms[:, 1], "diameter": atoms[:, 2], "kind": "data",
+    out = {"id": ids, "types": atoms[:, 1], "diameter": atoms[:, 2], "kind": "data",
            "mass": 4.0 * math.pi / 3.0 * (0.5 * atoms[:, 2]) ** 3 * atoms[:, 3],
            "x": atoms[:, 4:7].copy(), "box": box, "periodic": (True, True),
            "note": "LAMMPS data file, atom_style sphere"}
@@ -256,7 +256,7 @@ def _read_dump(path):
             x[:, a] = lo + col[axis + "s"] * (hi - lo)
         else:
             raise InputError(f"{path}: no {axis} (or {axis}u, {axis}s) column in ITEM: ATOMS {' '.join(cols)}")
-    out = {"ids": col["id"], "types": col["type"], "x": x, "box": box, "kind": "dump",
+    out = {"id": col["id"], "types": col["type"], "x": x, "box": box, "kind": "dump",
            "periodic": tuple(f.startswith("p") for f in flags[:2]) if len(flags) >= 2 else (True, True),
            "note": f"LAMMPS text dump, step {step}" + (f" (the last of {len(starts)} snapshots)"
                                                        if len(starts) > 1 else "")}
@@ -277,10 +277,10 @@ def _read_dump(path):
 
 def _to_mpdem(raw, fixed_types, path, what):
     """Check a LAMMPS particle set against mpdem's model and put it in mpdem's frame."""
-    n = len(raw["ids"])
+    n = len(raw["id"])
     if not np.all(np.isfinite(raw["x"])):
         raise InputError(f"{path}: non-finite positions")
-    ids, types = particle_ids(raw["ids"], path), raw["types"]
+    ids, types = particle_ids(raw["id"], path), raw["types"]
     if np.any(types != np.round(types)):
         raise InputError(f"{path}: atom types must be integers")
     types = types.astype(np.int64)
@@ -313,7 +313,7 @@ def _to_mpdem(raw, fixed_types, path, what):
         x[:, a] %= length
         # -tiny % L rounds to L
         x[x[:, a] >= length, a] = 0.0
-    return {"ids": ids, "types": types, "x": x,
+    return {"id": ids, "types": types, "x": x,
             "v": raw.get("v", np.zeros((n, 3))), "omega": raw.get("omega", np.zeros((n, 3))),
             "fixed": np.isin(types, np.asarray(fixed_types, np.int64)).astype(np.uint8),
             "L_x": float(L_x), "L_y": float(L_y), "kind": raw["kind"],

@@ -32,7 +32,7 @@ def contact_pairs(state, phys):
     """
     s, n, m = state, state.n_own, state.n_rows
     counts, jid, ds, order_own = s.contacts_flat()
-    ids = s.ids[:m]
+    ids = s.id[:m]
     i = np.repeat(order_own, counts)
     order = np.argsort(ids, kind="stable")
     j = order[np.searchsorted(ids[order], jid)]
