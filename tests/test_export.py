@@ -37,8 +37,11 @@ def write_state(path, time=0.123456789, step=1234, n=50, seed=0):
 
 
 def data_items(xmf):
-    """(HDF5 file, dataset, DataItem) for every DataItem of an XDMF file."""
+    """(HDF5 file, dataset, DataItem) for every DataItem of an XDMF file that points into HDF5 (all but
+    the inline radius)."""
     for item in ET.parse(xmf).getroot().iter("DataItem"):
+        if item.get("Format") == "XML":
+            continue
         assert item.get("Format") == "HDF"
         fname, dset = item.text.strip().split(":")
         yield fname, dset, item
@@ -58,7 +61,11 @@ def test_xdmf_sidecar_matches_the_datasets(tmp_path):
     geo = grid.find("Geometry")
     assert geo.get("GeometryType") == "XYZ" and geo.find("DataItem").text.strip() == "snap.h5:/particles/x"
     kinds = {att.get("Name"): (att.get("AttributeType"), att.find("DataItem").text.strip().split(":")[1])
-             for att in grid.findall("Attribute")}
+             for att in grid.findall("Attribute") if att.find("DataItem").get("Format") == "HDF"}
+    # the radius a viewer scales by: inline, one 0.5 per sphere
+    radius = [att.find("DataItem") for att in grid.findall("Attribute") if att.get("Name") == "radius"]
+    assert len(radius) == 1 and radius[0].get("Format") == "XML" and radius[0].get("Dimensions") == "50"
+    assert np.array_equal(np.array(radius[0].text.split(), float), np.full(50, 0.5))
     for name, kind in (("id", "Scalar"), ("fixed", "Scalar"), ("v", "Vector"), ("omega", "Vector"), ("f", "Vector")):
         assert kinds[name] == (kind, f"/particles/{name}")
     seen = set()
@@ -88,6 +95,9 @@ def test_xdmf_series_is_in_time_order(tmp_path):
     for g, name, n in zip(grids, "bca", (11, 12, 10)):
         assert g.find("Topology").get("NumberOfElements") == str(n)
         for item in g.iter("DataItem"):
+            if item.get("Format") == "XML":      # the inline radius: one per sphere of this file
+                assert item.get("Dimensions") == str(n) and len(item.text.split()) == n
+                continue
             fname, dset = item.text.strip().split(":")
             target = os.path.normpath(out.parent / fname)
             assert target == str(tmp_path / f"{name}.h5")

@@ -66,7 +66,18 @@ def _grid(h5_path, xmf_dir):
             ds = f[path]
             ET.SubElement(grid, "Attribute", Name=name, Center="Node",
                           AttributeType="Vector" if ds.ndim == 2 else "Scalar").append(_data_item(ds, ref))
+        ET.SubElement(grid, "Attribute", Name="radius", Center="Node",
+                      AttributeType="Scalar").append(_radius_item(x.shape[0]))
     return time, step, grid
+
+
+def _radius_item(n):
+    """An inline (XML) DataItem of n radii R: the state file has no radius dataset (every sphere has
+    d = 1), and a viewer's Point Gaussian or Glyph scales by an array. 4 bytes per sphere of sidecar."""
+    item = ET.Element("DataItem", Dimensions=str(n), NumberType="Float", Precision="8", Format="XML")
+    row = " ".join([repr(R)] * 32)
+    item.text = "\n".join([row] * (n // 32) + ([" ".join([repr(R)] * (n % 32))] if n % 32 else []))
+    return item
 
 
 def _write_xdmf_doc(path, grid):
@@ -84,13 +95,15 @@ def write_xdmf(h5_path):
     geometry XYZ from ``/particles/x`` (n, 3) [d]; node attributes ``id``
     (n,) int64, ``fixed`` (n,) uint8 (1 for bed), ``v`` (n, 3) [sqrt(g d)],
     ``omega`` (n, 3) [sqrt(g/d)], ``f`` (n, 3) [m g], ``torque`` (n, 3)
-    [m g d] and ``contacts`` (n,) int32 (contact slots per particle); the
-    grid's Time is the file's ``time``. Datasets are referenced through the
-    HDF5 file's base name, so the two files can be moved together.
+    [m g d] and ``contacts`` (n,) int32 (contact slots per particle), and
+    ``radius`` (n,) float64 [d], inline in the sidecar (0.5 for every sphere;
+    the state file has no radius dataset); the grid's Time is the file's
+    ``time``. Datasets are referenced through the HDF5 file's base name, so
+    the two files can be moved together.
 
-    There is no diameter dataset (every sphere has d = 1): in ParaView show
-    the points with the Point Gaussian representation, Gaussian radius 0.5
-    (or a Glyph filter with sphere radius 0.5, scale off).
+    In ParaView: the Point Gaussian representation with "Scale by array"
+    ``radius`` (scale 1), or a Glyph filter of spheres scaled by ``radius``
+    (sphere radius 1).
 
     Parameters
     ----------
