@@ -219,6 +219,19 @@ def test_snapshots_on_schedule_and_info(tmp_path, capsys):
     assert attrs["kind"] == "snapshot" and attrs["step"] == 20000 and len(a["id_i"]) > 0
     assert (out / "snapshots" / "snap-00000.xmf").exists() and (out / "snapshots" / "series.xmf").exists()
     assert (out / "final.xmf").exists()
+    # the contact network beside every snapshot and the final state, and in the series as a second collection
+    import h5py
+    import xml.etree.ElementTree as ET
+    for stem in (out / "snapshots" / "snap-00000", out / "snapshots" / "snap-00001", out / "final"):
+        with h5py.File(f"{stem}.contacts.h5") as f:
+            pairs, _ = checkpoint.read_state(f"{stem}.h5", pairs=True)
+            P = len(pairs["id_i"])
+            assert int(f.attrs["n_contacts"]) == P and f["cells/F_n"].shape == (2 * P,)
+        assert ET.parse(f"{stem}.contacts.xmf").getroot().find("Domain/Grid/Topology").get("TopologyType") == "Polyline"
+    cols = ET.parse(out / "snapshots" / "series.xmf").getroot().findall("Domain/Grid")
+    assert [c.get("Name") for c in cols] == ["series", "contacts"]
+    assert [g.get("Name") for g in cols[1].findall("Grid")] == ["snap-00000.contacts", "snap-00001.contacts"]
+    assert [g.find("Time").get("Value") for g in cols[1]] == [g.find("Time").get("Value") for g in cols[0]]
     capsys.readouterr()
     assert main(["info", str(out / "final.h5")]) == 0
     text = capsys.readouterr().out

@@ -80,10 +80,10 @@ def _radius_item(n):
     return item
 
 
-def _write_xdmf_doc(path, grid):
-    """Wrap a grid in an XDMF 3 document and write it atomically."""
+def _write_xdmf_doc(path, *grids):
+    """Wrap grids in an XDMF 3 document and write it atomically."""
     root = ET.Element("Xdmf", Version="3.0")
-    ET.SubElement(root, "Domain").append(grid)
+    ET.SubElement(root, "Domain").extend(grids)
     ET.indent(root)
     write_atomic(path, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
 
@@ -123,7 +123,10 @@ def write_xdmf_series(paths, out_path):
     """Write one XDMF 3 temporal collection of several state files.
 
     Each snapshot's grid (as in ``write_xdmf``) is inlined, sorted by time
-    (then step), with dataset paths relative to ``out_path``'s directory, so
+    (then step); where a state has its contact network beside it
+    (``<name>.contacts.h5``, ``network.write_contacts_xdmf``), those grids
+    form a second temporal collection, ``contacts``. Dataset paths are
+    relative to ``out_path``'s directory, so
     the series file may live anywhere as long as the files keep their
     relative places. (Inlining rather than xi:include: readers resolve the
     HDF5 paths of an included file against the including file.)
@@ -139,12 +142,21 @@ def write_xdmf_series(paths, out_path):
     -------
     str : ``out_path``
     """
+    from .network import contacts_grid, contacts_path
     xmf_dir = os.path.dirname(os.path.abspath(out_path))
     h5s = [os.path.splitext(p)[0] + ".h5" if p.endswith(".xmf") else p for p in map(str, paths)]
     grids = sorted((_grid(p, xmf_dir) for p in h5s), key=lambda g: g[:2])
     series = ET.Element("Grid", Name="series", GridType="Collection", CollectionType="Temporal")
     series.extend(g for _, _, g in grids)
-    _write_xdmf_doc(out_path, series)
+    # the contact networks written beside the states (Snapshots), as a second temporal collection
+    nets = sorted((contacts_grid(contacts_path(p), xmf_dir) for p in h5s if os.path.exists(contacts_path(p))),
+                  key=lambda g: g[:2])
+    if not nets:
+        _write_xdmf_doc(out_path, series)
+        return out_path
+    contacts = ET.Element("Grid", Name="contacts", GridType="Collection", CollectionType="Temporal")
+    contacts.extend(g for _, _, g in nets)
+    _write_xdmf_doc(out_path, series, contacts)
     return out_path
 
 

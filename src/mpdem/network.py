@@ -31,6 +31,10 @@ from .kernels.pairdist import separations
 from .rundir import write_atomic
 
 
+# the cell data of a contact (both half-lines carry it)
+CELL_DATA = ("F_n", "F_t", "zeta", "delta", "id_i", "id_j")
+
+
 def contact_table(path):
     """The contacts of a state file with geometry and forces.
 
@@ -89,8 +93,7 @@ def write_contacts_xdmf(path, out=None):
     pts = np.empty((4 * P, 3))
     pts[0::4], pts[1::4], pts[2::4], pts[3::4] = t["x_i"], t["x_i"] - half, t["x_j"], t["x_j"] + half
     conn = np.arange(4 * P, dtype=np.int64).reshape(2 * P, 2)
-    cells = {"F_n": t["F_n"], "F_t": t["ft"], "zeta": t["zeta"], "delta": t["delta"],
-             "id_i": t["id_i"], "id_j": t["id_j"]}
+    cells = dict(zip(CELL_DATA, (t["F_n"], t["ft"], t["zeta"], t["delta"], t["id_i"], t["id_j"])))
     n_cross = int(crossing(t, float(attrs["L_x"]), float(attrs["L_y"])).sum())
     tmp = h5 + ".tmp"
     with h5py.File(tmp, "w") as f:
@@ -100,26 +103,50 @@ def write_contacts_xdmf(path, out=None):
         f.attrs.update(source=os.path.basename(path), step=int(attrs["step"]), time=float(attrs["time"]),
                        n_contacts=P, n_crossing=n_cross)
     os.replace(tmp, h5)
-    ref = os.path.basename(h5)
     root = ET.Element("Xdmf", Version="3.0")
     dom = ET.SubElement(root, "Domain")
     ET.SubElement(dom, "Information", Name="contacts",
                   Value=f"{P} contacts of {os.path.basename(path)} as {2 * P} half-lines (centre to contact "
                         f"point); {n_cross} cross a periodic face and show as a half-line at each")
-    grid = ET.SubElement(dom, "Grid", Name=os.path.basename(stem), GridType="Uniform")
-    ET.SubElement(grid, "Time", Value=repr(float(attrs["time"])))
+    dom.append(contacts_grid(h5, os.path.dirname(os.path.abspath(xmf)))[2])
+    ET.indent(root)
+    write_atomic(xmf, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
+    return xmf
+
+
+def contacts_path(path):
+    """The contact network file ``<name>.contacts.h5`` that belongs to state file ``<name>.h5``."""
+    return os.path.splitext(path)[0] + ".contacts.h5"
+
+
+def contacts_grid(h5, xmf_dir):
+    """The Polyline grid of a contact network file (``write_contacts_xdmf``'s .h5).
+
+    Parameters
+    ----------
+    h5 : str
+    xmf_dir : str
+        Directory of the XDMF file the grid goes in; dataset paths are relative to it.
+
+    Returns
+    -------
+    (time, step, grid) : float, int, Element
+    """
+    ref = os.path.relpath(os.path.abspath(h5), xmf_dir)
+    with h5py.File(h5, "r") as f:
+        time, step, P = float(f.attrs["time"]), int(f.attrs["step"]), int(f.attrs["n_contacts"])
+        kinds = {k: ("Int", "8") if f[f"cells/{k}"].dtype.kind in "iu" else ("Float", "8") for k in f["cells"]}
+    grid = ET.Element("Grid", Name=os.path.splitext(os.path.basename(h5))[0], GridType="Uniform")
+    ET.SubElement(grid, "Time", Value=repr(time))
     topo = ET.SubElement(grid, "Topology", TopologyType="Polyline", NumberOfElements=str(2 * P),
                          NodesPerElement="2")
     topo.append(_item(f"{ref}:/connectivity", (2 * P, 2), "Int", "8"))
     geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
     geo.append(_item(f"{ref}:/points", (4 * P, 3), "Float", "8"))
-    for k, v in cells.items():
-        kind, prec = ("Int", "8") if np.asarray(v).dtype.kind in "iu" else ("Float", "8")
+    for k in CELL_DATA:
         att = ET.SubElement(grid, "Attribute", Name=k, Center="Cell", AttributeType="Scalar")
-        att.append(_item(f"{ref}:/cells/{k}", (2 * P,), kind, prec))
-    ET.indent(root)
-    write_atomic(xmf, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
-    return xmf
+        att.append(_item(f"{ref}:/cells/{k}", (2 * P,), *kinds[k]))
+    return time, step, grid
 
 
 def _item(text, dims, kind, precision):
