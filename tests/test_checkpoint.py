@@ -238,3 +238,18 @@ def test_snapshots_on_schedule_and_info(tmp_path, capsys):
     assert "kind final" in text and "step 20000" in text and "contact list:" in text and "mu 0.5" in text
     assert main(["export", str(out / "final.h5"), "--format", "xyz"]) == 0
     assert (out / "final.xyz").read_text().splitlines()[0].strip() == str(attrs["n"])
+
+
+def test_info_into_a_closed_pipe_stops_quietly():
+    """`mpdem info FILE | head -1`: the reader leaves after one line; no traceback, exit 0."""
+    import subprocess
+    import sys
+    from helpers import child_env
+    src = os.path.join(os.path.dirname(__file__), "data", "state_v2.h5")
+    p = subprocess.run(f"'{sys.executable}' -m mpdem info '{src}' | head -c 10", shell=True, capture_output=True,
+                       text=True, env=child_env(), timeout=120, executable="/bin/bash")
+    assert len(p.stdout) == 10 and p.stderr == "", p.stderr
+    p = subprocess.run(f"set -o pipefail; '{sys.executable}' -m mpdem info '{src}' | head -c 10 >/dev/null",
+                       shell=True, capture_output=True, text=True, env=child_env(), timeout=120,
+                       executable="/bin/bash")
+    assert p.returncode == 0, p.stderr

@@ -406,6 +406,10 @@ def _main(argv):
         sys.exit(EXIT_ERROR)
     except (MpdemError, NotImplementedError) as e:
         _fail(net, f"mpdem: error: {e}")
+    except BrokenPipeError:
+        # the reader of the output went away (`mpdem info FILE | head`): stop quietly, as text tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
     except KeyboardInterrupt:
         _fail(net, "mpdem: interrupted")
     except Exception:
