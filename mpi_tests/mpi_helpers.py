@@ -18,8 +18,7 @@ def shared_dir(comm):
 
 
 def run(cfg, out, comm):
-    r = Run(cfg, out, comm, quiet=True)
-    r.prepare()
+    r = Run.new(cfg, out, comm, quiet=True)
     r.run()
     return r, r.finish()
 

@@ -56,8 +56,7 @@ def test_particles_and_contacts_are_conserved(comm):
 def test_ghosts_equal_a_brute_force_search(comm):
     cfg = config.load(None, PILE + ["run.max_steps=5000"])
     base = shared_dir(comm)
-    r = Run(cfg, os.path.join(base, "g"), comm, quiet=True)
-    r.prepare()
+    r = Run.new(cfg, os.path.join(base, "g"), comm, quiet=True)
     r.run()
     r.engine.rebuild()
     st, dom = r.state, r.domain
@@ -170,8 +169,7 @@ def test_a_rank_that_owns_nothing(comm):
     """Bounds pushed so that rank 0 owns nothing for a while: same digest."""
     cfg = config.load(None, PILE + ["run.max_steps=3000", "decomp.balance_tolerance=100.0"])
     base = shared_dir(comm)
-    r = Run(cfg, os.path.join(base, "e"), comm, quiet=True)
-    r.prepare()
+    r = Run.new(cfg, os.path.join(base, "e"), comm, quiet=True)
     if comm.Get_size() > 1:
         # move everything away from rank 0's slab; migration at the first rebuild follows
         r.domain.bounds[1] = -1e9

@@ -40,8 +40,7 @@ def test_run_from_a_settled_table_warns_once(tmp_path):
     settled_table(tmp_path / "settled.txt")
     cfg = config.load(None, ["run.max_steps=10", "box.L_x=6.0", "box.L_y=6.0",
                              f'run.initial_file="{tmp_path / "settled.txt"}"'])
-    r = Run(cfg, str(tmp_path / "run"), quiet=True)
-    r.prepare()
+    r = Run.new(cfg, str(tmp_path / "run"), quiet=True)
     warned = [ln for ln in (tmp_path / "run" / "log.txt").read_text().splitlines() if "overlapping pairs" in ln]
     assert len(warned) == 1 and "216 overlapping pairs accepted" in warned[0]
     assert r.n_mobile == 216 and r.n_bed == 36
@@ -76,6 +75,5 @@ def test_a_gz_that_is_not_gzip_and_a_table_without_mobile_spheres_are_refused(tm
     (tmp_path / "beds.txt").write_text("id x y z fixed\n1 1.0 1.0 0.5 1\n2 2.5 1.0 0.5 1\n")
     cfg = config.load(None, ["run.max_steps=10", "box.L_x=6.0", "box.L_y=6.0",
                              f'run.initial_file="{tmp_path / "beds.txt"}"'])
-    r = Run(cfg, str(tmp_path / "run"), quiet=True)
     with pytest.raises(build.InputError, match=r"beds.txt: no mobile sphere: all 2 are bed spheres"):
-        r.prepare()
+        Run.new(cfg, str(tmp_path / "run"), quiet=True)

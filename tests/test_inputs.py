@@ -73,8 +73,7 @@ def test_initial_velocities_have_exact_mean_energy():
 
 def run_small(tmp_path, name, *extra):
     out = tmp_path / name
-    r = Run(small_cfg(*extra), str(out), quiet=True)
-    r.prepare()
+    r = Run.new(small_cfg(*extra), str(out), quiet=True)
     r.run()
     s = r.finish()
     return out, r, s
@@ -86,8 +85,7 @@ def test_run_from_text_table_continues_exactly(tmp_path):
     out, r, s = run_small(tmp_path, "a")
     # the initial state of run a, rebuilt, as a table
     cfg = small_cfg()
-    r0 = Run(cfg, str(tmp_path / "a0"), quiet=True)
-    r0.prepare()
+    r0 = Run.new(cfg, str(tmp_path / "a0"), quiet=True)
     st = r0.state
     n = st.n_own
     build.write_table(tmp_path / "init.txt", st.id[:n], st.x[:n], st.v[:n], st.fixed[:n])
@@ -144,16 +142,14 @@ def test_runtime_checks_stop_the_run(tmp_path):
     p = tmp_path / "fast.txt"
     build.write_table(p, np.array([0, 1]), np.array([[2.0, 2.5, 10.0], [3.2, 2.5, 10.0]]),
                       np.array([[300.0, 0, 0], [-300.0, 0, 0]]))
-    r = Run(small_cfg(f'run.initial_file="{p}"', "box.gravity=0.0"), str(tmp_path / "f"), quiet=True)
-    r.prepare()
+    r = Run.new(small_cfg(f'run.initial_file="{p}"', "box.gravity=0.0"), str(tmp_path / "f"), quiet=True)
     with pytest.raises(RunError, match="overlap .* exceeds checks.overlap_error"):
         r.run()
     # a sphere dropping past the single bed sphere, beside it
     p = tmp_path / "fall.txt"
     build.write_table(p, np.array([0, 1]), np.array([[1.0, 1.0, 3.0], [3.5, 3.5, 1.0]]),
                       fixed=np.array([0, 1], np.uint8))
-    r = Run(small_cfg(f'run.initial_file="{p}"', "run.max_steps=20000"), str(tmp_path / "g"), quiet=True)
-    r.prepare()
+    r = Run.new(small_cfg(f'run.initial_file="{p}"', "run.max_steps=20000"), str(tmp_path / "g"), quiet=True)
     with pytest.raises(RunError, match="fell through the bed"):
         r.run()
 

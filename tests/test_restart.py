@@ -92,12 +92,58 @@ def test_restart_on_other_rank_counts_gives_the_straight_digest(straight, tmp_pa
     if n_second == 1:   # the counters add up over segments: all here are the first segment's
         import h5py
         with h5py.File(again / "checkpoints" / "ckpt-00000.h5") as f:
-            rs = json.loads(f.attrs["run_state"])
+            rs = json.loads(f.attrs["run_state"])["history"]
         assert (s["migrated"], s["rebalances"]) == (rs["migrated"], rs["rebalances"])
         assert rs["migrated"] > 0
     assert thermo(again) == thermo(run)                  # the table continues, no row twice
     # file numbering continues: the restarted run wrote checkpoint 1 at step 2K again
     assert (again / "checkpoints" / "ckpt-00001.h5").exists()
+
+
+def flatten_run_state(path):
+    """Rewrite the ``run_state`` of state file ``path`` as mpdem wrote it before its namespaces (issue 24):
+    one JSON object with the fields of every record, in the records' order."""
+    import h5py
+    with h5py.File(path, "r+") as f:
+        flat = {}
+        for record in json.loads(f.attrs["run_state"]).values():
+            flat.update(record)
+        f.attrs["run_state"] = json.dumps(flat)
+    return flat
+
+
+def test_run_state_keeps_each_record_under_its_name_and_reads_the_flat_layout():
+    from mpdem.initial import Pile
+    from mpdem.runstate import History, RunState
+    from mpdem.schedule import CheckpointRecord, SnapshotRecord, StopRecord
+    rec = RunState(History(3, 12.5, 40, 0.01, 7, 2), Pile(4.5, 3.75, 20.0), StopRecord([0.5, 0.25], "translational"),
+                   CheckpointRecord(5), SnapshotRecord(9))
+    text = rec.dumps()
+    assert list(json.loads(text)) == ["history", "pile", "stop", "checkpoints", "snapshots"]
+    assert RunState.loads(text) == rec
+    flat = {}
+    for part in json.loads(text).values():
+        flat.update(part)
+    assert RunState.loads(json.dumps(flat)) == rec
+    # a field of one record does not reach another that has the same name
+    clash = json.loads(text)
+    clash["pile"]["n_checkpoints"] = 99
+    assert RunState.loads(json.dumps(clash)).checkpoints.n_checkpoints == 5
+    assert RunState.loads("{}") == RunState()
+
+
+def test_a_checkpoint_with_the_flat_run_state_of_earlier_versions_restarts_exactly(straight, tmp_path):
+    """A state file written before run_state had a namespace per record (issue 24) still restarts to the
+    straight run: segments, file numbers and the stop-rule window come back from its flat record."""
+    run, ref, steps = straight
+    old = rewind(run, tmp_path / "old", keep=0)
+    flat = flatten_run_state(old / "checkpoints" / "ckpt-00000.h5")
+    assert flat["n_checkpoints"] == 1 and flat["segments"] == 1 and len(flat["stop_samples"]) > 0
+    mpdem("restart", old, "--quiet", check=0)
+    s = summary(old)
+    assert (s["digest"], s["steps"], s["segments"]) == (ref, steps, 2)
+    assert thermo(old) == thermo(run)
+    assert (old / "checkpoints" / "ckpt-00001.h5").exists()
 
 
 @pytest.mark.validation

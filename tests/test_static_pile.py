@@ -16,8 +16,7 @@ from mpdem.simulation import Run
 def test_frictionless_pile_settles_to_z_near_6(tmp_path):
     cfg = config.load(None, ["run.max_steps=3000000", "box.L_x=10.0", "box.L_y=10.0", "pour.N=2000",
                              "contact.mu=0.0", "output.progress_every=200000"])
-    run = Run(cfg, str(tmp_path / "pile"), quiet=True)
-    run.prepare()
+    run = Run.new(cfg, str(tmp_path / "pile"), quiet=True)
     assert run.run() == "converged", "the pile did not settle within 3e6 steps"
     summary = run.finish()
     assert summary["E_k_per_particle"] < 1e-8

@@ -37,8 +37,7 @@ def run_pile(tmp_path, name, energy, max_steps=60000):
     cfg = config.load(None, [f"run.max_steps={max_steps}", "box.L_x=6.0", "box.L_y=6.0", "contact.mu=0.0",
                              "checks.overlap_warn=0.01", "stop.E_stop=1e-6", f'run.initial_file="{table}"',
                              f'stop.energy="{energy}"'])
-    r = Run(cfg, str(tmp_path / name), quiet=True)
-    r.prepare()
+    r = Run.new(cfg, str(tmp_path / name), quiet=True)
     status = r.run()
     r.finish()
     return r, status, top

@@ -169,7 +169,7 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     from . import config as config_mod
     from . import lammps
     from .build import InputError
-    from .simulation import Run
+    from .simulation import Logger, Run
     _threads(threads)
     net = _net(net)
     try:
@@ -179,11 +179,12 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     check_out(out, net, force)
 
     def go(held):
-        r = Run(cfg, out, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
-                t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         if held is not None and held.taken_over:
-            r.log.warn(held.taken_over)
-        r.prepare(lammps_initial=initial)
+            say = Logger(os.path.join(out, "log.txt"), quiet, net.rank)
+            say.warn(held.taken_over)
+            say.close()
+        r = Run.new(cfg, out, net, lammps_initial=initial, quiet=quiet, walltime=walltime, margin=walltime_margin,
+                    t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         return _go(r)
     return _locked(out, net, go)
 
@@ -218,9 +219,8 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
         say.close()
         if status is not None:
             return _finished(t, status, net)
-        r = Run(t.cfg, t.run_dir, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
-                t_start=time.monotonic() if t_start is None else t_start, signals=signals)
-        rs.resume(r, t)
+        r = Run.from_file(t, net, quiet=quiet, walltime=walltime, margin=walltime_margin,
+                          t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         return _go(r)
     return _locked(run_dir, net, go)
 

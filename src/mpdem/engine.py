@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,15 +47,34 @@ class Physics:
                    rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
 
 
-@dataclass
-class StepInfo:
-    """What one step reports to the monitors (already reduced over ranks)."""
+class NoFlags(NamedTuple):
+    """The flags of a step that no driver watches (bed making, benchmarks, tests): none."""
+
+
+NO_FLAGS = NoFlags()
+
+
+class StepInfo(NamedTuple):
+    """What one step reports to the monitors, already reduced over ranks; a new record every step.
+
+    Attributes
+    ----------
+    max_overlap : float
+        Largest overlap of the previous force evaluation [d].
+    n_contacts : int
+        Contacts of the whole pile (counted from both partners) as of the last ``Engine.contacts()``.
+    z_min, z_max : float
+        Height range of the owned mobile rows after the drift [d]; z_min is NaN when a
+        position became NaN or infinite.
+    flags : NamedTuple of float
+        The driver's flags given to ``Engine.step``, each the max over ranks, as a record of the
+        same type (``simulation.StepFlags`` in a run; ``NoFlags`` without a driver).
+    """
     max_overlap: float = 0.0
     n_contacts: int = 0
     z_min: float = math.inf
     z_max: float = -math.inf
-    flags: tuple = ()
-
+    flags: tuple = NO_FLAGS
 
 
 class Engine:
@@ -107,7 +127,8 @@ class Engine:
         self._reduce = np.zeros(4)
         self.n_rebuilds = 0
         self.sort_every = 20
-        self.info = StepInfo()
+        self.info = StepInfo()    # the newest step's (each step makes a new one)
+        self.n_contacts = 0       # contacts of the whole pile at the last count (``contacts``)
         self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
         self.last_overlap = 0.0  # this rank's largest overlap of the last force evaluation
         self._contacts = 0       # this rank's contacts of the last force evaluation
@@ -274,18 +295,19 @@ class Engine:
         self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
-    def step(self, flags=()):
-        """One velocity-Verlet step; returns the StepInfo (reduced over ranks).
+    def step(self, flags=NO_FLAGS):
+        """One velocity-Verlet step; returns a new StepInfo (reduced over ranks).
 
         ``info.max_overlap`` is that of the previous force evaluation: it
         travels in the one allreduce of the step, with the displacement that
-        decides the rebuild. ``info.n_contacts`` is updated by ``contacts()``.
+        decides the rebuild. ``info.n_contacts`` is the last ``contacts()`` count.
 
         Parameters
         ----------
-        flags : sequence of float
-            The driver's per-rank flags (signal, wall time, ...), agreed by
-            max in the same allreduce; ``info.flags`` holds the result.
+        flags : NamedTuple of float
+            The driver's per-rank flags (``simulation.StepFlags``: signal, wall
+            time, clock checkpoint), agreed by max in the same allreduce;
+            ``info.flags`` is the agreed record, of the same type.
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
@@ -298,7 +320,7 @@ class Engine:
             red = self._reduce = np.zeros(4 + len(flags))
         red[0], red[1], red[2], red[3] = d2, self.last_overlap, -z_min, z_max
         red[4:] = flags
-        d2, overlap, neg_z_min, z_max, *flags = dom.max_many(red)
+        d2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red)
         rebuilt = not d2 < 0.25 * p.skin * p.skin
         if rebuilt:
             self.rebuild()
@@ -310,18 +332,15 @@ class Engine:
         self.timers["integration"] += time.perf_counter() - t
         s.step += 1
         s.time = s.step * p.dt
-        info = self.info
-        info.max_overlap = overlap
-        info.z_min, info.z_max = -neg_z_min, z_max
-        info.flags = tuple(flags)
-        if math.isinf(d2):
-            info.z_min = math.nan          # a position became NaN or infinite
-        return info
+        # an infinite displacement: a position became NaN or infinite
+        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(d2) else -neg_z_min, z_max,
+                             flags._make(agreed))
+        return self.info
 
     def contacts(self):
         """Global number of contacts (counted from both partners) of the last evaluation."""
-        n = int(self.domain.sum_int(np.array([self._contacts]))[0])
-        self.info.n_contacts = n
+        n = self.n_contacts = int(self.domain.sum_int(np.array([self._contacts]))[0])
+        self.info = self.info._replace(n_contacts=n)
         return n
 
     def advance(self, n):

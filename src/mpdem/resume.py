@@ -1,23 +1,22 @@
-"""Restart: choose the state file, check its config, and resume the run from it.
+"""Restart: choose the state file and check it and its config.
 
 ``open_target`` picks the newest usable state file of a run directory (or
-takes the file given), reads this rank's share of it collectively and
-resolves the restart's config. ``verdict`` says whether there is anything to
-do; ``resume`` gives a new ``simulation.Run`` the file's particles and the
-restart records of its schedules. The next step is then bit for bit the one
-the straight run takes (ARCHITECTURE.md, invariants).
+takes the file given), reads this rank's share of it collectively, reads its
+restart records (``runstate.RunState``) and resolves the restart's config.
+``verdict`` says whether there is anything to do; ``simulation.Run.from_file``
+then builds the run's next segment from the ``Target``. The next step is bit
+for bit the one the straight run takes (ARCHITECTURE.md, invariants).
 """
 from __future__ import annotations
 
-import json
 import os
 import tomllib
 from dataclasses import dataclass
 
-from . import checkpoint, config, initial, rundir
+from . import checkpoint, config, rundir
 from .checkpoint import StateFileError
 from .errors import EXIT_NOT_CONVERGED, EXIT_OK
-from .schedule import from_dict
+from .runstate import RunState
 
 # attributes a state file needs to be restarted from
 NEEDED = ("run_state", "n_mobile", "n_bed", "config")
@@ -40,6 +39,8 @@ class Target:
         ``stop.*`` keys that --set changed.
     skipped : list of str
         Why newer files were passed over.
+    records : runstate.RunState
+        The restart records of the run and its schedules (the ``run_state`` attribute).
     """
     path: str
     run_dir: str
@@ -48,6 +49,7 @@ class Target:
     cfg: object
     stop_changed: list
     skipped: list
+    records: RunState
 
 
 def candidates(target):
@@ -163,11 +165,15 @@ def open_target(target, net, sets):
             if attrs.get("kind") not in checkpoint.KINDS or missing:
                 raise StateFileError(f"{path}: a {attrs.get('kind')!r} file without {', '.join(missing) or 'a run'}; "
                                      f"restart accepts the checkpoints, snapshots and final.h5 of a run")
+            try:
+                records = RunState.loads(attrs["run_state"])
+            except (ValueError, TypeError) as e:
+                raise StateFileError(f"{path}: its run_state is unusable ({e})") from None
             cfg = restart_config(attrs, path, run_dir, sets)
             # the file's own config, to see which stop.* keys --set changed
             old = config.resolve(config.raw_from_toml(attrs["config"], origin=path))
             changed = [k for k in cfg.values if k.startswith("stop.") and cfg.values[k] != old.values[k]]
-            return Target(path, run_dir, local, attrs, cfg, changed, skipped)
+            return Target(path, run_dir, local, attrs, cfg, changed, skipped, records)
         except StateFileError as e:
             if not os.path.isdir(target):
                 raise
@@ -199,27 +205,3 @@ def verdict(t, say):
             f"raise it with --set run.max_steps=... to go on")
         return EXIT_NOT_CONVERGED
     return None
-
-
-def resume(run, t):
-    """Continue ``run`` (a new ``simulation.Run`` in ``t.run_dir``) from state file ``t``.
-
-    Distributes the file's rows to the slab owners, gives the run and its
-    schedules their restart records, rewrites config.toml (a --set may have
-    changed it) and cuts thermo.csv back to the file's step.
-    """
-    attrs, rs = t.attrs, json.loads(t.attrs["run_state"])
-    run.history = from_dict(type(run.history), rs)
-    run.history.segments += 1
-    for part in (run.stop, run.checkpoints, run.snapshots):
-        part.restore(from_dict(type(part.record()), rs))
-    st = run.domain.distribute(t.local, float(attrs["L_x"]), float(attrs["L_y"]))
-    st.step, st.time = int(attrs["step"]), float(attrs["time"])
-    if run.rank == 0:
-        rundir.write_atomic(os.path.join(run.out, "config.toml"), run.cfg.to_toml())
-        rundir.truncate_thermo(os.path.join(run.out, "thermo.csv"), st.step)
-    run.log(f"restart: from {t.path} at step {st.step} (t = {st.time:.6g}), segment {run.history.segments}, "
-            f"{run.domain.size} ranks (written by {attrs.get('ranks', '?')})")
-    for w in run.cfg.warnings:
-        run.log.warn(w)
-    run.begin(st, from_dict(initial.Pile, rs), int(attrs["n_mobile"]), int(attrs["n_bed"]))

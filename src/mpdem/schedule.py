@@ -3,9 +3,10 @@
 ``Checks`` (every step), ``StopRule`` with ``Thermo`` (every sample),
 ``Progress`` (every ``output.progress_every`` steps), ``Checkpoints`` and
 ``Snapshots`` (their ``output`` cadences). Each object that a restart must
-continue serialises its state into a typed record (a dataclass); the run
-stores the records' fields together as the ``run_state`` attribute of every
-state file, and a restart gives each object its record back (``restart``).
+continue serialises its state into a typed record (a dataclass, ``record``);
+the run stores each record under its own name in the ``run_state`` attribute
+of every state file (``runstate.RunState``), and a run built from a file gives
+each object its record back (``restore``).
 All ranks call every object at the same steps; only rank 0 writes text.
 """
 from __future__ import annotations

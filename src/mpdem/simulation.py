@@ -1,19 +1,23 @@
-"""A pile run: start (new or restarted), step with its schedules, finish.
+"""A pile run: built new or from a state file, stepped with its schedules, finished.
 
 Owns the run directory (``rundir`` gives its layout) and the time-step loop
-of ARCHITECTURE.md. What happens between steps is in ``schedule`` (checks,
-stop rule and thermo, progress, checkpoints, snapshots); the initial state
-is ``initial``'s, the arithmetic of a step ``engine``'s, the files
-``checkpoint``'s, and continuing from a state file ``restart``'s.
+of ARCHITECTURE.md. A restart is a run built from a file: ``Run.new`` and
+``Run.from_file`` differ only in where the rows and the restart records
+(``runstate.RunState``) come from (``new_start``, ``file_start``). What
+happens between steps is in ``schedule`` (checks, stop rule and thermo,
+progress, checkpoints, snapshots); the initial state is ``initial``'s, the
+arithmetic of a step ``engine``'s, the files ``checkpoint``'s, choosing the
+file to restart from ``resume``'s, and the closing summary ``summary``'s.
 """
 from __future__ import annotations
 
-import json
+import dataclasses
 import math
 import os
 import signal
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,27 +27,89 @@ from .decomp import Domain
 from .engine import Engine, Physics
 from .errors import EXIT_RESTART
 from .pairs import contact_pairs
+from .runstate import History, RunState  # noqa: F401 (simulation.History, the name of earlier versions)
 from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
                        Thermo)
+from .state import State
 
 # the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
 # ("not finished, restart me", EX_TEMPFAIL)
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
 
+class StepFlags(NamedTuple):
+    """This rank's requests at a step, agreed by max over ranks in the step's one allreduce
+    (``Engine.step`` returns the agreed record in ``StepInfo.flags``)."""
+    signal: float = 0.0         # the highest stop signal number received (0: none)
+    walltime: float = 0.0       # 1: the wall time is near: stop with a checkpoint
+    clock: float = 0.0          # 1: a clock checkpoint (output.checkpoint_seconds) is due
+
+
 @dataclass
-class History:
-    """Restart record of the run as a whole: its segments and counters so far."""
-    segments: int = 1
-    wall_seconds: float = 0.0       # loop wall time of all segments [s]
-    n_rebuilds: int = 0
-    max_overlap: float = 0.0        # of the last force evaluation [d]
-    migrated: int = 0               # particles moved between ranks (summed over ranks)
-    rebalances: int = 0
+class Start:
+    """Where a run begins (``new_start``, ``file_start``).
+
+    Attributes
+    ----------
+    state : State
+        This rank's rows, at the first step.
+    n_mobile, n_bed : int
+        Spheres of the whole pile.
+    records : runstate.RunState
+        The restart records: a new run's defaults, or a state file's (segments counted on).
+    from_file : bool
+        The rows carry the forces, torques and contact histories of a state file.
+    """
+    state: State
+    n_mobile: int
+    n_bed: int
+    records: RunState
+    from_file: bool
+
+
+def new_start(cfg, out, domain, log, lammps_initial=None):
+    """A new run: build or read the initial state, check it, write config.toml and bed.txt.
+
+    ``lammps_initial``: a LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).
+    Returns a Start.
+    """
+    for w in cfg.warnings:
+        log.warn(w)
+    if domain.rank == 0:
+        rundir.write_atomic(os.path.join(out, "config.toml"), cfg.to_toml())
+        rundir.clear(out)
+    init = initial.initial_state(cfg, domain.net, log, lammps_initial)
+    w = init.whole
+    bed = w["fixed"] == 1
+    if init.n_bed and domain.rank == 0:
+        build.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
+    return Start(domain.scatter(w, cfg.box.L_x, cfg.box.L_y), init.n_mobile, init.n_bed, RunState(pile=init.pile),
+                 False)
+
+
+def file_start(t, out, domain, log):
+    """The next segment of a run from state file ``t`` (``resume.Target``).
+
+    Distributes the file's rows to the slab owners, counts the segment on,
+    rewrites config.toml (a --set may have changed it) and cuts thermo.csv
+    back to the file's step. Returns a Start.
+    """
+    attrs, rec = t.attrs, t.records
+    rec = dataclasses.replace(rec, history=dataclasses.replace(rec.history, segments=rec.history.segments + 1))
+    st = domain.distribute(t.local, float(attrs["L_x"]), float(attrs["L_y"]))
+    st.step, st.time = int(attrs["step"]), float(attrs["time"])
+    if domain.rank == 0:
+        rundir.write_atomic(os.path.join(out, "config.toml"), t.cfg.to_toml())
+        rundir.truncate_thermo(os.path.join(out, "thermo.csv"), st.step)
+    log(f"restart: from {t.path} at step {st.step} (t = {st.time:.6g}), segment {rec.history.segments}, "
+        f"{domain.size} ranks (written by {attrs.get('ranks', '?')})")
+    for w in t.cfg.warnings:
+        log.warn(w)
+    return Start(st, int(attrs["n_mobile"]), int(attrs["n_bed"]), rec, True)
 
 
 class Run:
-    """One pile run in ``out_dir``: a new one (``prepare``) or a continued one (``resume.resume``).
+    """One pile run in ``out_dir``: a new one (``Run.new``) or the next segment of one (``Run.from_file``).
 
     Parameters
     ----------
@@ -51,6 +117,10 @@ class Run:
     out_dir : str
         The run directory (``rundir``).
     net : parallel.Channel, mpi4py communicator or None
+    target : resume.Target or None
+        The state file to go on from (``resume.open_target``); None for a new run of ``cfg``.
+    lammps_initial : dict or None
+        A new run's LAMMPS ``run.initial_file``, already read (``lammps.initial_for``).
     quiet : bool
         No progress on stdout (the log file still gets it).
     walltime : float or None
@@ -66,8 +136,8 @@ class Run:
         the run appends the ones it receives.
     """
 
-    def __init__(self, cfg, out_dir, net=None, quiet=False, walltime=None, margin=None, t_start=None,
-                 signals=None):
+    def __init__(self, cfg, out_dir, net=None, *, target=None, lammps_initial=None, quiet=False, walltime=None,
+                 margin=None, t_start=None, signals=None):
         self.cfg, self.out = cfg, out_dir
         self.domain = Domain(net, r_list=1.0 + cfg.integration.skin,
                              tolerance=cfg.decomp.balance_tolerance, damping=cfg.decomp.balance_damping)
@@ -81,44 +151,52 @@ class Run:
         self.t_end = None if walltime is None else t_start + walltime
         self.margin = (min(60.0, walltime / 20) if margin is None else margin) if walltime else 0.0
         self.signals = [] if signals is None else signals
-        self.state = self.engine = None
-        self.status = None          # "converged", "max_steps" or "interrupted"
-        self.wall = 0.0
-        self.force_ratio = math.nan  # the unbalanced-force ratio of the last sample (summary.json)
-        self.history = History()
+        start = (file_start(target, out_dir, self.domain, self.log) if target is not None
+                 else new_start(cfg, out_dir, self.domain, self.log, lammps_initial))
+        rec = start.records
+        self.state, self.n_mobile, self.n_bed = start.state, start.n_mobile, start.n_bed
+        self.from_file = start.from_file
+        self.first_step = self.state.step   # this segment's first step
+        self.pile = rec.pile
+        self.history = rec.history          # the earlier segments' (this one's are added by ``records``)
         self.stop = StopRule.from_config(cfg, self.physics.dt)
+        self.stop.restore(rec.stop)
         self.checkpoints = Checkpoints(out_dir, cfg.output, self._write, self.domain, self.log)
+        self.checkpoints.restore(rec.checkpoints)
         self.snapshots = Snapshots(out_dir, cfg.output.snapshot_every, self._write, self.rank)
-        self._flags = np.zeros(3)   # per-rank: stop signal, wall time near, clock checkpoint due
+        self.snapshots.restore(rec.snapshots)
+        self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
+        self.thermo = Thermo(out_dir, self.rank)
+        self.engine = Engine(self.state, self.physics, self.domain)
+        self.status = None          # "converged", "max_steps" or "interrupted"
+        self.t0 = time.perf_counter()   # the loop's clock (started again when the loop starts)
+        self.wall = 0.0             # the loop's wall time [s]
+        self.ek = math.nan          # E_k per mobile sphere at the end of the loop [m g d]
+        self.force_ratio = math.nan  # the unbalanced-force ratio of the last sample (summary.json)
+        self._describe()
+
+    @classmethod
+    def new(cls, cfg, out_dir, net=None, lammps_initial=None, **options):
+        """A new run of ``cfg`` in ``out_dir`` (its initial state built or read; config.toml written).
+
+        ``options``: the keywords of ``Run`` (quiet, walltime, margin, t_start, signals).
+        """
+        return cls(cfg, out_dir, net, lammps_initial=lammps_initial, **options)
+
+    @classmethod
+    def from_file(cls, target, net=None, **options):
+        """The next segment of the run of state file ``target`` (``resume.Target``), in its run directory."""
+        return cls(target.cfg, target.run_dir, net, target=target, **options)
 
     @property
     def converged(self):
         return self.status == "converged"
 
-    def prepare(self, lammps_initial=None):
-        """A new run: build or read the initial state, check it, write config.toml and bed.txt.
-
-        ``lammps_initial``: a LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).
-        """
-        cfg = self.cfg
-        for w in cfg.warnings:
-            self.log.warn(w)
-        if self.rank == 0:
-            rundir.write_atomic(os.path.join(self.out, "config.toml"), cfg.to_toml())
-            rundir.clear(self.out)
-        init = initial.initial_state(cfg, self.domain.net, self.log, lammps_initial)
-        w = init.whole
-        bed = w["fixed"] == 1
-        if init.n_bed and self.rank == 0:
-            build.write_table(os.path.join(self.out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
-        self.begin(self.domain.scatter(w, cfg.box.L_x, cfg.box.L_y), init.pile, init.n_mobile, init.n_bed)
-
-    def begin(self, state, pile, n_mobile, n_bed):
-        """Take this rank's ``state`` and the pile's geometry (``initial.Pile``); describe the run."""
-        self.state, self.pile, self.n_mobile, self.n_bed = state, pile, n_mobile, n_bed
+    def _describe(self):
+        """The log lines that describe the run."""
         p, cfg = self.physics, self.cfg
         t_col = collision_time(p.gamma_n, p.k_n)
-        self.log(f"mpdem: {n_mobile} mobile + {n_bed} bed spheres, box {cfg.box.L_x:g} x {cfg.box.L_y:g}, "
+        self.log(f"mpdem: {self.n_mobile} mobile + {self.n_bed} bed spheres, box {cfg.box.L_x:g} x {cfg.box.L_y:g}, "
                  f"{cfg.contact.model} k_n = {p.k_n:g}, k_t = {p.k_t:g}, gamma_n = {p.gamma_n:.6g} "
                  f"(epsilon = {cfg.contact.epsilon:.4g}), gamma_t = {p.gamma_t:g}, mu = {p.mu:g}")
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
@@ -133,30 +211,30 @@ class Run:
         checkpoint was written; restart to go on).
         """
         st, max_steps, N = self.state, self.cfg.run.max_steps, max(self.n_mobile, 1)
-        eng = self._start()
-        checks = Checks(self.cfg, self.pile, self.n_bed, self.log)
-        checks.fatal(eng.info, st.step)
-        progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps, N,
-                            st.step, self.t0)
-        self.thermo = Thermo(self.out, self.rank)
-        handlers = {s: signal.signal(s, lambda signum, frame: self.signals.append(int(signum))) for s in STOP_SIGNALS}
+        eng, handlers = self.engine, {}
         try:
+            info = self._start()
+            self.checks.fatal(info, st.step)
+            progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps,
+                                N, st.step, self.t0)
+            handlers = {s: signal.signal(s, lambda signum, frame: self.signals.append(int(signum)))
+                        for s in STOP_SIGNALS}
             while self.status is None and st.step < max_steps:
                 info = eng.step(self._flags_now())
-                checks(info, st.step)
+                self.checks(info, st.step)
                 sample, show = self.stop.due(st.step), progress.due(st.step)
                 if sample or show:
-                    eng.contacts()
+                    info = info._replace(n_contacts=eng.contacts())
                 if sample and self._sample(info, N):
                     self.status = "converged"
                     break
                 if self.snapshots.due(st.step):
                     self.snapshots.write()
-                sig, late, clock = info.flags
-                if (sig or late) and st.step < max_steps:
-                    self._interrupt(sig)
+                flags = info.flags
+                if (flags.signal or flags.walltime) and st.step < max_steps:
+                    self._interrupt(flags.signal)
                     break
-                if self.checkpoints.due(st.step, clock):
+                if self.checkpoints.due(st.step, flags.clock):
                     self.thermo.flush()
                     self.checkpoints.write(st.step)
                 if show:
@@ -174,23 +252,18 @@ class Run:
         return self.status
 
     def _start(self):
-        """The engine, set up for a new or a continued run; starts the loop's clock."""
-        eng = self.engine = Engine(self.state, self.physics, self.domain)
-        self.t0, self.first_step, h = time.perf_counter(), self.state.step, self.history
+        """Set the engine up (a state file's forces kept); start the loop's clocks. Returns the StepInfo."""
+        self.t0 = time.perf_counter()
         self.checkpoints.start_clock()
-        if h.segments > 1:
-            eng.start_from_file(h.max_overlap, h.n_rebuilds)
-        else:
-            eng.start()
-        return eng
+        if self.from_file:
+            return self.engine.start_from_file(self.history.max_overlap, self.history.n_rebuilds)
+        return self.engine.start()
 
     def _flags_now(self):
-        """This rank's flags for the step's allreduce: stop signal, wall time near, clock checkpoint."""
-        now, f = time.monotonic(), self._flags
-        f[0] = float(max(self.signals, default=0))
-        f[1] = float(self.t_end is not None and now + self.margin + 2 * self.checkpoints.last_write >= self.t_end)
-        f[2] = float(self.checkpoints.clock_due(now))
-        return f
+        """This rank's StepFlags for the step's allreduce."""
+        now = time.monotonic()
+        late = self.t_end is not None and now + self.margin + 2 * self.checkpoints.last_write >= self.t_end
+        return StepFlags(float(max(self.signals, default=0)), float(late), float(self.checkpoints.clock_due(now)))
 
     def _sample(self, info, N):
         """A stop-rule sample and its thermo line; True if the rule holds."""
@@ -209,29 +282,27 @@ class Run:
         self.status = "interrupted"
 
     def wall_total(self):
+        """Loop wall time of all segments so far [s]."""
         return self.history.wall_seconds + time.perf_counter() - self.t0
 
     # -- files --
     def records(self):
-        """The restart records of the run and its schedules, as of now (collective)."""
+        """The restart records of the run and its schedules, as of now (collective); a RunState."""
         # one reduction: the last overlap, and one wall-clock reading for all ranks (attributes must agree)
         overlap, wall = self.domain.max_many([self.engine.last_overlap, self.wall_total()])
         migrated, rebalances = self.counters()
         h = History(self.history.segments, float(wall), self.engine.n_rebuilds, float(overlap), migrated, rebalances)
-        return [h, self.pile, self.stop.record(), self.checkpoints.record(), self.snapshots.record()]
+        return RunState(h, self.pile, self.stop.record(), self.checkpoints.record(), self.snapshots.record())
 
     def _attrs(self, kind):
         """Attributes of a state file: identical on every rank (collective)."""
         st, cfg = self.state, self.cfg
-        rs = {}
-        for rec in self.records():
-            rs.update(asdict(rec))
         return {"kind": kind, "step": st.step, "time": st.time, "n": self.n_mobile + self.n_bed,
                 "n_mobile": self.n_mobile, "n_bed": self.n_bed, "L_x": st.L_x, "L_y": st.L_y,
                 "z_bed": self.pile.z_bed, "converged": self.converged, "ranks": self.domain.size,
                 "seed": cfg.run.seed, "rng": "numpy PCG64 streams keyed by (run.seed, purpose); used at set-up only",
                 "mpdem_version": __import__("mpdem").__version__,
-                "config": cfg.to_toml(), "run_state": json.dumps(rs)}
+                "config": cfg.to_toml(), "run_state": self.records().dumps()}
 
     def _write(self, path, kind):
         """Write a state file of ``kind`` (collective); snapshots and the final state carry the contact list."""
@@ -248,5 +319,27 @@ class Run:
 
     # -- the end --
     def finish(self):
-        """Write RUN/final.h5 (with the contact list) and summary.json; log bulk z and phi (``summary``)."""
-        return summary.finish(self)
+        """Write RUN/final.h5 (with the contact list) and summary.json; log bulk z and phi (collective).
+
+        Returns
+        -------
+        dict or None
+            The summary on rank 0 (also in RUN/summary.json), None elsewhere.
+        """
+        # collectives first, in the same order on every rank
+        arrays = self.domain.gather_arrays(checkpoint.gather_state(self.state))
+        migrated, rebalances = self.counters()
+        path = self.snapshots.write(final=True)
+        try:
+            if self.rank != 0:
+                return None
+            return summary.write(self.end(migrated, rebalances), arrays, self.cfg, self.out, path, self.log)
+        finally:
+            self.log.close()
+
+    def end(self, migrated, rebalances):
+        """What the run came to (``summary.End``), with the whole run's ``migrated`` and ``rebalances``."""
+        st, dom = self.state, self.domain
+        return summary.End(self.status, st.step, st.step - self.first_step, st.time, self.n_mobile, st.L_x, st.L_y,
+                           self.ek, self.force_ratio, self.wall, self.wall_total(), self.history.segments, dom.size,
+                           dom.comm_seconds, dom.parallel, migrated, rebalances)

@@ -1,55 +1,113 @@
-"""The end of a run: RUN/final.h5, RUN/summary.json, and the closing log lines.
+"""The end of a run: RUN/summary.json and the closing log lines.
 
-``finish`` is called on every rank once the loop has ended with "converged"
-or "max_steps" (an interrupted run ends with its checkpoint instead).
+``Run.finish`` writes RUN/final.h5 on every rank once the loop has ended
+with "converged" or "max_steps" (an interrupted run ends with its checkpoint
+instead), then rank 0 gives ``write`` an ``End``: what the run came to.
 """
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 from . import analysis, checkpoint, rundir
 
 
+@dataclass
+class End:
+    """What a run came to, as ``Run.finish`` reports it to ``write``.
+
+    Attributes
+    ----------
+    status : str
+        "converged" or "max_steps".
+    steps, segment_steps : int
+        Steps of the whole run, and of this segment.
+    time : float
+        Simulated time [tau].
+    n_mobile : int
+    L_x, L_y : float
+        The box [d].
+    ek : float
+        Kinetic energy per mobile sphere at the end [m g d].
+    force_ratio : float
+        The unbalanced-force ratio of the last sample.
+    wall, wall_total : float
+        Loop wall time of this segment, and of all segments [s].
+    segments, ranks : int
+    comm_seconds : float
+        This segment's time in communication [s].
+    parallel : bool
+        More than one rank.
+    migrated, rebalances : int
+        Of the whole run (summed over ranks).
+    """
+    status: str
+    steps: int
+    segment_steps: int
+    time: float
+    n_mobile: int
+    L_x: float
+    L_y: float
+    ek: float
+    force_ratio: float
+    wall: float
+    wall_total: float
+    segments: int
+    ranks: int
+    comm_seconds: float
+    parallel: bool
+    migrated: int
+    rebalances: int
+
+    @property
+    def converged(self):
+        return self.status == "converged"
+
+
 def finish(run):
-    """Write the final state (with the contact list) and summary.json; log bulk z and phi.
+    """``run.finish()`` (the name of earlier versions)."""
+    return run.finish()
+
+
+def write(end, arrays, cfg, out, final, log):
+    """Write summary.json and log the end and the bulk z and phi (rank 0).
 
     Parameters
     ----------
-    run : simulation.Run
-        After ``run.run()``.
+    end : End
+    arrays : dict of arrays
+        The whole final state, sorted by id (``Domain.gather_arrays``).
+    cfg : Config
+    out : str
+        The run directory.
+    final : str
+        Path of the final state file written.
+    log : schedule.Logger
 
     Returns
     -------
-    dict or None
-        The summary on rank 0 (also in RUN/summary.json), None elsewhere.
+    dict
+        The summary (also in RUN/summary.json).
     """
-    cfg, st, log, dom = run.cfg, run.state, run.log, run.domain
-    # collectives first, in the same order on every rank
-    arrays = dom.gather_arrays(checkpoint.gather_state(st))
-    migrated, rebalances = run.counters()
-    path = run.snapshots.write(final=True)
-    if run.rank != 0:
-        log.close()
-        return None
-    steps = st.step
-    ns = 1e9 * run.wall / max((steps - run.first_step) * max(run.n_mobile, 1), 1)
-    summary = {"steps": steps, "time": st.time, "converged": run.converged, "status": run.status,
-               "E_k_per_particle": run.ek, "force_ratio": run.force_ratio, "wall_seconds": run.wall_total(),
-               "segments": run.history.segments,
-               "ns_per_particle_step": ns, "ranks": dom.size,
-               "comm_share": dom.comm_seconds / max(run.wall, 1e-9),
-               "migrated": migrated, "rebalances": rebalances,
+    steps = end.steps
+    ns = 1e9 * end.wall / max(end.segment_steps * max(end.n_mobile, 1), 1)
+    summary = {"steps": steps, "time": end.time, "converged": end.converged, "status": end.status,
+               "E_k_per_particle": end.ek, "force_ratio": end.force_ratio, "wall_seconds": end.wall_total,
+               "segments": end.segments,
+               "ns_per_particle_step": ns, "ranks": end.ranks,
+               "comm_share": end.comm_seconds / max(end.wall, 1e-9),
+               "migrated": end.migrated, "rebalances": end.rebalances,
                "digest": checkpoint.digest(arrays)}
     par = ""
-    if dom.parallel:
-        par = (f"; {dom.size} ranks, communication {100 * summary['comm_share']:.0f}%, "
-               f"{migrated} migrations, {rebalances} rebalances")
-    log(f"end: {'converged' if run.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
-        f"{steps} steps, t = {st.time:.4g}, E_k/N = {run.ek:.3e}, wall {run.wall:.1f} s "
+    if end.parallel:
+        par = (f"; {end.ranks} ranks, communication {100 * summary['comm_share']:.0f}%, "
+               f"{end.migrated} migrations, {end.rebalances} rebalances")
+    log(f"end: {'converged' if end.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
+        f"{steps} steps, t = {end.time:.4g}, E_k/N = {end.ek:.3e}, wall {end.wall:.1f} s "
         f"({ns:.0f} ns per particle-step{par})")
     try:
         a = cfg.analysis
-        bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], st.L_x, st.L_y, cfg.contact.mu,
+        bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], end.L_x, end.L_y, cfg.contact.mu,
                                      a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile,
                                      rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
                                      force_fraction=a.force_fraction, band_width=a.band_width)
@@ -60,12 +118,11 @@ def finish(run):
             f"surface h = {bulk['h']:.2f}")
     except ValueError as e:
         log.warn(f"no bulk measurement: {e}")
-    rundir.write_json(os.path.join(run.out, "summary.json"), summary)
-    log(f"wrote {path}")
-    if not run.converged:
+    rundir.write_json(os.path.join(out, "summary.json"), summary)
+    log(f"wrote {final}")
+    if not end.converged:
         # the exit code that follows is a result, not a crash (mpiexec reports it at length)
         log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
-            f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {run.out} "
+            f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
             f"--set run.max_steps=...`")
-    log.close()
     return summary
