@@ -134,7 +134,7 @@ def test_paper_sized_pile_gets_ten_d_margins_and_short_ones_the_clamp():
 
 
 def test_slab_volume_is_the_exact_cap_volume():
-    R = 0.5
+    from mpdem.kernels.particle import R
     for hcap in (0.1, 0.5, 0.8):
         # cut at height hcap below the top: the cap above the plane
         v = bulk.slab_volume(np.array([0.0]), R - hcap, 10.0)[0]

@@ -7,6 +7,7 @@ import pytest
 from mpdem.analysis import find_contacts
 from mpdem.build import insert_random, rng
 from mpdem.kernels.forces import contact_forces
+from mpdem.kernels.particle import HALF_I
 
 from helpers import make_engine
 
@@ -15,7 +16,7 @@ def total_energy(eng):
     """Kinetic plus Hookean elastic energy (1/2 k_n delta^2 per contact) [m g d]."""
     st = eng.state
     n = st.n_own
-    ke = 0.5 * np.sum(st.v[:n] ** 2) + 0.05 * np.sum(st.omega[:n] ** 2)
+    ke = 0.5 * np.sum(st.v[:n] ** 2) + HALF_I * np.sum(st.omega[:n] ** 2)
     pairs, r = find_contacts(st.x[:n], st.L_x, st.L_y)
     return ke + 0.5 * eng.phys.k_n * np.sum((1.0 - r) ** 2)
 

@@ -7,6 +7,7 @@ import pytest
 
 from mpdem.kernels.exactsum import add_exact, new_accumulator, to_float
 from mpdem.kernels.neighbours import build_neighbours
+from mpdem.kernels.particle import INERTIA
 
 
 def brute_pairs(x, L_x, L_y, rc):
@@ -165,7 +166,7 @@ def test_kick_drift_is_a_half_kick_a_drift_and_a_wrap():
     want = {k: a.copy() for k, a in dict(x=x, v=v, omega=omega).items()}
     mob = fixed == 0
     want["v"][mob] += 0.5 * dt * f[mob]
-    want["omega"][mob] += 0.5 * dt * torque[mob] / 0.1
+    want["omega"][mob] += 0.5 * dt * torque[mob] / INERTIA
     want["x"][mob] += dt * want["v"][mob]
     want["x"][:, :2] %= L
     d = want["x"][mob] - x_ref[mob]
@@ -178,3 +179,11 @@ def test_kick_drift_is_a_half_kick_a_drift_and_a_wrap():
         assert 0 <= xs[0, 0] < L and 0 <= xs[1, 1] < L
         assert d2 == pytest.approx((d ** 2).sum(axis=1).max(), rel=1e-9)
         assert (zlo, zhi) == (xs[mob, 2].min(), xs[mob, 2].max())
+
+
+def test_particle_constants_agree_with_each_other():
+    from mpdem.kernels import particle
+    assert particle.INERTIA == 0.4 * particle.R ** 2                 # (2/5) m R^2, m = 1
+    assert particle.INV_I == 1.0 / particle.INERTIA and particle.HALF_I == 0.5 * particle.INERTIA
+    from mpdem.kernels.forces import INV_I, R                        # the old import path
+    assert (INV_I, R) == (particle.INV_I, particle.R)

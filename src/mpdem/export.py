@@ -17,7 +17,7 @@ import h5py
 import numpy as np
 
 from . import checkpoint
-from .kernels.forces import R      # particle radius [d]
+from .kernels.particle import R    # particle radius [d]
 from .rundir import write_atomic
 
 # XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads

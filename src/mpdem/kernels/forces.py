@@ -37,9 +37,7 @@ from numba import njit, prange
 
 from .geometry import min_image
 from .history import slot_of, stamp_of
-
-R = 0.5          # particle radius [d]
-INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
+from .particle import INV_I, R  # noqa: F401 (INV_I: its old home, kept importable)
 
 MODEL_HOOKE = 0
 MODEL_HERTZ = 1

@@ -4,10 +4,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .geometry import min_image
-
 from .exactsum import NLIMBS, add_exact
-from .forces import INV_I
+from .geometry import min_image
+from .particle import HALF_I, INV_I
 
 
 @njit(cache=True, inline="always")
@@ -139,7 +138,7 @@ def kinetic_energy(n_own, v, omega, fixed, acc, nchunk):
             if fixed[i]:
                 continue
             et = 0.5 * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
-            er = 0.05 * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
+            er = HALF_I * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
                          + omega[i, 2] * omega[i, 2])
             add_exact(part[c, 0], et)
             add_exact(part[c, 1], er)
