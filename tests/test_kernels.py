@@ -5,6 +5,7 @@ import random
 import numpy as np
 import pytest
 
+from mpdem.kernels.chunks import chunk_bounds, chunk_of
 from mpdem.kernels.exactsum import add_exact, new_accumulator, to_float
 from mpdem.kernels.neighbours import build_neighbours
 from mpdem.kernels.particle import INERTIA
@@ -103,7 +104,8 @@ def test_link_entries_give_each_pair_one_computing_row_in_a_chunk(nchunk):
     n, start, lst, link = t["n"], t["start"], t["lst"], t["link"]
     chunk = np.zeros(n, np.int64)
     for c in range(nchunk):
-        chunk[c * n // nchunk:(c + 1) * n // nchunk] = c
+        lo, hi = chunk_bounds(c, n, nchunk)
+        chunk[lo:hi] = c
     entry = {(i, int(j)): int(link[e]) for i in range(n) for e, j in zip(range(start[i], start[i + 1]),
                                                                         lst[start[i]:start[i + 1]])}
     computed = [v for v in entry.values() if v >= 0]
@@ -187,3 +189,20 @@ def test_particle_constants_agree_with_each_other():
     assert particle.INV_I == 1.0 / particle.INERTIA and particle.HALF_I == 0.5 * particle.INERTIA
     from mpdem.kernels.forces import INV_I, R                        # the old import path
     assert (INV_I, R) == (particle.INV_I, particle.R)
+
+
+def test_chunk_of_agrees_with_chunk_bounds():
+    """Every row is in exactly the chunk whose bounds hold it, the chunks tile 0..n-1 in order
+    (empty ones too, with more chunks than rows), for the thread counts and row counts of a run."""
+    sizes = list(range(1, 70)) + [97, 128, 1000, 4099, 20283, 2 ** 31 - 1]
+    for n in sizes:
+        for nchunk in list(range(1, 40)) + [64, 100, 257]:
+            edge = 0
+            for c in range(nchunk):
+                lo, hi = chunk_bounds(c, n, nchunk)
+                assert lo == edge and lo <= hi
+                edge = hi
+                # the first and last rows of a chunk say so (all rows when n is small)
+                rows = range(lo, hi) if n < 200 or hi - lo < 2 else (lo, lo + 1, hi - 2, hi - 1)
+                assert all(chunk_of(i, n, nchunk) == c for i in rows)
+            assert edge == n

@@ -17,6 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .exactsum import NLIMBS, add_exact
 from .history import slot_of, stamp_of
 
@@ -40,7 +41,8 @@ def force_balance(n_own, f, fixed, nbr_start, link, pair, stamp, epoch, nchunk):
     now = stamp_of(epoch)
     part = np.zeros((nchunk, 4, NLIMBS), np.int64)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             add_exact(part[c, 0], math.sqrt(f[i, 0] ** 2 + f[i, 1] ** 2 + f[i, 2] ** 2))

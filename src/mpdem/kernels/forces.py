@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of, stamp_of
 from .particle import INV_I, R  # noqa: F401 (INV_I: its old home, kept importable)
@@ -120,7 +121,8 @@ def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f
     chunk_max, chunk_count, found, sep = scratch
     nchunk = len(chunk_max)
     for c in prange(nchunk):
-        mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed, lists, hist, pair,
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        mo, nc = _rows(lo, hi, x, v, omega, fixed, lists, hist, pair,
                        stamp, epoch, f, torque, L_x, L_y, law, increment, found[c], sep[c])
         chunk_max[c] = mo
         chunk_count[c] = nc
@@ -405,7 +407,8 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         deepest = 0.0
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             delta = R - x[i, 2]

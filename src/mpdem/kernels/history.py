@@ -15,6 +15,8 @@ merge per row.
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
+
 
 @njit(cache=True, inline="always")
 def stamp_of(epoch):
@@ -45,7 +47,8 @@ def count_contacts(n_own, nbr_start, link, stamp, epoch, slot_n, nchunk):
     """
     now = stamp_of(epoch)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 m += stamp[slot_of(link[k])] == now
@@ -75,7 +78,8 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, stamp, epoch, 
     """
     now = stamp_of(epoch)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             p = slot_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 lk = link[k]
@@ -113,7 +117,8 @@ def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, slot_start, slot_id,
     now = stamp_of(epoch)
     old = stamp_of(epoch - 1)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             p = slot_start[i]
             pe = slot_start[i + 1]
             for k in range(nbr_start[i], nbr_start[i + 1]):

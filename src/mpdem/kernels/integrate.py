@@ -4,6 +4,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .exactsum import NLIMBS, add_exact
 from .geometry import min_image
 from .particle import HALF_I, INV_I
@@ -42,7 +43,8 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, scratc
     """
     nchunk = scratch.shape[0]
     for c in prange(nchunk):
-        d2, zlo, zhi = _kick_drift_rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega,
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        d2, zlo, zhi = _kick_drift_rows(lo, hi, x, v, omega,
                                         f, torque, fixed, x_ref, dt, L_x, L_y)
         scratch[c, 0] = d2
         scratch[c, 1] = zlo
@@ -134,7 +136,8 @@ def kinetic_energy(n_own, v, omega, fixed, acc, nchunk):
     """
     part = np.zeros((nchunk, 2, NLIMBS), np.int64)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             et = 0.5 * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])

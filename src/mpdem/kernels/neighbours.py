@@ -12,6 +12,7 @@ lists are the same for any thread count.
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds, chunk_of
 from .geometry import min_image
 
 
@@ -150,7 +151,8 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
     r2 = r_list * r_list
     nbr_start[0] = 0
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             if not fixed[i]:
                 m = _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
@@ -160,17 +162,12 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
     if total > len(nbr_list):
         return total
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if not fixed[i]:
                 _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
                           nbr_list, nbr_start[i], True)
     return total
-
-
-@njit(cache=True, inline="always")
-def chunk_of(i, n, nchunk):
-    """The chunk of row i when rows 0..n-1 are split as [c n / C, (c + 1) n / C)."""
-    return ((i + 1) * nchunk - 1) // n
 
 
 @njit(cache=True, inline="always")
@@ -225,7 +222,8 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
     """
     comp_start[0] = 0
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
@@ -235,7 +233,8 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
     if total > len(comp_list):
         return total
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             idi = ids[i]
             g = comp_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .geometry import min_image
 
 REACH = 2          # cells scanned either side of a point's own cell
@@ -154,7 +155,8 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
     lx0 = math.log10(xi_min)
     for c in prange(N_CHUNKS):
         cells = np.empty((2 * REACH + 1) ** 3, np.int64)
-        for k in range(c * n_ref // N_CHUNKS, (c + 1) * n_ref // N_CHUNKS):
+        lo, hi = chunk_bounds(c, n_ref, N_CHUNKS)
+        for k in range(lo, hi):
             i = refs[k]
             for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
                 for s in range(start[cells[q]], start[cells[q] + 1]):
@@ -183,7 +185,8 @@ def _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, counts, out_i, ou
     r2c = r_c * r_c
     for c in prange(N_CHUNKS):
         cells = np.empty((2 * REACH + 1) ** 3, np.int64)
-        for i in range(c * n // N_CHUNKS, (c + 1) * n // N_CHUNKS):
+        lo, hi = chunk_bounds(c, n, N_CHUNKS)
+        for i in range(lo, hi):
             m = 0
             base = counts[i] if fill else 0
             for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
