@@ -190,8 +190,10 @@ def test_particle_constants_agree_with_each_other():
     from mpdem.kernels import particle
     assert particle.INERTIA == 0.4 * particle.R ** 2                 # (2/5) m R^2, m = 1
     assert particle.INV_I == 1.0 / particle.INERTIA and particle.HALF_I == 0.5 * particle.INERTIA
-    from mpdem.kernels.forces import INV_I, R                        # the old import path
-    assert (INV_I, R) == (particle.INV_I, particle.R)
+    assert particle.VOLUME == pytest.approx(4 / 3 * math.pi * particle.R ** 3, rel=1e-15)
+    from mpdem.build import SPHERE_VOLUME
+    from mpdem.kernels.forces import INV_I, R                        # the old import paths
+    assert (INV_I, R, SPHERE_VOLUME) == (particle.INV_I, particle.R, particle.VOLUME)
 
 
 def test_chunk_of_agrees_with_chunk_bounds():

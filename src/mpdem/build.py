@@ -18,11 +18,11 @@ from .engine import Engine, Physics
 from .errors import InputError
 from .kernels.bundles import make_box
 from .kernels.insert import rsa_insert
+from .kernels.particle import VOLUME as SPHERE_VOLUME
 from .rundir import write_atomic
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
-SPHERE_VOLUME = math.pi / 6.0
 
 
 def rng(seed, purpose):
