@@ -14,6 +14,7 @@ import pytest
 from mpdem import checkpoint, config, rundir
 from mpdem.analysis import bulk, fits, gofr, mobilisation, report
 from mpdem.kernels import pairdist
+from mpdem.kernels.bundles import make_box
 
 from helpers import SQUEEZE, fcc, mpdem, simple_cubic, write_crystal
 
@@ -62,7 +63,8 @@ def test_pair_histograms_count_every_ordered_pair_once_for_any_thread_count():
     out = []
     for t in sorted({1, before}):
         numba.set_num_threads(t)
-        out.append(pairdist.pair_histograms(x, refs, L, L, r_max, dr, int(r_max / dr), xi_min, per_dec, n_log, *grid))
+        out.append(pairdist.pair_histograms(x, refs, make_box(L, L), r_max, dr, int(r_max / dr), xi_min, per_dec,
+                                            n_log, grid))
     numba.set_num_threads(before)
     lin, lg, over = out[0]
     for o in out[1:]:
@@ -134,7 +136,7 @@ def test_paper_sized_pile_gets_ten_d_margins_and_short_ones_the_clamp():
 
 
 def test_slab_volume_is_the_exact_cap_volume():
-    R = 0.5
+    from mpdem.kernels.particle import R
     for hcap in (0.1, 0.5, 0.8):
         # cut at height hcap below the top: the cap above the plane
         v = bulk.slab_volume(np.array([0.0]), R - hcap, 10.0)[0]

@@ -6,7 +6,9 @@ import pytest
 
 from mpdem.analysis import find_contacts
 from mpdem.build import insert_random, rng
+from mpdem.kernels.bundles import Lists, Particles, Scratch, Slots, make_box
 from mpdem.kernels.forces import contact_forces
+from mpdem.kernels.particle import HALF_I
 
 from helpers import make_engine
 
@@ -15,7 +17,7 @@ def total_energy(eng):
     """Kinetic plus Hookean elastic energy (1/2 k_n delta^2 per contact) [m g d]."""
     st = eng.state
     n = st.n_own
-    ke = 0.5 * np.sum(st.v[:n] ** 2) + 0.05 * np.sum(st.omega[:n] ** 2)
+    ke = 0.5 * np.sum(st.v[:n] ** 2) + HALF_I * np.sum(st.omega[:n] ** 2)
     pairs, r = find_contacts(st.x[:n], st.L_x, st.L_y)
     return ke + 0.5 * eng.phys.k_n * np.sum((1.0 - r) ** 2)
 
@@ -59,10 +61,10 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full: each entry its own slot
     # (link k, hist[k] is entry k's), both entries computed (comp_list = nbr)
-    lists = (nbr_start, nbr, np.arange(2, dtype=np.int32), nbr_start.copy(), nbr.copy())
-    scratch = (np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
-    res = contact_forces(2, x, v, omega, fx, lists, hist, np.zeros((3, 6)), stamp, 1, f, t, 10.0, 10.0, law,
-                         increment, scratch)
+    lists = Lists(nbr_start, nbr, np.arange(2, dtype=np.int32), nbr_start.copy(), nbr.copy())
+    scratch = Scratch(np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
+    res = contact_forces(2, Particles(x, v, omega, f, t, fx), lists, Slots(hist, stamp, np.zeros((3, 6))), 1,
+                         make_box(10.0, 10.0), law, increment, scratch)
     return f, t, (stamp == 1).astype(np.uint8), hist, res
 
 

@@ -5,8 +5,11 @@ import random
 import numpy as np
 import pytest
 
+from mpdem.kernels.bundles import Lists, Particles, Slots, make_box
+from mpdem.kernels.chunks import chunk_bounds, chunk_of
 from mpdem.kernels.exactsum import add_exact, new_accumulator, to_float
 from mpdem.kernels.neighbours import build_neighbours
+from mpdem.kernels.particle import INERTIA
 
 
 def brute_pairs(x, L_x, L_y, rc):
@@ -28,9 +31,10 @@ def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
     rc = 1.2
     start = np.zeros(n + 1, np.int64)
     lst = np.zeros(10, np.int32)
-    need = build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst, 3)
+    box = make_box(L_x, L_y)
+    need = build_neighbours(x, n, n, fixed, ids, box, rc, start, lst, 3)
     lst = np.zeros(need, np.int32)
-    assert build_neighbours(x, n, n, fixed, ids, L_x, L_y, rc, start, lst, 5) == need
+    assert build_neighbours(x, n, n, fixed, ids, box, rc, start, lst, 5) == need
     ref = brute_pairs(x, L_x, L_y, rc)
     for i in range(n):
         got = lst[start[i]:start[i + 1]]
@@ -84,16 +88,16 @@ def _lists(n=300, L=5.0, nchunk=3, seed=9):
     fixed = (g.random(n) < 0.2).astype(np.uint8)
     ids = g.permutation(n).astype(np.int64) * 2 + 5
     start = np.zeros(n + 1, np.int64)
-    lst = np.zeros(build_neighbours(x, n, n, fixed, ids, L, L, 1.2, start, np.zeros(1, np.int32), nchunk), np.int32)
-    build_neighbours(x, n, n, fixed, ids, L, L, 1.2, start, lst, nchunk)
+    box = make_box(L, L)
+    lst = np.zeros(build_neighbours(x, n, n, fixed, ids, box, 1.2, start, np.zeros(1, np.int32), nchunk), np.int32)
+    build_neighbours(x, n, n, fixed, ids, box, 1.2, start, lst, nchunk)
     link = np.zeros(len(lst), np.int32)
     comp_start = np.zeros(n + 1, np.int64)
-    comp_list = np.zeros(1, np.int32)
-    k = int(link_entries(n, fixed, ids, start, lst, nchunk, link, comp_start, comp_list))
-    comp_list = np.zeros(k, np.int32)
-    assert link_entries(n, fixed, ids, start, lst, nchunk, link, comp_start, comp_list) == k
+    k = int(link_entries(n, fixed, ids, Lists(start, lst, link, comp_start, np.zeros(1, np.int32)), nchunk))
+    lists = Lists(start, lst, link, comp_start, np.zeros(k, np.int32))
+    assert link_entries(n, fixed, ids, lists, nchunk) == k
     return dict(n=n, x=x, fixed=fixed, ids=ids, start=start, lst=lst, link=link, comp_start=comp_start,
-                comp_list=comp_list, k=k, nchunk=nchunk)
+                comp_list=lists.comp_list, k=k, nchunk=nchunk, lists=lists)
 
 
 @pytest.mark.parametrize("nchunk", [1, 3, 7])
@@ -102,7 +106,8 @@ def test_link_entries_give_each_pair_one_computing_row_in_a_chunk(nchunk):
     n, start, lst, link = t["n"], t["start"], t["lst"], t["link"]
     chunk = np.zeros(n, np.int64)
     for c in range(nchunk):
-        chunk[c * n // nchunk:(c + 1) * n // nchunk] = c
+        lo, hi = chunk_bounds(c, n, nchunk)
+        chunk[lo:hi] = c
     entry = {(i, int(j)): int(link[e]) for i in range(n) for e, j in zip(range(start[i], start[i + 1]),
                                                                         lst[start[i]:start[i + 1]])}
     computed = [v for v in entry.values() if v >= 0]
@@ -128,11 +133,11 @@ def test_history_slots_round_trip_through_the_list_entries():
     hist = g.standard_normal((k, 3))
     stamp = np.where(g.random(k) < 0.6, history.stamp_of(epoch), history.stamp_of(epoch - 1)).astype(np.uint32)
     slot_n = np.zeros(n, np.int32)
-    total = history.count_contacts(n, t["start"], t["link"], stamp, epoch, slot_n, 4)
+    total = history.count_contacts(n, t["lists"], Slots(hist, stamp, np.zeros((0, 6))), epoch, slot_n, 4)
     slot_start = np.zeros(n + 1, np.int64)
     np.cumsum(slot_n, out=slot_start[1:])
     slot_id, slot_ds = np.empty(total, np.int64), np.empty((total, 3))
-    history.entries_to_slots(n, t["ids"], t["start"], t["lst"], t["link"], hist, stamp, epoch, slot_start,
+    history.entries_to_slots(n, t["ids"], t["lists"], Slots(hist, stamp, np.zeros((0, 6))), epoch, slot_start,
                              slot_id, slot_ds, 4)
     # each row's slots: its partners in contact, by id, with Delta s from its own side
     for i in range(n):
@@ -144,8 +149,8 @@ def test_history_slots_round_trip_through_the_list_entries():
         assert got == want
     # and back: the slots in contact get their history and the stamp, the others zero and the one before
     hist2, stamp2 = np.full((k, 3), 7.0), np.zeros(k, np.uint32)
-    history.slots_to_entries(n, t["ids"], t["start"], t["lst"], t["link"], slot_start, slot_id, slot_ds, hist2,
-                             stamp2, epoch, 4)
+    history.slots_to_entries(n, t["ids"], t["lists"], slot_start, slot_id, slot_ds,
+                             Slots(hist2, stamp2, np.zeros((0, 6))), epoch, 4)
     on = stamp == history.stamp_of(epoch)
     assert np.array_equal(stamp2, stamp) and np.array_equal(hist2[on], hist[on]) and np.all(hist2[~on] == 0.0)
 
@@ -165,16 +170,44 @@ def test_kick_drift_is_a_half_kick_a_drift_and_a_wrap():
     want = {k: a.copy() for k, a in dict(x=x, v=v, omega=omega).items()}
     mob = fixed == 0
     want["v"][mob] += 0.5 * dt * f[mob]
-    want["omega"][mob] += 0.5 * dt * torque[mob] / 0.1
+    want["omega"][mob] += 0.5 * dt * torque[mob] / INERTIA
     want["x"][mob] += dt * want["v"][mob]
     want["x"][:, :2] %= L
     d = want["x"][mob] - x_ref[mob]
     d[:, :2] -= L * np.round(d[:, :2] / L)
     for nchunk in (1, 5):
         xs, vs, ws = x.copy(), v.copy(), omega.copy()
-        d2, zlo, zhi = kick_drift(n, xs, vs, ws, f, torque, fixed, x_ref, dt, L, L, np.zeros((nchunk, 3)))
+        d2, zlo, zhi = kick_drift(n, Particles(xs, vs, ws, f, torque, fixed), x_ref, dt, make_box(L, L),
+                                  np.zeros((nchunk, 3)))
         assert np.allclose(xs, want["x"], rtol=0, atol=1e-12) and np.array_equal(vs, want["v"])
         assert np.allclose(ws, want["omega"], rtol=1e-15) and np.array_equal(xs[~mob], x[~mob])
         assert 0 <= xs[0, 0] < L and 0 <= xs[1, 1] < L
         assert d2 == pytest.approx((d ** 2).sum(axis=1).max(), rel=1e-9)
         assert (zlo, zhi) == (xs[mob, 2].min(), xs[mob, 2].max())
+
+
+def test_particle_constants_agree_with_each_other():
+    from mpdem.kernels import particle
+    assert particle.INERTIA == 0.4 * particle.R ** 2                 # (2/5) m R^2, m = 1
+    assert particle.INV_I == 1.0 / particle.INERTIA and particle.HALF_I == 0.5 * particle.INERTIA
+    assert particle.VOLUME == pytest.approx(4 / 3 * math.pi * particle.R ** 3, rel=1e-15)
+    from mpdem.build import SPHERE_VOLUME
+    from mpdem.kernels.forces import INV_I, R                        # the old import paths
+    assert (INV_I, R, SPHERE_VOLUME) == (particle.INV_I, particle.R, particle.VOLUME)
+
+
+def test_chunk_of_agrees_with_chunk_bounds():
+    """Every row is in exactly the chunk whose bounds hold it, the chunks tile 0..n-1 in order
+    (empty ones too, with more chunks than rows), for the thread counts and row counts of a run."""
+    sizes = list(range(1, 70)) + [97, 128, 1000, 4099, 20283, 2 ** 31 - 1]
+    for n in sizes:
+        for nchunk in list(range(1, 40)) + [64, 100, 257]:
+            edge = 0
+            for c in range(nchunk):
+                lo, hi = chunk_bounds(c, n, nchunk)
+                assert lo == edge and lo <= hi
+                edge = hi
+                # the first and last rows of a chunk say so (all rows when n is small)
+                rows = range(lo, hi) if n < 200 or hi - lo < 2 else (lo, lo + 1, hi - 2, hi - 1)
+                assert all(chunk_of(i, n, nchunk) == c for i in rows)
+            assert edge == n

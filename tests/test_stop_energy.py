@@ -11,6 +11,7 @@ import json
 import numpy as np
 
 from mpdem import build, config
+from mpdem.kernels.particle import HALF_I
 from mpdem.schedule import StopRecord, StopRule
 from mpdem.simulation import Run
 
@@ -69,7 +70,7 @@ def test_a_spinning_sphere_holds_the_total_rule_but_not_the_translational_one(tm
     assert status == "max_steps"
     # frictionless: no torque, so the spin is kept to the bit, and it is all the energy left
     assert r.state.omega[r.state.id == top + 1][0].tolist() == [0.0, 0.0, SPIN]
-    e_rot = 0.5 * 0.1 * SPIN ** 2 / 216
+    e_rot = HALF_I * SPIN ** 2 / 216
     assert r.ek > e_rot > 100 * r.cfg.stop.E_stop
     assert r.ek - e_rot < r.cfg.stop.E_stop
 

@@ -16,12 +16,13 @@ from .config import gamma_n_from_epsilon
 from .decomp import Domain
 from .engine import Engine, Physics
 from .errors import InputError
+from .kernels.bundles import make_box
 from .kernels.insert import rsa_insert
+from .kernels.particle import VOLUME as SPHERE_VOLUME
 from .rundir import write_atomic
 from .state import INITIAL, State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
-SPHERE_VOLUME = math.pi / 6.0
 
 
 def rng(seed, purpose):
@@ -55,7 +56,7 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000):
             raise InputError(f"random insertion placed only {done} of {n} spheres after {tried} tries; "
                              f"lower pour.phi_i")
         cand = gen.random((batch, 3))
-        done = rsa_insert(cand, obs, out, done, L_x, L_y, z_lo, z_hi)
+        done = rsa_insert(cand, obs, out, done, make_box(L_x, L_y), z_lo, z_hi)
         tried += batch
     return out
 

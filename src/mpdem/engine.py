@@ -15,6 +15,7 @@ import numpy as np
 
 from .kernels import history
 from .kernels.balance import force_balance
+from .kernels.bundles import Lists, Particles, Scratch, Slots, make_box
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces, wall_forces
 from .kernels.integrate import kick, kick_drift, kinetic_energy
@@ -153,6 +154,20 @@ class Engine:
         self._found = np.zeros((self.nchunk, width, 2), np.int32)
         self._sep = np.zeros((self.nchunk, width, 4))
 
+    # -- the kernels' bundles, made for each call (arrays are reallocated at rebuilds) --
+    def _particles(self):
+        s = self.state
+        return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
+
+    def _lists(self):
+        return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
+
+    def _slots(self):
+        return Slots(self.hist, self.stamp, self.pair)
+
+    def _box(self):
+        return make_box(self.state.L_x, self.state.L_y)
+
     # -- contact history: list entries <-> compact slots --
     def sync_slots(self):
         """Pack the history of the last force evaluation into the state's compact slots."""
@@ -163,18 +178,17 @@ class Engine:
         # made (forces() takes them back), so the peak memory holds the history once
         self.pair = np.zeros((0, 6))
         n = s.n_own
-        total = history.count_contacts(n, self.nbr_start, self.link, self.stamp, self._epoch, s.count,
-                                       self.nchunk)
+        total = history.count_contacts(n, self._lists(), self._slots(), self._epoch, s.count, self.nchunk)
         start = s.slot_offsets()
         s.alloc_slots(total)
-        history.entries_to_slots(n, s.id, self.nbr_start, self.nbr_list, self.link, self.hist, self.stamp,
-                                 self._epoch, start, s.partner, s.ds, self.nchunk)
+        history.entries_to_slots(n, s.id, self._lists(), self._slots(), self._epoch, start, s.partner, s.ds,
+                                 self.nchunk)
         s.slots_current = True
 
     def _unpack_slots(self):
         s = self.state
-        history.slots_to_entries(s.n_own, s.id, self.nbr_start, self.nbr_list, self.link, s.slot_offsets(),
-                                 s.partner, s.ds, self.hist, self.stamp, self._epoch, self.nchunk)
+        history.slots_to_entries(s.n_own, s.id, self._lists(), s.slot_offsets(), s.partner, s.ds,
+                                 self._slots(), self._epoch, self.nchunk)
         if self.law.mu == 0.0:
             # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
             self.hist[:] = 0.0
@@ -196,11 +210,11 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, s.L_x, s.L_y,
+        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(),
                                 self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
         if need > len(self.nbr_list):
             self._alloc_lists(int(need * 1.1) + 64)
-            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, s.L_x, s.L_y,
+            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(),
                              self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
         if longest > self._width:
@@ -221,11 +235,10 @@ class Engine:
         s = self.state
         if len(self.comp_start) < s.n_own + 1:
             self.comp_start = np.zeros(s.capacity + 1, np.int64)
-        args = (s.n_own, s.fixed, s.id, self.nbr_start, self.nbr_list, self.nchunk, self.link, self.comp_start)
-        k = int(link_entries(*args, self.comp_list))
+        k = int(link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk))
         if k > len(self.comp_list):
             self.comp_list = np.zeros(int(k * 1.1) + 64, np.int32)
-            link_entries(*args, self.comp_list)
+            link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk)
         self.hist = np.empty((k, 3))
         self.stamp = np.empty(k, np.uint32)
 
@@ -258,15 +271,14 @@ class Engine:
             # one row per slot; each step's computing rows write it before any row sums it
             self.pair = np.empty((len(self.hist), 6))
         self._epoch += 1
-        lists = (self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
-        scratch = (self._chunk_max, self._chunk_count, self._found, self._sep)
-        max_ov, n_c = contact_forces(s.n_own, s.x, s.v, s.omega, s.fixed, lists, self.hist, self.pair, self.stamp,
-                                     self._epoch, s.f, s.torque, s.L_x, s.L_y, self.law, increment, scratch)
+        part = self._particles()
+        scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
+        max_ov, n_c = contact_forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
+                                     self.law, increment, scratch)
         if p.floor:
-            floor_forces(s.n_own, s.x, s.v, s.fixed, s.f, p.k_n, p.gamma_n)
+            floor_forces(s.n_own, part, p.k_n, p.gamma_n)
         if p.wall:
-            max_ov = max(max_ov, wall_forces(s.n_own, s.x, s.v, s.omega, s.fixed, s.wall_ds, s.f, s.torque,
-                                             self.law, increment, self._chunk_max))
+            max_ov = max(max_ov, wall_forces(s.n_own, part, s.wall_ds, self.law, increment, self._chunk_max))
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c
@@ -311,8 +323,7 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        d2, z_min, z_max = kick_drift(s.n_own, s.x, s.v, s.omega, s.f, s.torque, s.fixed,
-                                      s.x_ref, p.dt, s.L_x, s.L_y, self._drift)
+        d2, z_min, z_max = kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
         red = self._reduce
@@ -328,7 +339,8 @@ class Engine:
             dom.refresh(s)
         self.last_overlap, self._contacts = self.forces(increment=True)
         t = time.perf_counter()
-        kick(s.n_own, s.v, s.omega, s.f, s.torque, s.fixed, p.dt)
+        # a new bundle: a rebuild may have reallocated the rows
+        kick(s.n_own, self._particles(), p.dt)
         self.timers["integration"] += time.perf_counter() - t
         s.step += 1
         s.time = s.step * p.dt
@@ -354,7 +366,7 @@ class Engine:
         """Global (translational, rotational) kinetic energy sums [m g d], exact."""
         s = self.state
         acc = new_accumulator(2)
-        kinetic_energy(s.n_own, s.v, s.omega, s.fixed, acc, self.nchunk)
+        kinetic_energy(s.n_own, self._particles(), acc, self.nchunk)
         acc = self.domain.sum_int(acc)
         return to_float(acc[0]), to_float(acc[1])
 
@@ -369,8 +381,8 @@ class Engine:
         if len(self.pair) < len(self.hist):
             # the slot forces were freed when the history was packed (a state file written since)
             return math.nan, -1
-        acc = self.domain.sum_int(force_balance(s.n_own, s.f, s.fixed, self.nbr_start, self.link, self.pair,
-                                                self.stamp, self._epoch, self.nchunk))
+        acc = self.domain.sum_int(force_balance(s.n_own, self._particles(), self._lists(), self._slots(),
+                                                self._epoch, self.nchunk))
         res, con, n_c, free = (to_float(a) for a in acc)
         n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
         # no contact, or contacts that carry no force yet (the first evaluation of a touching pair)

@@ -17,7 +17,7 @@ import h5py
 import numpy as np
 
 from . import checkpoint
-from .kernels.forces import R      # particle radius [d]
+from .kernels.particle import R    # particle radius [d]
 from .rundir import write_atomic
 from .state import FIELDS, PARTICLE
 

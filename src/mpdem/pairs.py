@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels.forces import INV_I, R
+from .kernels.particle import INV_I, R
 from .kernels.pairdist import separations
 
 

@@ -10,8 +10,7 @@ import math
 import numpy as np
 
 from ..kernels.pairdist import close_pairs, separations
-
-R = 0.5
+from ..kernels.particle import R
 
 
 def slab_volume(zc, a, b, radius=R):

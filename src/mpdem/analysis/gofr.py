@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..kernels.bundles import make_box
 from ..kernels.pairdist import cell_grid, pair_histograms, wrap
 
 
@@ -48,9 +49,9 @@ def radial_distribution(xm, L_x, L_y, z1, z2, r_max, dr=0.01, xi_min=1e-6, per_d
     if refs.size == 0:
         raise ValueError(f"no reference spheres: the bulk slab [{z1:.3g}, {z2:.3g}] is thinner than "
                          f"2 r_max = {2 * r_max:g} d")
-    order, start, dims, geo = cell_grid(xm, L_x, L_y, r_max)
-    lin, lg, n_over = pair_histograms(xm, refs, L_x, L_y, r_max, dr, n_lin, xi_min,
-                                      float(per_decade), n_log, order, start, dims, geo)
+    grid = cell_grid(xm, L_x, L_y, r_max)
+    lin, lg, n_over = pair_histograms(xm, refs, make_box(L_x, L_y), r_max, dr, n_lin, xi_min,
+                                      float(per_decade), n_log, grid)
     r_lo, r_hi = dr * np.arange(n_lin), dr * np.arange(1, n_lin + 1)
     xi_lo = xi_min * 10.0 ** (np.arange(n_log) / per_decade)
     xi_hi = xi_min * 10.0 ** (np.arange(1, n_log + 1) / per_decade)

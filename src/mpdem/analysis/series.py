@@ -17,7 +17,7 @@ import os
 import numpy as np
 
 from .. import checkpoint, rundir
-from ..kernels.forces import INV_I
+from ..kernels.particle import HALF_I
 from . import bulk
 from .report import AnalysisError, file_config
 
@@ -47,7 +47,7 @@ def measure_file(path, sets=()):
     mob = ~arrays["fixed"].astype(bool)
     n = max(int(mob.sum()), 1)
     ek_t = 0.5 * float(np.sum(arrays["v"][mob] ** 2)) / n
-    ek_r = 0.5 / INV_I * float(np.sum(arrays["omega"][mob] ** 2)) / n
+    ek_r = HALF_I * float(np.sum(arrays["omega"][mob] ** 2)) / n
     row = dict.fromkeys(COLUMNS, math.nan)
     row.update(step=int(attrs.get("step", 0)), time=float(attrs.get("time", 0.0)), kind=attrs.get("kind", "?"),
                ek=ek_t + ek_r, ek_trans=ek_t, ek_rot=ek_r, note="")

@@ -17,19 +17,22 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .exactsum import NLIMBS, add_exact
 from .history import slot_of, stamp_of
 
 
 @njit(cache=True, parallel=True)
-def force_balance(n_own, f, fixed, nbr_start, link, pair, stamp, epoch, nchunk):
+def force_balance(n_own, particles, lists, slots, epoch, nchunk):
     """Exact sums of the resultant and the contact forces of the owned mobile rows.
 
     Parameters
     ----------
-    f : (n, 3) forces of the last evaluation (contacts and gravity) [m g]
-    nbr_start, link : the rows' list entries and their slots; pair : (K, 6) slot forces
-        (columns 0-2 the contact force); stamp : (K,) uint32; epoch : int, the last evaluation
+    particles : Particles; ``f`` (n, 3), the forces of the last evaluation (contacts and gravity)
+        [m g], and ``fixed`` are read
+    lists : Lists; ``nbr_start`` and ``link`` (the rows' list entries and their slots) are read
+    slots : Slots; ``pair`` (K, 6) slot forces (columns 0-2 the contact force [m g]) and ``stamp`` are read
+    epoch : int, the last evaluation
     nchunk : int, chunks of rows (the sums do not depend on it)
 
     Returns
@@ -37,10 +40,14 @@ def force_balance(n_own, f, fixed, nbr_start, link, pair, stamp, epoch, nchunk):
     (4, NLIMBS) int64 accumulators: sum |f_i|, sum |F_c| over the rows' contacts, their number,
     and the mobile rows without a contact
     """
+    f, fixed = particles.f, particles.fixed
+    nbr_start, link = lists.nbr_start, lists.link
+    pair, stamp = slots.pair, slots.stamp
     now = stamp_of(epoch)
     part = np.zeros((nchunk, 4, NLIMBS), np.int64)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             add_exact(part[c, 0], math.sqrt(f[i, 0] ** 2 + f[i, 1] ** 2 + f[i, 2] ** 2))

@@ -35,11 +35,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of, stamp_of
-
-R = 0.5          # particle radius [d]
-INV_I = 10.0     # 1 / moment of inertia, I = (2/5) m R^2 = 0.1 [m d^2]
+from .particle import INV_I, R  # noqa: F401 (INV_I: its old home, kept importable)
 
 MODEL_HOOKE = 0
 MODEL_HERTZ = 1
@@ -68,49 +67,41 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque, L_x, L_y, law,
-                   increment, scratch):
+def contact_forces(n_own, particles, lists, slots, epoch, box, law, increment, scratch):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
     ----------
     n_own : int
         Owned rows ``0..n_own-1`` get forces; other rows are read-only ghosts.
-    x, v, omega : (n_rows, 3) float64
-        Position [d], velocity [sqrt(g d)], angular velocity [sqrt(g/d)];
-        v and omega are the half-step values of velocity Verlet.
-    fixed : (n_rows,) uint8
-        1 for bed particles (never moved; zero force and torque here).
-    lists : tuple (nbr_start, nbr_list, link, comp_start, comp_list)
-        ``nbr_start`` (n_own + 1,) int64 and ``nbr_list`` (E,) int32: full
-        neighbour lists in CSR form, each sorted by partner id; ``link`` (E,)
-        int32: each entry's slot, g or ~g (``link_entries``); ``comp_start``
-        (n_own + 1,) int64 and ``comp_list`` (K,) int32: the partners of the
-        entries each row computes, slot g = position in ``comp_list``.
-    hist : (K, 3) float64, in/out
-        Delta s [d] of each slot's pair (the computing row's view); read only
-        if the pair was in contact at the previous evaluation.
-    pair : (>= K, 6) float64, scratch
-        Per slot: the computing row's contact force [m g] and torque [m g d]
-        (zeros out of contact; the torque only with friction).
-    stamp : (K,) uint32, in/out
-        Per slot, the number (mod 2**32) of the last evaluation that found its
-        pair in contact; set to ``epoch`` for the contacts of this one.
+    particles : Particles
+        ``x``, ``v``, ``omega`` (n_rows, 3) float64: position [d], velocity
+        [sqrt(g d)], angular velocity [sqrt(g/d)], v and omega the half-step
+        values of velocity Verlet; ``fixed`` (n_rows,) uint8: 1 for bed
+        particles (never moved; zero force and torque here); ``f``, ``torque``
+        (n_rows, 3) float64, out: force [m g] including gravity, torque [m g d].
+    lists : Lists
+        Full neighbour lists (E entries, each row's sorted by partner id),
+        each entry's slot ``link`` and the K entries the rows compute
+        (``link_entries``).
+    slots : Slots
+        ``hist`` (K, 3) float64, in/out: Delta s [d] of each slot's pair (the
+        computing row's view), read only if the pair was in contact at the
+        previous evaluation; ``stamp`` (K,) uint32, in/out: set to ``epoch``
+        for the contacts of this evaluation; ``pair`` (>= K, 6) float64, out:
+        the computing row's contact force [m g] and torque [m g d] (zeros out
+        of contact; the torque only with friction).
     epoch : int
         The number of this evaluation (the previous one is ``epoch - 1``).
-    f, torque : (n_rows, 3) float64, out
-        Force [m g] including gravity, torque [m g d].
-    L_x, L_y : float
+    box : Box
         Periodic box [d].
     law : Law
     increment : bool
         False on the set-up evaluation at t = 0 (no history increment).
-    scratch : tuple (chunk_max, chunk_count, found, sep)
-        ``chunk_max`` (C,) float64 and ``chunk_count`` (C,) int64: one slot per
-        chunk of rows (C >= 1; any C gives the same result); ``found``
-        (C, W, 2) int32 and ``sep`` (C, W, 4) float64, W >= the longest list of
-        a row: the slot and partner row of each of a row's computed contacts,
-        their separation x_i - x_j [d] and its square [d^2].
+    scratch : Scratch
+        Per chunk of rows (C >= 1 chunks; any C gives the same result): the
+        largest overlap, the contacts, and room for a row's computed
+        contacts (W >= the longest list of a row).
 
     Returns
     -------
@@ -119,11 +110,12 @@ def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f
     n_contacts : int
         Contacts counted from owned mobile particles (bed partners included).
     """
-    chunk_max, chunk_count, found, sep = scratch
+    # fields by attribute before the loop, never unpacked as a tuple (bundles.py: numba's prange)
+    chunk_max, chunk_count, found, sep = scratch.chunk_max, scratch.chunk_count, scratch.found, scratch.sep
     nchunk = len(chunk_max)
     for c in prange(nchunk):
-        mo, nc = _rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega, fixed, lists, hist, pair,
-                       stamp, epoch, f, torque, L_x, L_y, law, increment, found[c], sep[c])
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        mo, nc = _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, (found[c], sep[c]))
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -135,9 +127,10 @@ def contact_forces(n_own, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque, L_x, L_y, law, increment,
-          found, sep):
+def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
+
+    ``room`` is the chunk's (found (W, 2) int32, sep (W, 4) float64) of ``Scratch``.
 
     Per row: a screening pass over the entries the row computes records the
     contacts (slot, partner) in ``found`` and their separations in ``sep``
@@ -149,15 +142,14 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
     the outcome: a slot out of contact holds zeros (adding +0.0
     or -0.0 to a sum that started at +0.0 or -gravity leaves it as it is).
     """
+    x, v, omega, f, torque, fixed = particles
     nbr_start, nbr_list, link, comp_start, comp_list = lists
-    k_t, gamma_t, mu = law.k_t, law.gamma_t, law.mu
-    hertz = law.model == MODEL_HERTZ
-    friction = mu > 0.0
-    dt = law.dt
+    hist, stamp, pair = slots
+    L_x, L_y, hx, hy = box
+    found, sep = room
+    friction = law.mu > 0.0
     now = stamp_of(epoch)
     before = stamp_of(epoch - 1)
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
     max_overlap = 0.0
     n_contacts = 0
     for i in range(lo, hi):
@@ -236,9 +228,8 @@ def _rows(lo, hi, x, v, omega, fixed, lists, hist, pair, stamp, epoch, f, torque
                 vty = vry - vn * ny - (wz * nx - wx * nz)
                 vtz = vrz - vn * nz - (wx * ny - wy * nx)
                 sx, sy, sz, ftx, fty, ftz = _tangential(
-                    hist[g, 0] if was else 0.0, hist[g, 1] if was else 0.0, hist[g, 2] if was else 0.0,
-                    vtx, vty, vtz, nx, ny, nz,
-                    hertz, scale, meff, abs(fn), k_t, gamma_t, mu, dt, increment, law.rescale_history)
+                    (hist[g, 0] if was else 0.0, hist[g, 1] if was else 0.0, hist[g, 2] if was else 0.0),
+                    (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
                 # + 0.0 stores a zero as +0.0 whichever way it was reached
                 hist[g, 0] = sx + 0.0
                 hist[g, 1] = sy + 0.0
@@ -299,12 +290,34 @@ def _normal(delta, vn, meff, law):
 
 
 @njit(cache=True, inline="always")
-def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, hertz, scale, meff, fn_mag, k_t, gamma_t, mu, dt,
-                increment, rescale_history):
+def _tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
     """History update, projection and Coulomb truncation of docs/model.md 2.4.
 
-    Returns the new Delta s (3) and the tangential force on i (3).
+    Parameters
+    ----------
+    ds : (3,) tuple of float
+        Delta s before this step [d] (zeros for a new contact).
+    vt : (3,) tuple of float
+        Tangential relative velocity at the contact point [sqrt(g d)].
+    nrm : (3,) tuple of float
+        Unit normal n.
+    scale : float
+        sqrt(delta) for Hertz (``_normal``); not read for Hooke.
+    meff : float
+        Effective mass [m].
+    fn_mag : float
+        |f_n| [m g], the Coulomb bound's normal force.
+    law : Law
+    increment : bool
+        False on the set-up evaluation (no history increment).
+
+    Returns the new Delta s (3) [d] and the tangential force on i (3) [m g].
     """
+    sx, sy, sz = ds
+    vtx, vty, vtz = vt
+    nx, ny, nz = nrm
+    k_t, gamma_t, mu, dt = law.k_t, law.gamma_t, law.mu, law.dt
+    rescale_history = law.rescale_history
     if increment:
         sx += vtx * dt
         sy += vty * dt
@@ -324,7 +337,7 @@ def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, hertz, scale, meff, fn_ma
             sx *= q
             sy *= q
             sz *= q
-    if hertz:
+    if law.model == MODEL_HERTZ:
         ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
         fty = -scale * (k_t * sy + meff * gamma_t * vty)
         ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
@@ -362,12 +375,14 @@ def _tangential(sx, sy, sz, vtx, vty, vtz, nx, ny, nz, hertz, scale, meff, fn_ma
 
 
 @njit(cache=True)
-def floor_forces(n_own, x, v, fixed, f, k_n, gamma_n):
+def floor_forces(n_own, particles, k_n, gamma_n):
     """Add a flat frictionless floor at z = 0 (only for building the bed).
 
-    Hookean normal force k_n delta - m gamma_n v_z on owned mobile rows with
-    delta = R - z > 0 (m_eff = m, as for any fixed partner).
+    Hookean normal force k_n delta - m gamma_n v_z [m g] on owned mobile rows
+    with delta = R - z > 0 (m_eff = m, as for any fixed partner), added to
+    ``particles.f``; k_n [m g / d], gamma_n [sqrt(g/d)].
     """
+    x, v, f, fixed = particles.x, particles.v, particles.f, particles.fixed
     for i in range(n_own):
         if fixed[i]:
             continue
@@ -377,7 +392,7 @@ def floor_forces(n_own, x, v, fixed, f, k_n, gamma_n):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, chunk_max):
+def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
     """Add the contact of each owned mobile sphere with the wall plane z = 0 (``bed.wall``).
 
     The wall is a partner of infinite mass at rest (m_eff = m = 1) with the
@@ -388,12 +403,12 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
 
     Parameters
     ----------
-    x, v, omega : (n_rows, 3) float64
-        Position [d], half-step velocity [sqrt(g d)] and angular velocity [sqrt(g/d)].
+    particles : Particles
+        ``x``, ``v``, ``omega``: position [d], half-step velocity [sqrt(g d)]
+        and angular velocity [sqrt(g/d)]; the wall's force [m g] and torque
+        [m g d] are added to ``f`` and ``torque``.
     wall_ds : (n_rows, 3) float64, in/out
         Delta s of each sphere's wall contact [d].
-    f, torque : (n_rows, 3) float64, in/out
-        The wall's force [m g] and torque [m g d] are added.
     law : Law
     increment : bool
         False on the set-up evaluation (no history increment).
@@ -404,10 +419,13 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
     -------
     float : the largest wall overlap [d] (0 if none).
     """
+    x, v, omega, fixed = particles.x, particles.v, particles.omega, particles.fixed
+    f, torque = particles.f, particles.torque
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         deepest = 0.0
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             delta = R - x[i, 2]
@@ -425,9 +443,8 @@ def wall_forces(n_own, x, v, omega, fixed, wall_ds, f, torque, law, increment, c
                 vty = v[i, 1] + R * omega[i, 0]
                 vtz = 0.0
                 sx, sy, sz, ftx, fty, ftz = _tangential(
-                    wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2], vtx, vty, vtz, 0.0, 0.0, 1.0,
-                    law.model == MODEL_HERTZ, scale, 1.0, abs(fn), law.k_t, law.gamma_t, law.mu, law.dt, increment,
-                    law.rescale_history)
+                    (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2]), (vtx, vty, vtz), (0.0, 0.0, 1.0),
+                    scale, 1.0, abs(fn), law, increment)
                 wall_ds[i, 0] = sx + 0.0
                 wall_ds[i, 1] = sy + 0.0
                 wall_ds[i, 2] = sz + 0.0

@@ -15,6 +15,8 @@ merge per row.
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds
+
 
 @njit(cache=True, inline="always")
 def stamp_of(epoch):
@@ -29,12 +31,18 @@ def slot_of(lk):
 
 
 @njit(cache=True, parallel=True)
-def count_contacts(n_own, nbr_start, link, stamp, epoch, slot_n, nchunk):
+def count_contacts(n_own, lists, slots, epoch, slot_n, nchunk):
     """slot_n[i] = entries of row i in contact, for the owned rows.
 
     Parameters
     ----------
-    nbr_start : (n_own + 1,) int64; link : (E,) int32; stamp : (K,) uint32; epoch : int
+    n_own : int
+    lists : Lists
+        ``nbr_start`` and ``link`` are read.
+    slots : Slots
+        ``stamp`` is read.
+    epoch : int
+        The number of the last force evaluation.
     slot_n : (n_own,) int32, out
     nchunk : int
         Chunks of rows for the threads.
@@ -43,9 +51,11 @@ def count_contacts(n_own, nbr_start, link, stamp, epoch, slot_n, nchunk):
     -------
     int : total contacts.
     """
+    nbr_start, link, stamp = lists.nbr_start, lists.link, slots.stamp
     now = stamp_of(epoch)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 m += stamp[slot_of(link[k])] == now
@@ -57,8 +67,7 @@ def count_contacts(n_own, nbr_start, link, stamp, epoch, slot_n, nchunk):
 
 
 @njit(cache=True, parallel=True)
-def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, stamp, epoch, slot_start, slot_id,
-                     slot_ds, nchunk):
+def entries_to_slots(n_own, ids, lists, slots, epoch, slot_start, slot_id, slot_ds, nchunk):
     """Pack the entries in contact into compact slots.
 
     An entry that takes its pair from the lower row (``link < 0``) holds
@@ -67,15 +76,22 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, stamp, epoch, 
     Parameters
     ----------
     ids : (n_rows,) int64
-    nbr_start : (n_own + 1,) int64, nbr_list : (E,) int32, link : (E,) int32
-    hist : (K, 3) float64, stamp : (K,) uint32, epoch : int
+    lists : Lists
+        ``nbr_start``, ``nbr_list`` and ``link`` are read.
+    slots : Slots
+        ``hist`` [d] and ``stamp`` are read.
+    epoch : int
+        The number of the last force evaluation.
     slot_start : (n_own + 1,) int64
         Offsets of each row's slots (prefix sum of ``count_contacts``).
     slot_id : (M,) int64, slot_ds : (M, 3) float64, out
     """
+    nbr_start, nbr_list, link = lists.nbr_start, lists.nbr_list, lists.link
+    hist, stamp = slots.hist, slots.stamp
     now = stamp_of(epoch)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             p = slot_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 lk = link[k]
@@ -92,8 +108,7 @@ def entries_to_slots(n_own, ids, nbr_start, nbr_list, link, hist, stamp, epoch, 
 
 
 @njit(cache=True, parallel=True)
-def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, slot_start, slot_id, slot_ds, hist,
-                     stamp, epoch, nchunk):
+def slots_to_entries(n_own, ids, lists, slot_start, slot_id, slot_ds, slots, epoch, nchunk):
     """Unpack compact slots onto the slots of new neighbour lists.
 
     A compact slot whose partner is not in the new list is dropped: the pair
@@ -103,17 +118,24 @@ def slots_to_entries(n_own, ids, nbr_start, nbr_list, link, slot_start, slot_id,
 
     Parameters
     ----------
-    link : (E,) int32
+    ids : (n_rows,) int64
+    lists : Lists
+        ``nbr_start``, ``nbr_list`` and ``link`` are read.
     slot_start : (n_own + 1,) int64, slot_id : (M,) int64, slot_ds : (M, 3) float64
-    hist : (K, 3) float64, stamp : (K,) uint32, out
+        The compact slots (partner ids, Delta s [d]).
+    slots : Slots
+        ``hist`` (K, 3) float64 [d] and ``stamp`` (K,) uint32 are written.
     epoch : int
         The number of the last force evaluation: the slot of a pair in contact
         gets it as its stamp, any other ``epoch - 1``.
     """
+    nbr_start, nbr_list, link = lists.nbr_start, lists.nbr_list, lists.link
+    hist, stamp = slots.hist, slots.stamp
     now = stamp_of(epoch)
     old = stamp_of(epoch - 1)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             p = slot_start[i]
             pe = slot_start[i + 1]
             for k in range(nbr_start[i], nbr_start[i + 1]):

@@ -6,7 +6,7 @@ from .geometry import min_image
 
 
 @njit(cache=True)
-def rsa_insert(cand, obstacles, out, n_done, L_x, L_y, z_lo, z_hi):
+def rsa_insert(cand, obstacles, out, n_done, box, z_lo, z_hi):
     """Accept candidate centres that overlap nothing placed so far.
 
     Candidates are consumed in order, so the result depends only on the
@@ -21,14 +21,17 @@ def rsa_insert(cand, obstacles, out, n_done, L_x, L_y, z_lo, z_hi):
     out : (N, 3) float64, in/out
         Accepted centres; rows ``0..n_done-1`` are already placed.
     n_done : int
-    L_x, L_y, z_lo, z_hi : float
-        Box [0, L_x) x [0, L_y) x [z_lo, z_hi] for the centres [d].
+    box : Box
+        The periodic box [d]: centres go in [0, L_x) x [0, L_y).
+    z_lo, z_hi : float
+        Centres go in [z_lo, z_hi] [d].
 
     Returns
     -------
     n_done : int
         Number of centres placed after this batch.
     """
+    L_x, L_y, hx, hy = box
     n_want = out.shape[0]
     nx = max(int(L_x // 1.0), 1)
     ny = max(int(L_y // 1.0), 1)
@@ -52,8 +55,6 @@ def rsa_insert(cand, obstacles, out, n_done, L_x, L_y, z_lo, z_hi):
         nxt[m] = head[c]
         head[c] = m
         m += 1
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
     for k in range(cand.shape[0]):
         if n_done >= n_want:
             break

@@ -4,32 +4,38 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .geometry import min_image
-
+from .chunks import chunk_bounds
 from .exactsum import NLIMBS, add_exact
-from .forces import INV_I
+from .geometry import min_image
+from .particle import HALF_I, INV_I
 
 
 @njit(cache=True, inline="always")
 def _half_kick(i, v, omega, f, torque, h):
-    """v += h F / m and omega += h T / I for row i (m = 1, I = 0.1)."""
+    """v += h F / m and omega += h T / I for row i (m = 1, I = ``particle.INERTIA``); h [tau]."""
     for a in range(3):
         v[i, a] += h * f[i, a]
         omega[i, a] += h * INV_I * torque[i, a]
 
 
 @njit(cache=True, parallel=True)
-def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, scratch):
+def kick_drift(n_own, particles, x_ref, dt, box, scratch):
     """First half-kick and drift of owned mobile rows; wrap x and y.
 
     Parameters
     ----------
-    x, v, omega, f, torque : (n_rows, 3) float64
-        Updated in place (m = 1, I = 0.1).
+    n_own : int
+        Rows ``0..n_own-1`` move (those with ``fixed`` 0).
+    particles : Particles
+        ``x`` [d], ``v`` [sqrt(g d)] and ``omega`` [sqrt(g/d)] (n_rows, 3)
+        are updated in place from ``f`` [m g] and ``torque`` [m g d]
+        (m = 1, I = ``particle.INERTIA``).
     x_ref : (n_rows, 3) float64
-        Positions at the last neighbour-list build.
+        Positions at the last neighbour-list build [d].
     dt : float
         Time step [tau].
+    box : Box
+        Periodic box [d]; x and y are wrapped into [0, L_x) x [0, L_y).
     scratch : (C, 3) float64
         One row per chunk of rows for the threads (any C >= 1, same result).
 
@@ -43,8 +49,8 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, scratc
     """
     nchunk = scratch.shape[0]
     for c in prange(nchunk):
-        d2, zlo, zhi = _kick_drift_rows(c * n_own // nchunk, (c + 1) * n_own // nchunk, x, v, omega,
-                                        f, torque, fixed, x_ref, dt, L_x, L_y)
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        d2, zlo, zhi = _kick_drift_rows(lo, hi, particles, x_ref, dt, box)
         scratch[c, 0] = d2
         scratch[c, 1] = zlo
         scratch[c, 2] = zhi
@@ -65,11 +71,11 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, scratc
 
 
 @njit(cache=True)
-def _kick_drift_rows(lo, hi, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y):
+def _kick_drift_rows(lo, hi, particles, x_ref, dt, box):
     """Rows lo..hi-1 of ``kick_drift``; returns (max d^2 or NaN, z_min, z_max)."""
+    x, v, omega, f, torque, fixed = particles
+    L_x, L_y, hx, hy = box
     h = 0.5 * dt
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
     max_d2 = 0.0
     z_min = math.inf
     z_max = -math.inf
@@ -112,8 +118,10 @@ def _kick_drift_rows(lo, hi, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y)
 
 
 @njit(cache=True, parallel=True)
-def kick(n_own, v, omega, f, torque, fixed, dt):
-    """Second half-kick of owned mobile rows (m = 1, I = 0.1)."""
+def kick(n_own, particles, dt):
+    """Second half-kick of owned mobile rows: ``particles.v`` and ``omega`` from ``f`` and ``torque``
+    (m = 1, I = ``particle.INERTIA``); dt the time step [tau]."""
+    v, omega, f, torque, fixed = particles.v, particles.omega, particles.f, particles.torque, particles.fixed
     h = 0.5 * dt
     for i in prange(n_own):
         if not fixed[i]:
@@ -121,11 +129,13 @@ def kick(n_own, v, omega, f, torque, fixed, dt):
 
 
 @njit(cache=True, parallel=True)
-def kinetic_energy(n_own, v, omega, fixed, acc, nchunk):
+def kinetic_energy(n_own, particles, acc, nchunk):
     """Kinetic energies of owned mobile rows as exact fixed-point sums.
 
     Parameters
     ----------
+    particles : Particles
+        ``v`` [sqrt(g d)], ``omega`` [sqrt(g/d)] and ``fixed`` are read.
     acc : (2, NLIMBS) int64, out
         ``acc[0]`` gets sum(1/2 m v^2) and ``acc[1]`` sum(1/2 I omega^2), each
         an exact integer sum (see ``exactsum``), so the totals do not depend
@@ -133,13 +143,15 @@ def kinetic_energy(n_own, v, omega, fixed, acc, nchunk):
     nchunk : int
         Chunks of rows for the threads.
     """
+    v, omega, fixed = particles.v, particles.omega, particles.fixed
     part = np.zeros((nchunk, 2, NLIMBS), np.int64)
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if fixed[i]:
                 continue
             et = 0.5 * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
-            er = 0.05 * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
+            er = HALF_I * (omega[i, 0] * omega[i, 0] + omega[i, 1] * omega[i, 1]
                          + omega[i, 2] * omega[i, 2])
             add_exact(part[c, 0], et)
             add_exact(part[c, 1], er)

@@ -12,6 +12,7 @@ lists are the same for any thread count.
 import numpy as np
 from numba import njit, prange
 
+from .chunks import chunk_bounds, chunk_of
 from .geometry import min_image
 
 
@@ -22,8 +23,14 @@ def _cell_axis(length, r_list):
 
 
 @njit(cache=True)
-def _bin(x, n_rows, L_x, L_y, r_list):
-    """Counting sort of rows into cells: (nx, ny, nz, cell start (ncell + 1,), rows by cell)."""
+def _bin(x, n_rows, box, r_list):
+    """Counting sort of rows into cells of at least r_list [d].
+
+    Returns the plain tuple ``cells`` = (nx, ny, nz, cell (n_rows,) each row's cell, count (ncell + 1,)
+    CSR offsets of the cells, order (n_rows,) the rows by cell); a plain tuple, as it is read in a
+    prange loop (bundles.py).
+    """
+    L_x, L_y = box.L_x, box.L_y
     nx = _cell_axis(L_x, r_list)
     ny = _cell_axis(L_y, r_list)
     cx = L_x / nx
@@ -62,14 +69,14 @@ def _bin(x, n_rows, L_x, L_y, r_list):
 
 
 @njit(cache=True)
-def _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
-              nbr_list, first, write):
-    """Partners of row i within the list cutoff; written from ``first`` (sorted by id) if ``write``.
+def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, write):
+    """Partners of row i within the list cutoff (squared distance r2 [d^2]) in the ``cells`` of ``_bin``;
+    written from ``first`` (sorted by id) if ``write``.
 
     Returns the number of partners.
     """
-    hx = 0.5 * L_x
-    hy = 0.5 * L_y
+    L_x, L_y, hx, hy = box
+    nx, ny, nz, cell, count, order = cells
     c = cell[i]
     ix = c % nx
     iy = (c // nx) % ny
@@ -115,7 +122,7 @@ def _offsets(start, n):
 
 
 @njit(cache=True, parallel=True)
-def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, nbr_list, nchunk):
+def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_list, nchunk):
     """Full neighbour lists of the owned mobile rows, each sorted by partner id.
 
     Parameters
@@ -129,8 +136,8 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
         are never listed.
     ids : (n_rows_cap,) int64
         Particle ids; each list is sorted by the partners' ids.
-    L_x, L_y : float
-        Periodic box lengths [d].
+    box : Box
+        Periodic box [d].
     r_list : float
         List cutoff, contact distance plus skin [d].
     nbr_start : (n_own + 1,) int64, out
@@ -146,31 +153,25 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, L_x, L_y, r_list, nbr_start, 
         Entries needed. If larger than ``len(nbr_list)``, only ``nbr_start``
         was written: grow ``nbr_list`` and call again.
     """
-    nx, ny, nz, cell, count, order = _bin(x, n_rows, L_x, L_y, r_list)
+    cells = _bin(x, n_rows, box, r_list)
     r2 = r_list * r_list
     nbr_start[0] = 0
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             if not fixed[i]:
-                m = _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
-                              nbr_list, 0, False)
+                m = _scan_row(i, x, ids, box, r2, cells, nbr_list, 0, False)
             nbr_start[i + 1] = m
     total = _offsets(nbr_start, n_own)
     if total > len(nbr_list):
         return total
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             if not fixed[i]:
-                _scan_row(i, x, fixed, ids, L_x, L_y, r2, nx, ny, nz, cell, count, order,
-                          nbr_list, nbr_start[i], True)
+                _scan_row(i, x, ids, box, r2, cells, nbr_list, nbr_start[i], True)
     return total
-
-
-@njit(cache=True, inline="always")
-def chunk_of(i, n, nchunk):
-    """The chunk of row i when rows 0..n-1 are split as [c n / C, (c + 1) n / C)."""
-    return ((i + 1) * nchunk - 1) // n
 
 
 @njit(cache=True, inline="always")
@@ -194,7 +195,7 @@ def _linked(j, n_own, fixed, nchunk, c):
 
 
 @njit(cache=True, parallel=True)
-def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_start, comp_list):
+def link_entries(n_own, fixed, ids, lists, nchunk):
     """Split the entries into those a row computes and those it takes, and give each its slot.
 
     Rows of a chunk are done in ascending order by one thread, so of a pair of
@@ -212,10 +213,19 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
 
     Parameters
     ----------
-    link : (len(nbr_list),) int32, out
-    comp_start : (>= n_own + 1,) int64, out
-    comp_list : (>= K,) int32, out
-        Partner rows of the computed entries (see Returns).
+    n_own : int
+        Rows ``0..n_own-1`` have lists.
+    fixed : (n_rows,) uint8
+        1 for bed rows.
+    ids : (n_rows,) int64
+        Particle ids (the lists' order).
+    lists : Lists
+        ``nbr_start`` and ``nbr_list`` are read (``build_neighbours``);
+        ``link`` (len(nbr_list),) int32, ``comp_start`` (>= n_own + 1,) int64
+        and ``comp_list`` (>= K,) int32 (the partner rows of the computed
+        entries) are written.
+    nchunk : int
+        The chunks of rows of ``contact_forces`` (``chunks.chunk_bounds``).
 
     Returns
     -------
@@ -223,9 +233,13 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
         Computed entries. If larger than ``len(comp_list)``, only ``comp_start``
         was written: grow ``comp_list`` and call again.
     """
+    # fields by attribute before the loops, never unpacked as a tuple (bundles.py: numba's prange)
+    nbr_start, nbr_list, link = lists.nbr_start, lists.nbr_list, lists.link
+    comp_start, comp_list = lists.comp_start, lists.comp_list
     comp_start[0] = 0
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             m = 0
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
@@ -235,7 +249,8 @@ def link_entries(n_own, fixed, ids, nbr_start, nbr_list, nchunk, link, comp_star
     if total > len(comp_list):
         return total
     for c in prange(nchunk):
-        for i in range(c * n_own // nchunk, (c + 1) * n_own // nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        for i in range(lo, hi):
             idi = ids[i]
             g = comp_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):

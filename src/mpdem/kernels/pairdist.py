@@ -15,10 +15,13 @@ in parallel (numba threads) and summed: the result does not depend on the
 number of threads.
 """
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
+from .bundles import make_box
+from .chunks import chunk_bounds
 from .geometry import min_image
 
 REACH = 2          # cells scanned either side of a point's own cell
@@ -41,6 +44,20 @@ def separations(x, i, j, L_x, L_y):
     return d
 
 
+class Grid(NamedTuple):
+    """Points binned into cells (``cell_grid``).
+
+    order : (n,) int64 point indices sorted by cell
+    start : (n_cells + 1,) int64 CSR offsets of each cell in ``order``
+    dims : (3,) int64 cells along x, y, z
+    geo : (4,) float64 cell widths along x, y, z and the lowest z [d]
+    """
+    order: np.ndarray
+    start: np.ndarray
+    dims: np.ndarray
+    geo: np.ndarray
+
+
 def cell_grid(x, L_x, L_y, r_max):
     """Bin points into cells at least r_max / REACH wide.
 
@@ -52,10 +69,7 @@ def cell_grid(x, L_x, L_y, r_max):
 
     Returns
     -------
-    order : (n,) int64 point indices sorted by cell
-    start : (n_cells + 1,) int64 CSR offsets of each cell in ``order``
-    dims : (3,) int64 cells along x, y, z
-    geo : (4,) float64 cell widths along x, y, z and the lowest z [d]
+    Grid : (order, start, dims, geo)
     """
     w = r_max / REACH
     nx, ny = max(1, int(L_x // w)), max(1, int(L_y // w))
@@ -70,7 +84,7 @@ def cell_grid(x, L_x, L_y, r_max):
     order = np.argsort(cell, kind="stable").astype(np.int64)
     start = np.zeros(nx * ny * nz + 1, np.int64)
     np.cumsum(np.bincount(cell, minlength=nx * ny * nz), out=start[1:])
-    return order, start, dims, geo
+    return Grid(order, start, dims, geo)
 
 
 @njit(cache=True)
@@ -98,9 +112,10 @@ def _span(c, n):
 
 
 @njit(cache=True)
-def _cells_around(p, L_x, L_y, dims, geo, out):
-    """The cells that can hold points within r_max of p: fills ``out``, returns how many (<= 125)."""
-    ix, iy, iz = _cell_of(p, L_x, L_y, dims, geo)
+def _cells_around(p, box, grid, out):
+    """The cells of ``grid`` that can hold points within r_max of p: fills ``out``, returns how many (<= 125)."""
+    dims = grid.dims
+    ix, iy, iz = _cell_of(p, box.L_x, box.L_y, dims, grid.geo)
     ox, nx = _span(ix, dims[0])
     oy, ny = _span(iy, dims[1])
     oz, nz = _span(iz, dims[2])
@@ -116,29 +131,28 @@ def _cells_around(p, L_x, L_y, dims, geo, out):
 
 
 @njit(cache=True)
-def _dist2(x, i, j, L_x, L_y):
-    dx = min_image(x[i, 0] - x[j, 0], L_x, 0.5 * L_x)
-    dy = min_image(x[i, 1] - x[j, 1], L_y, 0.5 * L_y)
+def _dist2(x, i, j, box):
+    dx = min_image(x[i, 0] - x[j, 0], box.L_x, box.half_x)
+    dy = min_image(x[i, 1] - x[j, 1], box.L_y, box.half_y)
     dz = x[i, 2] - x[j, 2]
     return dx * dx + dy * dy + dz * dz
 
 
 @njit(cache=True, parallel=True)
-def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_log,
-                    order, start, dims, geo):
+def pair_histograms(x, refs, box, r_max, dr, n_lin, xi_min, per_decade, n_log, grid):
     """Histograms of the distances from reference points to all other points.
 
     Parameters
     ----------
     x : (n, 3) float64 positions [d], wrapped (``wrap``); the partners: all of them
     refs : (n_ref,) int64 indices of the reference points in ``x``
-    L_x, L_y : float box lengths [d]
+    box : Box (``bundles.make_box``) [d]
     r_max : float counted distances are r < r_max [d]
     dr : float width of the linear bins [d]; bin k is [k dr, (k+1) dr)
     n_lin : int number of linear bins
     xi_min, per_decade, n_log : logarithmic bins in xi = r - 1 > 0, bin k is
         [xi_min 10^(k/per_decade), xi_min 10^((k+1)/per_decade))
-    order, start, dims, geo : from ``cell_grid(x, L_x, L_y, r_max)``
+    grid : Grid, ``cell_grid(x, box.L_x, box.L_y, r_max)``
 
     Returns
     -------
@@ -147,6 +161,7 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
     n_overlap : int ordered pairs with r < 1 (contacts)
     """
     n_ref = refs.shape[0]
+    order, start = grid.order, grid.start
     lin = np.zeros((N_CHUNKS, n_lin), np.int64)
     lg = np.zeros((N_CHUNKS, n_log), np.int64)
     over = np.zeros(N_CHUNKS, np.int64)
@@ -154,14 +169,15 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
     lx0 = math.log10(xi_min)
     for c in prange(N_CHUNKS):
         cells = np.empty((2 * REACH + 1) ** 3, np.int64)
-        for k in range(c * n_ref // N_CHUNKS, (c + 1) * n_ref // N_CHUNKS):
+        lo, hi = chunk_bounds(c, n_ref, N_CHUNKS)
+        for k in range(lo, hi):
             i = refs[k]
-            for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
+            for q in range(_cells_around(x[i], box, grid, cells)):
                 for s in range(start[cells[q]], start[cells[q] + 1]):
                     j = order[s]
                     if j == i:
                         continue
-                    d2 = _dist2(x, i, j, L_x, L_y)
+                    d2 = _dist2(x, i, j, box)
                     if d2 >= r2max:
                         continue
                     r = math.sqrt(d2)
@@ -178,18 +194,22 @@ def pair_histograms(x, refs, L_x, L_y, r_max, dr, n_lin, xi_min, per_decade, n_l
 
 
 @njit(cache=True, parallel=True)
-def _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, counts, out_i, out_j, fill):
+def _contact_counts(x, box, r_c, grid, counts, out_i, out_j, fill):
+    """Pairs i < j closer than r_c [d]: per point i, their number into ``counts`` (``fill`` False), or the
+    pairs into ``out_i``, ``out_j`` from offset ``counts[i]`` (``fill`` True)."""
     n = x.shape[0]
+    order, start = grid.order, grid.start
     r2c = r_c * r_c
     for c in prange(N_CHUNKS):
         cells = np.empty((2 * REACH + 1) ** 3, np.int64)
-        for i in range(c * n // N_CHUNKS, (c + 1) * n // N_CHUNKS):
+        lo, hi = chunk_bounds(c, n, N_CHUNKS)
+        for i in range(lo, hi):
             m = 0
             base = counts[i] if fill else 0
-            for q in range(_cells_around(x[i], L_x, L_y, dims, geo, cells)):
+            for q in range(_cells_around(x[i], box, grid, cells)):
                 for s in range(start[cells[q]], start[cells[q] + 1]):
                     j = order[s]
-                    if j > i and _dist2(x, i, j, L_x, L_y) < r2c:
+                    if j > i and _dist2(x, i, j, box) < r2c:
                         if fill:
                             out_i[base + m] = i
                             out_j[base + m] = j
@@ -214,12 +234,13 @@ def close_pairs(x, L_x, L_y, r_c=1.0):
     n = len(x)
     if n == 0:
         return np.zeros((0, 2), np.int64)
-    order, start, dims, geo = cell_grid(x, L_x, L_y, r_c)
+    grid = cell_grid(x, L_x, L_y, r_c)
+    box = make_box(L_x, L_y)
     counts = np.zeros(n + 1, np.int64)
     empty = np.zeros(0, np.int64)
-    _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, counts, empty, empty, False)
+    _contact_counts(x, box, r_c, grid, counts, empty, empty, False)
     offs = np.zeros(n + 1, np.int64)
     np.cumsum(counts[:n], out=offs[1:])
     pi, pj = np.empty(offs[-1], np.int64), np.empty(offs[-1], np.int64)
-    _contact_counts(x, L_x, L_y, r_c, order, start, dims, geo, offs, pi, pj, True)
+    _contact_counts(x, box, r_c, grid, offs, pi, pj, True)
     return np.stack([pi, pj], axis=1)
