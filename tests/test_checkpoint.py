@@ -222,9 +222,13 @@ def test_snapshots_on_schedule_and_info(tmp_path, capsys):
     # the contact network beside every snapshot and the final state, and in the series as a second collection
     import h5py
     import xml.etree.ElementTree as ET
-    for stem in (out / "snapshots" / "snap-00000", out / "snapshots" / "snap-00001", out / "final"):
+    # in a directory of their own: the state files' globs (snapshots/*.h5, RUN/*.h5) list state files only
+    assert sorted(p.name for p in (out / "snapshots").glob("*.h5")) == ["snap-00000.h5", "snap-00001.h5"]
+    assert [p.name for p in out.glob("*.h5")] == ["final.h5"]
+    for d, name in ((out / "snapshots", "snap-00000"), (out / "snapshots", "snap-00001"), (out, "final")):
+        stem = d / "contacts" / name
         with h5py.File(f"{stem}.contacts.h5") as f:
-            pairs, _ = checkpoint.read_state(f"{stem}.h5", pairs=True)
+            pairs, _ = checkpoint.read_state(f"{d / name}.h5", pairs=True)
             P = len(pairs["id_i"])
             assert int(f.attrs["n_contacts"]) == P and f["cells/F_n"].shape == (2 * P,)
         assert ET.parse(f"{stem}.contacts.xmf").getroot().find("Domain/Grid/Topology").get("TopologyType") == "Polyline"

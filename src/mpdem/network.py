@@ -86,6 +86,8 @@ def write_contacts_xdmf(path, out=None):
     """
     t, attrs = contact_table(path)
     stem = out or os.path.splitext(path)[0] + ".contacts"
+    if os.path.dirname(stem):
+        os.makedirs(os.path.dirname(stem), exist_ok=True)
     h5, xmf = stem + ".h5", stem + ".xmf"
     P = len(t["dist"])
     half = 0.5 * t["branch"]
@@ -114,9 +116,15 @@ def write_contacts_xdmf(path, out=None):
     return xmf
 
 
+CONTACTS_DIR = "contacts"
+
+
 def contacts_path(path):
-    """The contact network file ``<name>.contacts.h5`` that belongs to state file ``<name>.h5``."""
-    return os.path.splitext(path)[0] + ".contacts.h5"
+    """The contact network file that a run writes for state file ``DIR/<name>.h5``:
+    ``DIR/contacts/<name>.contacts.h5``. A directory of its own, so that ``snapshots/*.h5`` and
+    ``RUN/*.h5`` still list state files only."""
+    d, base = os.path.split(path)
+    return os.path.join(d, CONTACTS_DIR, os.path.splitext(base)[0] + ".contacts.h5")
 
 
 def contacts_grid(h5, xmf_dir):

@@ -204,8 +204,9 @@ def clear(run):
     """Remove the outputs of an earlier run in ``run`` (a new run with --force)."""
     for p in ([p for _, p in checkpoints(run) + snapshots(run)]
               + glob.glob(os.path.join(run, CKPT_DIR, "*.tmp")) + glob.glob(os.path.join(run, SNAP_DIR, "*"))
-              + [os.path.join(run, n) for n in ("final.h5", "final.xmf", "final.contacts.h5", "final.contacts.xmf",
-                                                "summary.json", "thermo.csv", "packing.npz")]):
+              # the contact networks written beside the states (network.contacts_path)
+              + glob.glob(os.path.join(run, SNAP_DIR, "contacts", "*")) + glob.glob(os.path.join(run, "contacts", "*"))
+              + [os.path.join(run, n) for n in ("final.h5", "final.xmf", "summary.json", "thermo.csv", "packing.npz")]):
         if os.path.isfile(p):
             os.remove(p)
 

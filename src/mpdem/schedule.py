@@ -328,7 +328,7 @@ class Snapshots:
     def write(self, final=False):
         """Write the next snapshot, or RUN/final.h5 (collective); returns its path."""
         from . import export
-        from .network import write_contacts_xdmf
+        from .network import contacts_path, write_contacts_xdmf
         if final:
             path = rundir.final_path(self.out)
         else:
@@ -339,8 +339,8 @@ class Snapshots:
         self._write(path, "final" if final else "snapshot")
         if self.rank == 0:
             export.write_xdmf(path)
-            # the contact network beside it, for force chains in ParaView (<name>.contacts.h5 / .xmf)
-            write_contacts_xdmf(path)
+            # its contact network, for force chains in ParaView (contacts/<name>.contacts.h5 / .xmf)
+            write_contacts_xdmf(path, contacts_path(path)[:-len(".h5")])
             if not final:
                 export.write_xdmf_series([p for _, p in rundir.snapshots(self.out)],
                                          os.path.join(self.out, rundir.SNAP_DIR, "series.xmf"))
