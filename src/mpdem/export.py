@@ -196,7 +196,7 @@ def _xyz(a, attrs):
                       np.full(len(a["id"]), R), a["id"]])
 
 
-def _lammps_data(a, attrs, path):
+def lammps_data(a, attrs, path):
     """LAMMPS data file, atom_style sphere (``lammps.data_lines``)."""
     from .lammps import data_lines
     title = (f"mpdem state {os.path.basename(path)}, step {int(attrs['step'])}, time {float(attrs['time']):.17g}; "
@@ -205,7 +205,7 @@ def _lammps_data(a, attrs, path):
                       title)
 
 
-FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz), "lammps-data": (".data", _lammps_data)}
+FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz), "lammps-data": (".data", lammps_data)}
 
 
 def export_file(path, fmt, out=None):

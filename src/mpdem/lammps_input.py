@@ -153,14 +153,14 @@ def write(path, out=None, steps=None, every=None):
         Directory for the two files; default ``<state without suffix>.lammps``.
     steps, every : int, optional
         Default steps (what is left of ``run.max_steps``, at least 1) and dump interval
-        (``output.snapshot_every`` when set, else ``output.thermo_every`` when set, else steps).
+        (``output.snapshot_every`` when set, else the steps).
 
     Returns
     -------
     (str, int) : the input script's path and the number of dropped histories.
     """
     from . import checkpoint
-    from .export import _lammps_data
+    from .export import lammps_data
     from .rundir import write_atomic
     arrays, attrs = checkpoint.read_state(path)
     cfg = tomllib.loads(attrs["config"])
@@ -173,6 +173,6 @@ def write(path, out=None, steps=None, every=None):
     os.makedirs(out, exist_ok=True)
     dropped = nonzero_histories(arrays)
     script = os.path.join(out, INPUT_NAME)
-    write_atomic(os.path.join(out, DATA_NAME), _lammps_data(arrays, attrs, path))
+    write_atomic(os.path.join(out, DATA_NAME), lammps_data(arrays, attrs, path))
     write_atomic(script, input_lines(cfg, step, steps, every, dropped, os.path.basename(path)))
     return script, dropped
