@@ -4,7 +4,7 @@ import tempfile
 
 from mpi4py import MPI
 
-from mpdem.simulation import Run
+from mpdem.driver.simulation import Run
 
 PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5.0",
         "output.progress_every=100000", "stop.sample_interval=0.01"]

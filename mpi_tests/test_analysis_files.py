@@ -5,7 +5,8 @@ import os
 
 import numpy as np
 
-from mpdem import checkpoint, config
+from mpdem.io import checkpoint
+from mpdem import config
 from mpdem.analysis import bulk, report
 
 from mpi_helpers import shared_dir

@@ -10,8 +10,9 @@ import tempfile
 import numpy as np
 import pytest
 
-from mpdem import build, config
-from mpdem.simulation import Run
+from mpdem import config
+from mpdem.io import tables
+from mpdem.driver.simulation import Run
 
 from mpi_helpers import PILE, reference_key, run, serial_digest, shared_dir
 
@@ -80,7 +81,7 @@ def test_pile_too_small_for_the_ranks(comm):
     base = shared_dir(comm)
     p = os.path.join(base, "tiny.txt")
     if comm.Get_rank() == 0:
-        build.write_table(p, np.array([4, 9, 1]),
+        tables.write_table(p, np.array([4, 9, 1]),
                           np.array([[1.0, 1.0, 1.0], [1.3, 1.1, 2.2], [3.5, 3.5, 1.0]]),
                           np.array([[0.0, 0.0, 0.0], [0.1, 0.0, -1.0], [0.0, 0.0, 0.0]]),
                           np.array([1, 0, 1], np.uint8))
@@ -112,7 +113,7 @@ def write_stack(path, layers=8, n=5, L=6.0, gap=0.001, jitter=0.0002, seed=3):
     mob[:, :2] = (mob[:, :2] + jitter * np.random.default_rng(seed).uniform(-1, 1, (len(mob), 2))) % L
     x = np.concatenate([mob, np.column_stack([grid, np.full(n * n, 0.5)])])
     fixed = np.r_[np.zeros(len(mob), np.uint8), np.ones(n * n, np.uint8)]
-    build.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
+    tables.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
 
 
 def stack_config(comm, base, mu):
@@ -195,7 +196,7 @@ def write_sparse_bed_pile(path):
     x = np.concatenate([mob, bed])
     v = np.concatenate([rng.normal(scale=0.3, size=mob.shape), np.zeros(bed.shape)])
     fixed = np.r_[np.zeros(len(mob)), np.ones(len(bed))].astype(np.uint8)
-    build.write_table(path, np.arange(1, len(x) + 1), x, v, fixed)
+    tables.write_table(path, np.arange(1, len(x) + 1), x, v, fixed)
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from mpdem import checkpoint, config, rundir
-from mpdem.checkpoint import StateFileError
+from mpdem.io import checkpoint
+from mpdem import config
+from mpdem.driver import rundir
+from mpdem.io.checkpoint import StateFileError
 from mpdem.decomp import Domain
 
 from mpi_helpers import PILE, run, shared_dir

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mpdem import build, checkpoint, config
+from mpdem import config
+from mpdem.io import tables
+from mpdem.io import checkpoint
 from mpdem.analysis import bulk
 from mpdem.config import gamma_n_from_epsilon
 from mpdem.decomp import Domain
@@ -44,7 +46,7 @@ def settled_table(path, depth=1e-3):
     mob = np.array([[i, j, (1 - depth) * k] for k in range(1, 7) for j in g for i in g])
     x = np.concatenate([mob, bed])
     fixed = np.r_[np.zeros(len(mob)), np.ones(len(bed))].astype(np.uint8)
-    build.write_table(path, np.arange(1, len(x) + 1), x, fixed=fixed)
+    tables.write_table(path, np.arange(1, len(x) + 1), x, fixed=fixed)
     return len(mob), len(bed)
 
 

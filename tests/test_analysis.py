@@ -11,7 +11,9 @@ import numba
 import numpy as np
 import pytest
 
-from mpdem import checkpoint, config, rundir
+from mpdem.io import checkpoint
+from mpdem import config
+from mpdem.driver import rundir
 from mpdem.analysis import bulk, fits, gofr, mobilisation, report
 from mpdem.kernels import pairdist
 from mpdem.kernels.bundles import make_box
@@ -378,7 +380,7 @@ def test_analyze_cli_on_a_run_directory(tmp_path):
 
 
 def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
-    from mpdem import export, packing
+    from mpdem.io import export, packing
     run = tmp_path / "run"
     run.mkdir()
     a = math.sqrt(2.0) * SQUEEZE

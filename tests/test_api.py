@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mpdem
-from mpdem import checkpoint
+from mpdem.io import checkpoint
 from mpdem.config import ConfigError
 from mpdem.analysis.report import AnalysisError
 from mpdem.errors import MpdemError

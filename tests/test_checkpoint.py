@@ -7,9 +7,10 @@ import h5py
 import numpy as np
 import pytest
 
-from mpdem import checkpoint, rundir
+from mpdem.io import checkpoint
+from mpdem.driver import rundir
 from mpdem.__main__ import main
-from mpdem.checkpoint import StateFileError
+from mpdem.io.checkpoint import StateFileError
 from mpdem.pairs import contact_pairs
 
 SMALL = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=60", "pour.phi_i=0.3", "pour.K0=5.0", "bed.settle_time=10.0",

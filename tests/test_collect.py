@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpdem import config, rundir
-from mpdem.analysis import collect as co
+from mpdem import config
+from mpdem.driver import rundir
+from mpdem.campaign import collect as co
 from mpdem.analysis import bands, fits, nearcontact, report
 from mpdem.analysis.report import AnalysisError
 
@@ -414,7 +415,7 @@ def test_development_size_verdicts_figures_inline_and_notes(tmp_path):
 
 
 def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
-    from mpdem.analysis.collect import _physics_key
+    from mpdem.campaign.collect import _physics_key
     old = {"contact.mu": 0.5, "contact.k_n": 2e5}
     new = dict(old, **{"bed.wall": False})
     assert _physics_key(old) == _physics_key(new)
@@ -424,7 +425,7 @@ def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
 def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     """A set run under another stop rule (stop.energy, not a PARAM_KEYS column) at the same mu
     is its own family: the z(mu) trend of the others does not step from mu = 0.5 to 0.5."""
-    from mpdem.analysis.runs import RunResult, families
+    from mpdem.campaign.runs import RunResult, families
     rng = np.random.default_rng(11)
     root = tmp_path / "runs"
     for mu, z in ((0.0, 6.10), (0.5, 4.90), (1.0, 4.80)):

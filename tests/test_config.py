@@ -146,7 +146,7 @@ def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
     ("run.seed=2", False), ("run.initial_file=x.h5", False),
 ])
 def test_a_restart_set_may_change_only_restart_keys(tmp_path, item, allowed):
-    from mpdem import resume as restart
+    from mpdem.driver import resume as restart
     attrs = {"config": cfg().to_toml()}
     if allowed:
         key, value = config.parse_set(item)
@@ -168,7 +168,10 @@ def test_sections_are_built_once_and_read_only():
 
 
 def test_every_error_said_as_one_line_is_an_mpdem_error():
-    from mpdem import build, checkpoint, simulation, sweep, threads
+    from mpdem import build, threads
+    from mpdem.io import checkpoint
+    from mpdem.driver import simulation
+    from mpdem.campaign import sweep
     from mpdem.analysis import report
     from mpdem.errors import MpdemError
     for err in (config.ConfigError, config.AgreedError, build.InputError, checkpoint.StateFileError,

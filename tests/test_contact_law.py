@@ -219,7 +219,7 @@ def test_same_bits_for_any_thread_and_chunk_count():
     import dataclasses
     import numba
     from mpdem import threads as mt
-    from mpdem.checkpoint import digest, gather_state
+    from mpdem.io.checkpoint import digest, gather_state
     n, L = 300, 6.0
     x = insert_random(rng(5, 1), n, L, L, 0.5, 0.5 + n * (math.pi / 6) / (L * L * 0.3))
     digests = []

@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from mpdem import checkpoint, export
+from mpdem.io import checkpoint, export
 
 L_X, L_Y = 6.0, 7.5
 # dtype -> (NumberType, Precision) as XDMF 3 readers understand them
@@ -174,8 +174,8 @@ def test_unknown_format_is_named(tmp_path):
 def test_contact_network_for_paraview_and_ovito_reads_back(tmp_path):
     """export --format contacts (XDMF Polyline grid) and lammps-local (dump local): one line (or two
     half-lines) per contact with the file's forces; contacts across a periodic face are split."""
-    from mpdem import network
-    from mpdem.export import export_file
+    from mpdem.io import network
+    from mpdem.io.export import export_file
     from helpers import SQUEEZE, fcc, write_crystal
     a = 2.0 ** 0.5 * SQUEEZE
     x, L = fcc(4, 4, a)

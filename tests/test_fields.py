@@ -10,7 +10,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from mpdem import checkpoint, decomp, state
+from mpdem.io import checkpoint
+from mpdem import decomp, state
 from mpdem.state import CONTACT, FIELD, MOVE_FIELDS, PARTICLE, ROW, SLOT, State
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -173,7 +174,8 @@ def test_a_new_contact_history_field_is_one_registry_entry(tmp_path):
     (copy / "state.py").write_text(text.replace(anchor, NEW_FIELD + anchor, 1))
     script = """
 import numpy as np
-from mpdem import checkpoint, decomp, state
+from mpdem.io import checkpoint
+from mpdem import decomp, state
 from mpdem.state import State
 assert state.FIELD["roll"] in state.SLOT and "roll" in checkpoint.GROUPS["contacts"]
 st = State(np.arange(4), np.random.default_rng(0).random((4, 3)), L_x=5.0, L_y=5.0)

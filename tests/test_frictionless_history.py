@@ -10,7 +10,7 @@ ranks: a non-canonical zero changes the digest with the rank count
 import numpy as np
 import pytest
 
-from mpdem import checkpoint
+from mpdem.io import checkpoint
 
 
 def gathered_slots(eng):

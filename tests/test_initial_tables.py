@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mpdem import build, config
-from mpdem.simulation import Run
+from mpdem.io import tables
+from mpdem.driver.simulation import Run
 
 from helpers import settled_table
 
@@ -50,17 +51,17 @@ def test_gzip_table_reads_as_the_plain_one(tmp_path):
     settled_table(tmp_path / "t.txt")
     with open(tmp_path / "t.txt", "rb") as src, gzip.open(tmp_path / "t.txt.gz", "wb") as dst:
         dst.write(src.read())
-    a, b = build.read_table(tmp_path / "t.txt"), build.read_table(tmp_path / "t.txt.gz")
+    a, b = tables.read_table(tmp_path / "t.txt"), tables.read_table(tmp_path / "t.txt.gz")
     assert all(np.array_equal(a[k], b[k]) for k in a)
     (tmp_path / "bad.gz").write_bytes(b"\x1f\x8bnot gzip")
     with pytest.raises(build.InputError, match="bad.gz: cannot read"):
-        build.read_table(tmp_path / "bad.gz")
+        tables.read_table(tmp_path / "bad.gz")
 
 
 def test_tile_table_copies_and_renumbers():
     t = {"id": np.array([4, 1]), "x": np.array([[0.5, 1.5, 1.0], [5.5, -0.5, 2.0]]),
          "v": np.array([[1.0, 0, 0], [0, 2.0, 0]]), "fixed": np.array([0, 1], np.uint8)}
-    w = build.tile_table(t, 6.0, 6.0, 2, 3)
+    w = tables.tile_table(t, 6.0, 6.0, 2, 3)
     assert len(w["id"]) == 12 and len(np.unique(w["id"])) == 12
     assert w["id"][:2].tolist() == [4, 1]                       # copy 0 keeps the ids
     assert np.all((w["x"][:, 0] >= 0) & (w["x"][:, 0] < 12) & (w["x"][:, 1] >= 0) & (w["x"][:, 1] < 18))
@@ -71,7 +72,7 @@ def test_tile_table_copies_and_renumbers():
 def test_a_gz_that_is_not_gzip_and_a_table_without_mobile_spheres_are_refused(tmp_path):
     (tmp_path / "plain.txt.gz").write_text("id x y z\n1 1.0 1.0 1.0\n")
     with pytest.raises(build.InputError, match=r"plain.txt.gz: named .gz but not gzip-compressed"):
-        build.read_table(tmp_path / "plain.txt.gz")
+        tables.read_table(tmp_path / "plain.txt.gz")
     (tmp_path / "beds.txt").write_text("id x y z fixed\n1 1.0 1.0 0.5 1\n2 2.5 1.0 0.5 1\n")
     cfg = config.load(None, ["run.max_steps=10", "box.L_x=6.0", "box.L_y=6.0",
                              f'run.initial_file="{tmp_path / "beds.txt"}"'])

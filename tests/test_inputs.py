@@ -4,8 +4,10 @@ import json
 import numpy as np
 import pytest
 
-from mpdem import build, checkpoint, config
-from mpdem.simulation import Run
+from mpdem import build, config
+from mpdem.io import tables
+from mpdem.io import checkpoint
+from mpdem.driver.simulation import Run
 
 from helpers import mpdem
 
@@ -24,8 +26,8 @@ def test_table_round_trip(tmp_path):
     v = g.normal(size=(3, 3))
     fixed = np.array([0, 1, 0], np.uint8)
     p = tmp_path / "t.txt"
-    build.write_table(p, ids, x, v, fixed)
-    t = build.read_table(p)
+    tables.write_table(p, ids, x, v, fixed)
+    t = tables.read_table(p)
     assert np.array_equal(t["id"], ids) and np.array_equal(t["x"], x)
     assert np.array_equal(t["v"], v) and np.array_equal(t["fixed"], fixed)
 
@@ -33,17 +35,17 @@ def test_table_round_trip(tmp_path):
 def test_table_without_header_and_bad_tables(tmp_path):
     p = tmp_path / "t.txt"
     p.write_text("1 0.5 0.5 3.0\n2 2.5 0.5 3.0\n")
-    t = build.read_table(p)
+    t = tables.read_table(p)
     assert t["id"].tolist() == [1, 2] and np.all(t["v"] == 0) and np.all(t["fixed"] == 0)
     p.write_text("id x y z fixed\n1 0.5 0.5 3.0 2\n")
     with pytest.raises(build.InputError, match="fixed must be 0 or 1"):
-        build.read_table(p)
+        tables.read_table(p)
     p.write_text("id x y z\n1 0.5 0.5 3.0\n1 2.5 0.5 3.0\n")
     with pytest.raises(build.InputError, match="duplicate"):
-        build.read_table(p)
+        tables.read_table(p)
     p.write_text("a b c\n1 2 3\n")
     with pytest.raises(build.InputError, match="need id x y z"):
-        build.read_table(p)
+        tables.read_table(p)
 
 
 def test_initial_overlap_is_named():
@@ -88,7 +90,7 @@ def test_run_from_text_table_continues_exactly(tmp_path):
     r0 = Run.new(cfg, str(tmp_path / "a0"), quiet=True)
     st = r0.state
     n = st.n_own
-    build.write_table(tmp_path / "init.txt", st.id[:n], st.x[:n], st.v[:n], st.fixed[:n])
+    tables.write_table(tmp_path / "init.txt", st.id[:n], st.x[:n], st.v[:n], st.fixed[:n])
     out_b, rb, sb = run_small(tmp_path, "b", f'run.initial_file="{tmp_path / "init.txt"}"')
     assert sb["digest"] == s["digest"]
     # and from the final state file: the run continues from where it stopped
@@ -137,17 +139,17 @@ def test_cli_info_and_digest(tmp_path):
 
 
 def test_runtime_checks_stop_the_run(tmp_path):
-    from mpdem.simulation import RunError
+    from mpdem.driver.simulation import RunError
     # a head-on collision far too fast for k_n: overlap above checks.overlap_error
     p = tmp_path / "fast.txt"
-    build.write_table(p, np.array([0, 1]), np.array([[2.0, 2.5, 10.0], [3.2, 2.5, 10.0]]),
+    tables.write_table(p, np.array([0, 1]), np.array([[2.0, 2.5, 10.0], [3.2, 2.5, 10.0]]),
                       np.array([[300.0, 0, 0], [-300.0, 0, 0]]))
     r = Run.new(small_cfg(f'run.initial_file="{p}"', "box.gravity=0.0"), str(tmp_path / "f"), quiet=True)
     with pytest.raises(RunError, match="overlap .* exceeds checks.overlap_error"):
         r.run()
     # a sphere dropping past the single bed sphere, beside it
     p = tmp_path / "fall.txt"
-    build.write_table(p, np.array([0, 1]), np.array([[1.0, 1.0, 3.0], [3.5, 3.5, 1.0]]),
+    tables.write_table(p, np.array([0, 1]), np.array([[1.0, 1.0, 3.0], [3.5, 3.5, 1.0]]),
                       fixed=np.array([0, 1], np.uint8))
     r = Run.new(small_cfg(f'run.initial_file="{p}"', "run.max_steps=20000"), str(tmp_path / "g"), quiet=True)
     with pytest.raises(RunError, match="fell through the bed"):

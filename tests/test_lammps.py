@@ -6,7 +6,9 @@ import shutil
 import numpy as np
 import pytest
 
-from mpdem import build, checkpoint, config, export, lammps
+from mpdem import config
+from mpdem.io import tables
+from mpdem.io import checkpoint, export, lammps
 from mpdem.build import InputError
 
 from helpers import mpdem
@@ -20,7 +22,7 @@ def test_files_are_recognised_by_their_content(tmp_path):
     shutil.copy(LMP_DATA, tmp_path / "state.txt")
     assert lammps.kind(str(tmp_path / "state.txt")) == "data"
     assert lammps.kind(LMP_DUMP) == "dump"
-    build.write_table(tmp_path / "t.txt", np.arange(1, 3), np.ones((2, 3)))
+    tables.write_table(tmp_path / "t.txt", np.arange(1, 3), np.ones((2, 3)))
     assert lammps.kind(str(tmp_path / "t.txt")) is None
 
 
@@ -122,7 +124,7 @@ def test_export_to_a_lammps_data_file_reads_back_to_the_same_particles(tmp_path)
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_a_run_from_the_lammps_data_file_has_the_digest_of_the_same_state_as_a_table(tmp_path, mu):
     t = lammps.read(LMP_DATA, (2,))
-    build.write_table(tmp_path / "same.txt", t["id"], t["x"], t["v"], t["fixed"], omega=t["omega"])
+    tables.write_table(tmp_path / "same.txt", t["id"], t["x"], t["v"], t["fixed"], omega=t["omega"])
     common = ["--set", "run.max_steps=400", "--set", f"contact.mu={mu}", "--set", "output.progress_every=100"]
     p = mpdem("run", "--out", "from_data", "--set", f'run.initial_file="{LMP_DATA}"',
               "--set", "run.fixed_types=[2]", *common, cwd=tmp_path)
@@ -139,7 +141,7 @@ def test_a_run_from_the_lammps_data_file_has_the_digest_of_the_same_state_as_a_t
 
 
 def test_lammps_inputs_that_do_not_fit_stop_before_any_work(tmp_path):
-    build.write_table(tmp_path / "t.txt", np.arange(1, 3), np.ones((2, 3)))
+    tables.write_table(tmp_path / "t.txt", np.arange(1, 3), np.ones((2, 3)))
     cases = [
         (["--set", f'run.initial_file="{LMP_DUMP}"'],
          r"run.fixed_types is not set: .* is a LAMMPS file with atom types \[1, 2\]; name the bed's types"),

@@ -19,8 +19,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from mpdem import checkpoint, lammps, lammps_input
-from mpdem.lammps_input import LammpsInputError
+from mpdem.io import checkpoint, lammps, lammps_input
+from mpdem.io.lammps_input import LammpsInputError
 
 from helpers import mpdem
 

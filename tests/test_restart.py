@@ -114,8 +114,8 @@ def flatten_run_state(path):
 
 def test_run_state_keeps_each_record_under_its_name_and_reads_the_flat_layout():
     from mpdem.initial import Pile
-    from mpdem.runstate import History, RunState
-    from mpdem.schedule import CheckpointRecord, SnapshotRecord, StopRecord
+    from mpdem.driver.runstate import History, RunState
+    from mpdem.driver.schedule import CheckpointRecord, SnapshotRecord, StopRecord
     rec = RunState(History(3, 12.5, 40, 0.01, 7, 2), Pile(4.5, 3.75, 20.0), StopRecord([0.5, 0.25], "translational"),
                    CheckpointRecord(5), SnapshotRecord(9))
     text = rec.dumps()

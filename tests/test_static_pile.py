@@ -9,7 +9,7 @@ import pytest
 
 from mpdem import config
 from mpdem.analysis import report
-from mpdem.simulation import Run
+from mpdem.driver.simulation import Run
 
 
 @pytest.mark.validation

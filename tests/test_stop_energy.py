@@ -10,10 +10,11 @@ import json
 
 import numpy as np
 
-from mpdem import build, config
+from mpdem import config
+from mpdem.io import tables
 from mpdem.kernels.particle import HALF_I
-from mpdem.schedule import StopRecord, StopRule
-from mpdem.simulation import Run
+from mpdem.driver.schedule import StopRecord, StopRule
+from mpdem.driver.simulation import Run
 
 from helpers import mpdem, settled_table
 
@@ -24,11 +25,11 @@ def spinner_table(path):
     """The settled columns of ``helpers.settled_table`` (216 mobile on 36 bed, 6 d x 6 d), with
     the top sphere of the first column spinning about z; returns its row."""
     settled_table(path)
-    t = build.read_table(path)
+    t = tables.read_table(path)
     top = int(np.argmax(np.where(t["fixed"] == 0, t["x"][:, 2], -np.inf)))
     omega = np.zeros_like(t["x"])
     omega[top, 2] = SPIN
-    build.write_table(path, t["id"], t["x"], t["v"], t["fixed"], omega)
+    tables.write_table(path, t["id"], t["x"], t["v"], t["fixed"], omega)
     return top
 
 

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from mpdem import config, sweep
-from mpdem.checkpoint import digest, read_state
+from mpdem import config
+from mpdem.campaign import sweep
+from mpdem.io.checkpoint import digest, read_state
 
 from helpers import child_env, fake_segment_mpdem, mpdem, mpdem_argv
 

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from mpdem import lammps
+from mpdem.io import lammps
 from mpdem.config import gamma_n_from_epsilon, restitution
 
 from helpers import make_engine, mpdem

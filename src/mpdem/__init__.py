@@ -43,3 +43,9 @@ def __getattr__(name):
         from . import api
         return getattr(api, name)
     raise AttributeError(f"module 'mpdem' has no attribute {name!r}")
+
+
+# modules that moved into io/, driver/ and campaign/ keep their old import paths (ARCHITECTURE.md)
+from ._moved import install as _install_moved  # noqa: E402
+
+_install_moved()

@@ -113,10 +113,10 @@ def cmd_restart(args, net):
 
 
 def cmd_export(args, net):
-    from . import export
+    from .io import export
     if net.rank == 0:          # one writer, however it was launched
         if args.format == "lammps-input":
-            from . import lammps_input
+            from .io import lammps_input
             script, dropped = lammps_input.write(args.file, args.out)
             print(f"wrote {script} and {lammps_input.DATA_NAME} beside it; run it there with `lmp -in "
                   f"{lammps_input.INPUT_NAME}`")
@@ -129,7 +129,7 @@ def cmd_export(args, net):
 
 
 def cmd_info(args, net):
-    from . import checkpoint
+    from .io import checkpoint
     if net.rank != 0:
         return EXIT_OK
     arrays, attrs = checkpoint.read_state(args.file, pairs=True)
@@ -173,7 +173,7 @@ def cmd_analyze(args, net):
 
 
 def cmd_collect(args, net):
-    from .analysis.collect import collect
+    from .campaign.collect import collect
     if net.rank != 0:
         return EXIT_OK
     collect(args.runs, args.out, analyze_missing=not args.no_analyze, log=_quiet(args.quiet),
@@ -183,7 +183,7 @@ def cmd_collect(args, net):
 
 def cmd_sweep(args):
     """Run the rows of sweep tables here, J at a time, then collect them (no MPI in this process)."""
-    from . import sweep
+    from .campaign import sweep
     from .config import ConfigError
     try:
         rows = sweep.plan(args.tables, args.config, args.set)
@@ -195,7 +195,7 @@ def cmd_sweep(args):
                      progress=args.progress).run()
     if rc == EXIT_RESTART or args.no_collect:
         return rc
-    from .analysis.collect import collect
+    from .campaign.collect import collect
     from .analysis.report import AnalysisError
     try:
         collect([args.out], args.collect or os.path.join(args.out, "collect"))

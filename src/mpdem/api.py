@@ -94,7 +94,7 @@ def _result(run, summary):
     summary = net.bcast(summary if run.rank == 0 else None)
     if run.status == "interrupted":
         return RunResult("interrupted", int(run.state.step), None, None, run.out, {})
-    from . import rundir
+    from .driver import rundir
     return RunResult(run.status, int(summary["steps"]), summary["digest"], rundir.final_path(run.out),
                      run.out, summary)
 
@@ -115,7 +115,7 @@ def lock(run_dir, net):
     AgreedError on every rank, naming the holder, when another process writes ``run_dir``.
     """
     from .config import AgreedError
-    from .rundir import RunLock
+    from .driver.rundir import RunLock
     held = RunLock(run_dir) if net.rank == 0 else None
     why = net.on_root(lambda: held.acquire())
     if why:
@@ -139,7 +139,7 @@ def check_out(out, net, force=False):
     Rank 0 looks, before any rank can write there; every rank raises the same AgreedError.
     """
     from .config import AgreedError
-    from .rundir import writable
+    from .driver.rundir import writable
     held, why = net.on_root(lambda: (os.path.exists(os.path.join(out, "config.toml")), writable(out)))
     if why:
         raise AgreedError(f"--out {out}: {why}")
@@ -167,9 +167,9 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     RunResult
     """
     from . import config as config_mod
-    from . import lammps
+    from .io import lammps
     from .build import InputError
-    from .simulation import Logger, Run
+    from .driver.simulation import Logger, Run
     _threads(threads)
     net = _net(net)
     try:
@@ -202,8 +202,8 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
     RunResult
     """
     from . import config
-    from . import resume as rs
-    from .simulation import Logger, Run
+    from .driver import resume as rs
+    from .driver.simulation import Logger, Run
     _threads(threads)
     net = _net(net)
     items = list(set_items) + [f"{k}={config.toml_value(v)}" for k, v in sets.items()]
@@ -252,7 +252,7 @@ def read_state(path):
     ------
     StateFileError (or PackingFileError) naming the file when it is damaged or not one.
     """
-    from . import checkpoint, packing
+    from .io import checkpoint, packing
     if packing.is_packing(path):
         return State(*packing.read(path))
     return State(*checkpoint.read_state(path, pairs=True))
@@ -305,7 +305,7 @@ def collect(paths, out=None):
     import csv
     import json
     import tempfile
-    from .analysis import collect as co
+    from .campaign import collect as co
     paths = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
     with tempfile.TemporaryDirectory() as tmp:
         where = out or tmp

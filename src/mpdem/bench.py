@@ -1,7 +1,7 @@
 """``python -m mpdem bench``: nanoseconds per atom-step, beside LAMMPS.
 
 ``bench --table FILE`` (the default bench) starts from a particle table
-(``build.read_table``: plain or gzip; e.g. a landed 20 000-sphere pile)
+(``tables.read_table``: plain or gzip; e.g. a landed 20 000-sphere pile)
 and times ``--steps`` steps (default 2000) of the contact model with the
 settings of the LAMMPS comparison input: Hooke, k_n = 2e5, epsilon =
 0.88, gamma_t = gamma_n / 2, mu = 0.5, dt = 1e-4, skin 0.2 d, box 20 d x 20 d
@@ -27,7 +27,10 @@ import time
 
 import numpy as np
 
-from . import build, checkpoint, config, initial
+from . import build, config, initial
+from .errors import InputError
+from .io import tables
+from .io import checkpoint
 from .decomp import Domain
 from .engine import Engine, Physics
 from .parallel import channel
@@ -138,12 +141,12 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     Parameters
     ----------
     path : str
-        A text table (``build.read_table``, plain or gzip), read as
+        A text table (``tables.read_table``, plain or gzip), read as
         ``run.initial_file`` is (``initial.particles``).
     cfg : Config
         Box (``box.L_x``, ``box.L_y``) and ``checks.overlap_warn``.
     tile : (int, int)
-        Copies along x and y (``build.tile_table``).
+        Copies along x and y (``tables.tile_table``).
     say : callable
         Takes the overlap warning line.
 
@@ -154,7 +157,7 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     L_x, L_y : the (tiled) box [d]
     """
     if not os.path.isfile(path):
-        raise build.InputError(f"--table {path}: no such file")
+        raise InputError(f"--table {path}: no such file")
     # the reader of run.initial_file: a text table (or a state or LAMMPS file)
     t = initial.particles(path, cfg, log=say)
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
@@ -164,7 +167,7 @@ def load_table(path, cfg, tile=(1, 1), say=print):
                         overlap_warn=cfg.checks.overlap_warn, warn=say)
     nx, ny = tile
     if (nx, ny) != (1, 1):
-        t = build.tile_table(t, L_x, L_y, nx, ny)
+        t = tables.tile_table(t, L_x, L_y, nx, ny)
     whole = {k: t[k] for k in INITIAL}
     return whole, nx * L_x, ny * L_y
 

@@ -13,7 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import build, checkpoint, lammps, state
+from . import build, state
+from .errors import InputError
+from .io import tables
+from .io import checkpoint, lammps
 
 
 @dataclass
@@ -60,7 +63,7 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
     Parameters
     ----------
     path : str
-        Text table (``build.read_table``), mpdem state file, or LAMMPS data
+        Text table (``tables.read_table``), mpdem state file, or LAMMPS data
         file or text dump (``lammps.read``, types from ``run.fixed_types``).
     cfg : Config
     all_fixed : bool
@@ -77,7 +80,7 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
     has (``Field.history``: count, partner, ds, wall_ds).
     """
     if not os.path.exists(path):
-        raise build.InputError(f"initial file {path}: no such file")
+        raise InputError(f"initial file {path}: no such file")
     if checkpoint.is_state_file(path):
         t, _ = checkpoint.read_state(path)
     elif lammps.kind(path):
@@ -88,13 +91,13 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
         log(f"read {path}: {t['note']}" if all_fixed else
             f"read {path}: {t['note']}; {int(t['fixed'].sum())} bed spheres (types {list(cfg.run.fixed_types)})")
     else:
-        t = build.read_table(path)
+        t = tables.read_table(path)
     out = {f.name: t[f.name] for f in state.FIELDS if (f.initial or f.history) and f.name in t}
     if all_fixed:
         out["fixed"] = np.ones(len(out["id"]), np.uint8)
     elif len(out["fixed"]) and np.all(out["fixed"] == 1):
         how = f"of types {list(cfg.run.fixed_types)}" if lammps.kind(path) else "fixed = 1"
-        raise build.InputError(f"initial file {path}: no mobile sphere: all {len(out['fixed'])} are bed "
+        raise InputError(f"initial file {path}: no mobile sphere: all {len(out['fixed'])} are bed "
                                f"spheres ({how})")
     return out
 

@@ -26,8 +26,10 @@ import tomllib
 
 import numpy as np
 
-from .. import checkpoint, config, packing, rundir
-from ..checkpoint import StateFileError
+from ..io import checkpoint, packing
+from .. import config
+from ..driver import rundir
+from ..io.checkpoint import StateFileError
 from ..errors import AnalysisError
 from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
 
@@ -346,7 +348,7 @@ def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False
     """``mpdem analyze``: a run directory or a state file measured and written; (summary, output directory).
 
     ``keep_packing``: when the state is a run's final.h5, also write RUN/packing.npz
-    (``mpdem.packing``), which this function reads when final.h5 is gone.
+    (``mpdem.io.packing``), which this function reads when final.h5 is gone.
     """
     t0 = time.perf_counter()
     path, out = locate(target, out)

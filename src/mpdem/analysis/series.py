@@ -16,7 +16,8 @@ import os
 
 import numpy as np
 
-from .. import checkpoint, rundir
+from ..io import checkpoint
+from ..driver import rundir
 from ..kernels.particle import HALF_I
 from . import bulk
 from .report import AnalysisError, file_config

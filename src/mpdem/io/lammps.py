@@ -20,7 +20,8 @@ import re
 
 import numpy as np
 
-from .build import InputError, _open_text, particle_ids
+from ..errors import InputError
+from .tables import open_text, particle_ids
 
 # LAMMPS's density of a d = 1 sphere of mass exactly 1.0 (4.0 * pi / 3.0 * 0.5^3 * RHO == 1.0)
 RHO = 1.9098593171027443
@@ -43,7 +44,7 @@ _SECTION = re.compile(r"^\s*([A-Z][A-Za-z ]*[a-z])\s*(#.*)?$")
 def kind(path):
     """'dump', 'data' or None: what LAMMPS file ``path`` is, from its first lines."""
     try:
-        with _open_text(path) as fh:
+        with open_text(path) as fh:
             head = []
             for line in fh:
                 head.append(line)
@@ -97,7 +98,7 @@ def initial_for(cfg):
     -------
     (Config, dict or None) : the config (box filled in) and ``read``'s result.
     """
-    from .config import ConfigError
+    from ..config import ConfigError
     path, types = cfg.run.initial_file, cfg.run.fixed_types
     if not path or kind(path) is None:
         if types:
@@ -138,7 +139,7 @@ def _numbers(lines, path, where, ncols):
 
 def _read_data(path):
     """The Atoms and Velocities sections and the box of a data file (atom_style sphere)."""
-    with _open_text(path) as fh:
+    with open_text(path) as fh:
         lines = fh.read().splitlines()
     counts, box, i = {}, {}, 1
     # header: up to the first section keyword
@@ -216,7 +217,7 @@ def _read_data(path):
 
 def _read_dump(path):
     """The last snapshot of a text dump (``ITEM: ATOMS id type x y z ...``)."""
-    with _open_text(path) as fh:
+    with open_text(path) as fh:
         lines = fh.read().splitlines()
     starts = [k for k, ln in enumerate(lines) if ln.startswith("ITEM: TIMESTEP")]
     s = starts[-1]

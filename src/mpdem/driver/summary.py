@@ -9,7 +9,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from . import analysis, checkpoint, rundir
+from .. import analysis
+from ..io import checkpoint
+from . import rundir
 
 
 @dataclass

@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 
 from . import checkpoint
-from .kernels.particle import R    # particle radius [d]
-from .rundir import write_atomic
-from .state import FIELDS, PARTICLE
+from ..kernels.particle import R    # particle radius [d]
+from ..driver.rundir import write_atomic
+from ..state import FIELDS, PARTICLE
 
 # XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads
 # "UInt" as 32-bit whatever its Precision, so one unsigned byte is "UChar".
@@ -231,9 +231,9 @@ def export_file(path, fmt, out=None):
     path : str
         An mpdem state file (checksums are verified).
     fmt : {"lammps-dump", "xyz", "lammps-data", "packing", "contacts", "lammps-local"}
-        ``contacts`` and ``lammps-local``: the contact network (``mpdem.network``).
+        ``contacts`` and ``lammps-local``: the contact network (``mpdem.io.network``).
         ``packing``: the positions and the contact list with its forces, compressed
-        (``mpdem.packing``; what ``analyze`` needs, not a restart).
+        (``mpdem.io.packing``; what ``analyze`` needs, not a restart).
     out : str, optional
         Output path; default ``path`` with the suffix ``.dump``, ``.xyz`` or ``.data``;
         for ``packing`` RUN/packing.npz beside a final.h5, else ``.packing.npz``.
@@ -243,7 +243,7 @@ def export_file(path, fmt, out=None):
     str : the output path (written atomically).
     """
     if fmt == "packing":
-        # what the analyses need, compressed (mpdem.packing): RUN/final.h5 -> RUN/packing.npz
+        # what the analyses need, compressed (mpdem.io.packing): RUN/final.h5 -> RUN/packing.npz
         from . import packing
         base = os.path.basename(path)
         out = out or (os.path.join(os.path.dirname(path), "packing.npz") if base == "final.h5"
@@ -251,11 +251,11 @@ def export_file(path, fmt, out=None):
         arrays, attrs = checkpoint.read_state(path, pairs=True)
         return packing.write(out, arrays, attrs)
     if fmt == "contacts":
-        # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.network)
+        # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.io.network)
         from .network import write_contacts_xdmf
         return write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None)
     if fmt == "lammps-local":
-        # the contact network for OVITO: a LAMMPS dump local of the contacts (mpdem.network)
+        # the contact network for OVITO: a LAMMPS dump local of the contacts (mpdem.io.network)
         from .network import lammps_local_lines
         out = out or os.path.splitext(path)[0] + ".local"
         write_atomic(out, lammps_local_lines(path))

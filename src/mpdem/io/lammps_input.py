@@ -34,7 +34,7 @@ import tomllib
 
 import numpy as np
 
-from .errors import MpdemError
+from ..errors import MpdemError
 
 DATA_NAME = "data.mpdem"
 INPUT_NAME = "in.mpdem"
@@ -161,7 +161,7 @@ def write(path, out=None, steps=None, every=None):
     """
     from . import checkpoint
     from .export import lammps_data
-    from .rundir import write_atomic
+    from ..driver.rundir import write_atomic
     arrays, attrs = checkpoint.read_state(path)
     cfg = tomllib.loads(attrs["config"])
     step = int(attrs["step"])

@@ -31,12 +31,13 @@ import warnings
 
 import numpy as np
 
-from .. import rundir
+from ..driver import rundir
 from ..config import PARAM_KEYS
-from . import fits, paper, pooled
+from ..analysis import fits
+from . import paper, pooled
 from .comparison import comparisons, write_readme
 from .figures import make_figures
-from .report import PACKING, SUMMARY, AnalysisError
+from ..analysis.report import PACKING, SUMMARY, AnalysisError
 from .runs import NAN, SHORT, RunResult, Set, families, mean_sem
 
 SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mobilised_fraction",
@@ -111,7 +112,7 @@ def _analyse(path, why, log, settings=None):
 
     ``settings``: the ``analysis.*`` values of an earlier analysis, kept.
     """
-    from . import report
+    from ..analysis import report
     log(f"collect: analysing {path} ({why})")
     sets = [f"{k}={v!r}" for k, v in (settings or {}).items()]
     try:
@@ -409,7 +410,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
         for e in fit_res[kind]:
             why = f" ({e['reason']})" if "reason" in e else ""
             log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}{why}")
-    from .plots import formats_of
+    from ..analysis.plots import formats_of
     fmts = formats_of(figure_format)
     bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
     if bad or not fmts:

@@ -21,16 +21,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import build, checkpoint, initial, rundir, summary
-from .config import collision_time
-from .decomp import Domain
-from .engine import Engine, Physics
-from .errors import EXIT_RESTART
-from .pairs import contact_pairs
+from .. import initial
+from ..io import tables
+from ..io import checkpoint
+from . import rundir, summary
+from ..config import collision_time
+from ..decomp import Domain
+from ..engine import Engine, Physics
+from ..errors import EXIT_RESTART
+from ..pairs import contact_pairs
 from .runstate import History, RunState  # noqa: F401 (simulation.History, the name of earlier versions)
 from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
                        Thermo)
-from .state import State
+from ..state import State
 
 # the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
 # ("not finished, restart me", EX_TEMPFAIL)
@@ -82,7 +85,7 @@ def new_start(cfg, out, domain, log, lammps_initial=None):
     w = init.whole
     bed = w["fixed"] == 1
     if init.n_bed and domain.rank == 0:
-        build.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
+        tables.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
     return Start(domain.scatter(w, cfg.box.L_x, cfg.box.L_y), init.n_mobile, init.n_bed, RunState(pile=init.pile),
                  False)
 

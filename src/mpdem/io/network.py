@@ -27,8 +27,8 @@ import h5py
 import numpy as np
 
 from . import checkpoint
-from .kernels.pairdist import separations
-from .rundir import write_atomic
+from ..kernels.pairdist import separations
+from ..driver.rundir import write_atomic
 
 
 # the cell data of a contact (both half-lines carry it)
@@ -43,7 +43,7 @@ def contact_table(path):
     dict of (P,) / (P, 3) arrays: id_i, id_j, x_i, x_j, branch (x_i - x_j, minimum image),
     dist, F_n, F_t (vector on i), ft (|F_t|), zeta, delta, force (total on i); and attrs
     """
-    from .errors import StateFileError
+    from ..errors import StateFileError
     a, attrs = checkpoint.read_state(path, pairs=True)
     if "id_i" not in a:
         raise StateFileError(f"{path}: no contact list (a checkpoint); a snapshot or final state has one")

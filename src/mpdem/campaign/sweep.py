@@ -26,8 +26,9 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from . import config, rundir
-from .errors import EXIT_RESTART, SweepError
+from .. import config
+from ..driver import rundir
+from ..errors import EXIT_RESTART, SweepError
 
 # table column -> (config key, the short name used in run directory names)
 COLUMNS = {"mu": ("contact.mu", "mu"), "epsilon": ("contact.epsilon", "eps"), "k_n": ("contact.k_n", "kn"),

@@ -12,7 +12,7 @@ Everything here is an analysis constant: nothing steers a simulation.
 """
 from __future__ import annotations
 
-from .fits import K_REF, eq7, eq9
+from ..analysis.fits import K_REF, eq7, eq9
 
 SOURCE = "Silbert et al., Phys. Rev. E 65, 031304 (2002), via docs/model.md section 7"
 SOURCE_SMALL = "docs/model.md 7.1 (reference implementation, LAMMPS gran/hooke/history; not the paper)"

@@ -14,8 +14,9 @@ import os
 
 import numpy as np
 
-from .. import rundir
-from . import fits, paper
+from ..driver import rundir
+from ..analysis import fits
+from . import paper
 from .figures import FIGURES
 from .runs import NAN, families, fmt_kn, fmt_pm
 

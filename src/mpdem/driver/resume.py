@@ -13,9 +13,11 @@ import os
 import tomllib
 from dataclasses import dataclass
 
-from . import checkpoint, config, rundir
-from .checkpoint import StateFileError
-from .errors import EXIT_NOT_CONVERGED, EXIT_OK
+from ..io import checkpoint
+from .. import config
+from . import rundir
+from ..io.checkpoint import StateFileError
+from ..errors import EXIT_NOT_CONVERGED, EXIT_OK
 from .runstate import RunState
 
 # attributes a state file needs to be restarted from

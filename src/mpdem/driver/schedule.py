@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field, fields
 
 from . import rundir
-from .errors import RunError  # noqa: F401 (schedule.RunError, simulation.RunError)
+from ..errors import RunError  # noqa: F401 (schedule.RunError, simulation.RunError)
 
 
 def from_dict(cls, d):
@@ -327,8 +327,8 @@ class Snapshots:
 
     def write(self, final=False):
         """Write the next snapshot, or RUN/final.h5 (collective); returns its path."""
-        from . import export
-        from .network import contacts_path, write_contacts_xdmf
+        from ..io import export
+        from ..io.network import contacts_path, write_contacts_xdmf
         if final:
             path = rundir.final_path(self.out)
         else:

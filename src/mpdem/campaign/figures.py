@@ -20,7 +20,8 @@ from collections import Counter
 
 import numpy as np
 
-from . import fits, paper
+from ..analysis import fits
+from . import paper
 from .runs import NAN, families, fmt_kn, fmt_pm, num
 
 
@@ -52,7 +53,7 @@ class Figures:
     """The paper's figures from the sets; each ``figN`` returns None when made, else why not."""
 
     def __init__(self, sets, fit_res, out, formats=("png",)):
-        from . import plots  # matplotlib only once figures are drawn
+        from ..analysis import plots  # matplotlib only once figures are drawn
         self.plt, self.formats = plots.plt, tuple(formats)
         self.save = lambda fig, path: plots.save(fig, path, self.formats)
         self.sets, self.fits, self.out = sets, fit_res, out
@@ -463,7 +464,7 @@ class Figures:
         got = self._pooled("P_f")
         if not got:
             return "no run has P(f)"
-        from .bands import F_BIN
+        from ..analysis.bands import F_BIN
         fig, ax = self.plt.subplots(figsize=(6.5, 4.5))
         for s, e in got:
             P = np.array(e["P"], float)

@@ -20,8 +20,8 @@ import zipfile
 
 import numpy as np
 
-from .errors import PackingFileError
-from .rundir import starts_with
+from ..errors import PackingFileError
+from ..driver.rundir import starts_with
 
 FORMAT = "mpdem-packing"
 VERSION = 1

@@ -42,10 +42,10 @@ import sys
 import h5py
 import numpy as np
 
-from . import state
-from .errors import StateFileError
-from .parallel import channel
-from .rundir import starts_with
+from .. import state
+from ..errors import StateFileError
+from ..parallel import channel
+from ..driver.rundir import starts_with
 
 FORMAT = "mpdem-state"
 VERSION = 2

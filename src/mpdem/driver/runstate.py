@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 
-from .initial import Pile
+from ..initial import Pile
 from .schedule import CheckpointRecord, SnapshotRecord, StopRecord, from_dict
 
 

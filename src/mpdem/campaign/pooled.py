@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from . import bands, fits, nearcontact
+from ..analysis import bands, fits, nearcontact
 
 
 def _have(s, key):

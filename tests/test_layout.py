@@ -1,0 +1,61 @@
+"""The package layout (ARCHITECTURE.md): moved modules keep their old import paths."""
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from mpdem._moved import MOVED
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "mpdem"
+
+
+def test_every_old_path_gives_the_new_module_and_names_it():
+    # a fresh interpreter, so that no old name is imported yet
+    script = (
+        "import importlib, json, sys, warnings\n"
+        "from mpdem._moved import MOVED\n"
+        "out = {}\n"
+        "for old, new in MOVED.items():\n"
+        "    with warnings.catch_warnings(record=True) as w:\n"
+        "        warnings.simplefilter('always')\n"
+        "        m = importlib.import_module(old)\n"
+        "    out[old] = [m is importlib.import_module(new), m.__name__, m.__spec__.name,\n"
+        "                [str(x.message) for x in w if x.category is DeprecationWarning]]\n"
+        "from mpdem import simulation\n"
+        "from mpdem.analysis.collect import collect\n"
+        "from mpdem.build import read_table, write_table\n"
+        "import mpdem.io.tables as t, mpdem.campaign.collect as c, mpdem.driver.simulation as s\n"
+        "out['from'] = [simulation is s, collect is c.collect, read_table is t.read_table]\n"
+        "print(json.dumps(out))\n")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    out = json.loads(r.stdout)
+    assert out.pop("from") == [True, True, True]
+    assert set(out) == set(MOVED)
+    for old, (same, name, spec, warned) in out.items():
+        new = MOVED[old]
+        assert same and name == new and spec == new, old
+        assert warned == [f"{old} has moved to {new}; import it from there"], old
+
+
+def test_the_code_itself_imports_no_old_path():
+    # the finder is for users' scripts; inside the package every import names the new home
+    for path in SRC.rglob("*.py"):
+        mod = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+        pkg = mod if path.name == "__init__.py" else mod.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                base = pkg.split(".")
+                if node.level:
+                    base = base[: len(base) - node.level + 1]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                assert target not in MOVED, f"{path}: imports {target}"
+                for a in node.names:
+                    full = f"{target}.{a.name}"
+                    assert full not in MOVED, f"{path}: imports {full}; it is {MOVED.get(full)}"
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    assert a.name not in MOVED, f"{path}: imports {a.name}"
