@@ -81,11 +81,10 @@ class StepInfo(NamedTuple):
 class Engine:
     """Advance a State with a Physics over a Domain.
 
-    Between rebuilds the contact history lives with the neighbour list
-    (``hist``, ``stamp``, one slot per computed pair, ``link_entries``) and is
-    updated in place;
-    ``sync_slots`` packs it into the state's compact slots, which a rebuild,
-    a migration and a checkpoint use.
+    The contact history lives in ``hist`` and ``stamp`` (one slot per
+    computed pair) between rebuilds, and ``sync_slots`` / ``_unpack_slots``
+    move it to and from the state's compact slots (see docs/computing.md,
+    "The contact history's two homes").
 
     Parameters
     ----------
@@ -250,7 +249,8 @@ class Engine:
     def _sort_rows(self):
         """Order owned rows by cell so neighbours are near in memory.
 
-        Sums run in partner-id order, so row order changes no result bit.
+        Sums run in partner-id order, so row order changes no result bit
+        (docs/computing.md, "The force sum: two passes per row").
         """
         s = self.state
         n = s.n_own

@@ -6,15 +6,15 @@ read-only ghost copies (filled by ``decomp``). Arrays have a capacity larger
 than ``n_rows`` so ghosts and arriving particles fit without reallocation;
 ``grow`` enlarges them.
 
-Contact history (ARCHITECTURE.md) has two homes. Between neighbour
-list rebuilds it lives in the engine, aligned with the list entries and
-updated in place. At a rebuild, a migration and a checkpoint it is here, as
-compact slots of the owned rows in row order: ``count[i]`` partners of row
-i, their ids ascending in ``partner`` and their tangential displacements in
-``ds`` (flat, CSR by ``count``). ``slots_current`` says whether the
-slots hold the history of the last force evaluation; when they do not, a
-reader of the slots has the engine pack them first (``packer``, set to
-``Engine.sync_slots``).
+The contact history has two homes: the engine's list slots between
+rebuilds, and here the compact slots at a rebuild, a migration and a
+checkpoint (see docs/computing.md, "The contact history's two homes"). The
+compact slots are those of the owned rows in row order: ``count[i]``
+partners of row i, their ids ascending in ``partner`` and their tangential
+displacements [d] in ``ds`` (flat, CSR by ``count``). ``slots_current`` says
+whether they hold the history of the last force evaluation; when they do
+not, a reader of the slots has the engine pack them first (``packer``, set
+to ``Engine.sync_slots``).
 
 The field registry
 ------------------

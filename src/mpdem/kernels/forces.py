@@ -1,33 +1,13 @@
 """Contact forces and torques (docs/model.md section 2).
 
-Each owned mobile particle sums its contacts in the order of its full
-neighbour list, sorted by partner id (ARCHITECTURE.md). The operations are
-arranged so that the two partners' views of a pair are exact negatives in
-IEEE arithmetic (raw difference, then minimum image; symmetric sums of
-partner quantities), so the partner of row i, on this rank or another, holds
-the mirror of i's contact to the bit.
-
-Rows are split into chunks, one thread per chunk, which does its rows in
-ascending order. Of a pair of two owned mobile rows of one chunk the lower
-row computes the contact; every other pair (ghost, bed or other-chunk
-partner) is computed by each row (``neighbours.link_entries``). A computed
-contact has a slot g: ``stamp[g]``, the number of the last force evaluation
-that found it in contact, Delta s in ``hist[g]`` (the computing row's view),
-read and written in place each step, and the contact force and torque in
-``pair[g]``. A contact whose stamp is not the previous evaluation's is new:
-its Delta s starts from zero (docs/model.md 2.4: the history of a contact
-that ended is deleted), so the history of a slot out of contact is never
-written; its ``pair`` row is set to zeros.
-
-Per row, two passes: the row computes its own contacts (screening only the
-entries it computes), then sums all its entries in partner-id order, adding
-``pair[g]`` for its own and, for a pair the lower row computed, minus its
-force and the same torque. The higher row's own view would give exactly
-these values (n and F_t flip sign, f_n and n x F_t do not), so this is the
-same arithmetic, bit for bit, as computing both views, and the result does
-not depend on the chunks or threads.
-Stored zeros are +0.0 (``x + 0.0``), so the stored state does not depend on
-which arithmetic path produced a zero.
+Per row, two passes: the row computes its own pairs (a pair within a chunk
+once, by its lower row), then sums all its entries in partner-id order, so
+the result has the same bits for any ranks, threads and chunks (see
+docs/computing.md, "The force sum: two passes per row"). The contact
+history is read and written in place in the list slots (docs/computing.md,
+"The contact history's two homes"); a contact whose stamp is not the
+previous evaluation's is new and its Delta s starts from zero (docs/model.md
+2.4). Stored zeros are +0.0 (``x + 0.0``).
 """
 import math
 from typing import NamedTuple

@@ -1,16 +1,12 @@
 """Contact history between its two homes: list slots and compact per-row slots.
 
-Between rebuilds the history of a contact lives in the slot g of the pair
-(``neighbours.link_entries``): ``stamp[g]``, the number of the last force
-evaluation that found it in contact (``contact_forces``), and Delta s in
-``hist[g]``, as seen from the row that computes the pair. Entry k of a row's
-list reaches it through ``link[k]``: ``g``, or ``~g`` for an entry whose pair
-the lower row of the chunk computes (its Delta s is minus the slot's). A pair
-is in contact now if its stamp is the last evaluation's number, ``epoch``. At a
-rebuild, a migration or a checkpoint the history is in compact per-row slots
-(partner ids ascending, Delta s), which travel with the particle
-(ARCHITECTURE.md). Both are sorted by partner id, so each direction is one
-merge per row.
+The list slots (``Slots``: ``hist`` Delta s [d] in the computing row's view,
+``stamp`` the last evaluation in contact; entry k reaches slot g through
+``link[k]`` = g, or ~g for an entry that takes its pair) hold it between
+rebuilds; the compact slots (partner ids ascending, Delta s [d]) at a
+rebuild, a migration and a checkpoint. Both are sorted by partner id, so
+each direction is one merge per row. See docs/computing.md, "The contact
+history's two homes".
 """
 import numpy as np
 from numba import njit, prange

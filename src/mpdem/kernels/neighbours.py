@@ -198,16 +198,16 @@ def _linked(j, n_own, fixed, nchunk, c):
 def link_entries(n_own, fixed, ids, lists, nchunk):
     """Split the entries into those a row computes and those it takes, and give each its slot.
 
-    Rows of a chunk are done in ascending order by one thread, so of a pair of
-    two owned mobile rows of one chunk the lower row computes the contact
-    once, and the higher row takes its force and torque (``contact_forces``).
-    Every other entry (ghost, bed or other-chunk partner) is computed by its
-    row. The computed entries of row i are ``comp_list[comp_start[i]:
-    comp_start[i + 1]]`` (partner rows, in id order), numbered chunk after
-    chunk and row after row, so a row reads and writes its slots in sequence;
-    slot g holds that contact's history and result. ``link[k]`` is the slot of
-    entry k: ``g`` for an entry its row computes, ``~g`` (negative) for one it
-    takes, whose slot keeps Delta s as seen from the lower row. Lists are
+    Of a pair of two owned mobile rows of one chunk the lower row computes the
+    contact once and the higher row takes it; every other entry (ghost, bed
+    or other-chunk partner) is computed by its row (why: docs/computing.md,
+    "The force sum: two passes per row"). The computed entries of row i
+    are ``comp_list[comp_start[i]:comp_start[i + 1]]`` (partner rows, in id
+    order), numbered chunk after chunk and row after row, so a row reads and
+    writes its slots in sequence; slot g holds that contact's history and
+    result. ``link[k]`` is the slot of entry k: ``g`` for an entry its row
+    computes, ``~g`` (negative) for one it takes, whose slot keeps Delta s as
+    seen from the lower row. Lists are
     symmetric (the distance test is mirror-exact) and sorted by id, so the
     mirror entry is found by bisection.
 
