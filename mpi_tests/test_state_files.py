@@ -10,7 +10,7 @@ from mpi4py import MPI
 
 from mpdem.io import checkpoint
 from mpdem import config
-from mpdem.driver import rundir
+from mpdem.io import rundir
 from mpdem.io.checkpoint import StateFileError
 from mpdem.decomp import Domain
 

@@ -13,7 +13,7 @@ import pytest
 
 from mpdem.io import checkpoint
 from mpdem import config
-from mpdem.driver import rundir
+from mpdem.io import rundir
 from mpdem.analysis import bulk, fits, gofr, mobilisation, report
 from mpdem.kernels import pairdist
 from mpdem.kernels.bundles import make_box

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mpdem.io import checkpoint
-from mpdem.driver import rundir
+from mpdem.io import rundir
 from mpdem.__main__ import main
 from mpdem.io.checkpoint import StateFileError
 from mpdem.pairs import contact_pairs

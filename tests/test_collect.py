@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from mpdem import config
-from mpdem.driver import rundir
+from mpdem.io import rundir
 from mpdem.campaign import collect as co
 from mpdem.analysis import bands, fits, nearcontact, report
 from mpdem.analysis.report import AnalysisError

@@ -42,20 +42,43 @@ def test_every_old_path_gives_the_new_module_and_names_it():
 def test_the_code_itself_imports_no_old_path():
     # the finder is for users' scripts; inside the package every import names the new home
     for path in SRC.rglob("*.py"):
+        old = [t for t in _imports(path) if t in MOVED]
+        assert not old, f"{path}: imports {old}, now {[MOVED[t] for t in old]}"
+
+
+# which packages a package may not import (ARCHITECTURE.md): files know nothing of runs or campaigns,
+# one packing's measurements nothing of runs or campaigns, the run nothing of campaigns
+FORBIDDEN = {
+    "mpdem.kernels": ("mpdem.io", "mpdem.driver", "mpdem.analysis", "mpdem.campaign", "mpdem.engine"),
+    "mpdem.io": ("mpdem.driver", "mpdem.analysis", "mpdem.campaign"),
+    "mpdem.analysis": ("mpdem.driver", "mpdem.campaign"),
+    "mpdem.driver": ("mpdem.campaign",),
+}
+
+
+def _imports(path):
+    """Absolute names of the mpdem modules a source file imports (at any depth in the file)."""
+    mod = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+    pkg = mod if path.name == "__init__.py" else mod.rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            base = pkg.split(".")
+            if node.level:
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for a in node.names:
+                yield f"{target}.{a.name}" if target in ("mpdem", "mpdem.io", "mpdem.driver", "mpdem.analysis",
+                                                         "mpdem.campaign", "mpdem.kernels") else target
+        elif isinstance(node, ast.Import):
+            yield from (a.name for a in node.names)
+
+
+def test_packages_import_only_downwards():
+    for path in SRC.rglob("*.py"):
         mod = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
-        pkg = mod if path.name == "__init__.py" else mod.rsplit(".", 1)[0]
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom):
-                base = pkg.split(".")
-                if node.level:
-                    base = base[: len(base) - node.level + 1]
-                    target = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
-                assert target not in MOVED, f"{path}: imports {target}"
-                for a in node.names:
-                    full = f"{target}.{a.name}"
-                    assert full not in MOVED, f"{path}: imports {full}; it is {MOVED.get(full)}"
-            elif isinstance(node, ast.Import):
-                for a in node.names:
-                    assert a.name not in MOVED, f"{path}: imports {a.name}"
+        for pkg, banned in FORBIDDEN.items():
+            if mod == pkg or mod.startswith(pkg + "."):
+                bad = [t for t in _imports(path) if any(t == b or t.startswith(b + ".") for b in banned)]
+                assert not bad, f"{mod} imports {bad}"

@@ -17,9 +17,9 @@ import warnings
 # old name -> new name
 MOVED = {
     **{f"mpdem.{m}": f"mpdem.io.{m}"
-       for m in ("checkpoint", "export", "lammps", "lammps_input", "network", "packing")},
+       for m in ("checkpoint", "export", "lammps", "lammps_input", "network", "packing", "rundir")},
     **{f"mpdem.{m}": f"mpdem.driver.{m}"
-       for m in ("simulation", "schedule", "resume", "summary", "rundir", "runstate")},
+       for m in ("simulation", "schedule", "resume", "summary", "runstate")},
     "mpdem.sweep": "mpdem.campaign.sweep",
     **{f"mpdem.analysis.{m}": f"mpdem.campaign.{m}"
        for m in ("collect", "figures", "comparison", "paper", "runs", "pooled")},

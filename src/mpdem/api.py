@@ -94,7 +94,7 @@ def _result(run, summary):
     summary = net.bcast(summary if run.rank == 0 else None)
     if run.status == "interrupted":
         return RunResult("interrupted", int(run.state.step), None, None, run.out, {})
-    from .driver import rundir
+    from .io import rundir
     return RunResult(run.status, int(summary["steps"]), summary["digest"], rundir.final_path(run.out),
                      run.out, summary)
 
@@ -115,7 +115,7 @@ def lock(run_dir, net):
     AgreedError on every rank, naming the holder, when another process writes ``run_dir``.
     """
     from .config import AgreedError
-    from .driver.rundir import RunLock
+    from .io.rundir import RunLock
     held = RunLock(run_dir) if net.rank == 0 else None
     why = net.on_root(lambda: held.acquire())
     if why:
@@ -139,7 +139,7 @@ def check_out(out, net, force=False):
     Rank 0 looks, before any rank can write there; every rank raises the same AgreedError.
     """
     from .config import AgreedError
-    from .driver.rundir import writable
+    from .io.rundir import writable
     held, why = net.on_root(lambda: (os.path.exists(os.path.join(out, "config.toml")), writable(out)))
     if why:
         raise AgreedError(f"--out {out}: {why}")

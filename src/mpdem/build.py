@@ -1,4 +1,4 @@
-"""Initial configurations: rough bed, random insertion, initial files.
+"""Initial configurations: rough bed, random insertion, initial velocities, the initial-state checks.
 
 Everything here is serial and deterministic: random numbers come from
 streams keyed by (seed, purpose) that do not depend on the rank count.

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..io import checkpoint, packing
 from .. import config
-from ..driver import rundir
+from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import AnalysisError
 from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order

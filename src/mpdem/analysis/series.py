@@ -17,7 +17,7 @@ import os
 import numpy as np
 
 from ..io import checkpoint
-from ..driver import rundir
+from ..io import rundir
 from ..kernels.particle import HALF_I
 from . import bulk
 from .report import AnalysisError, file_config

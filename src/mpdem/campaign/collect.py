@@ -31,7 +31,7 @@ import warnings
 
 import numpy as np
 
-from ..driver import rundir
+from ..io import rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
 from . import paper, pooled

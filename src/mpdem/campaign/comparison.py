@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from ..driver import rundir
+from ..io import rundir
 from ..analysis import fits
 from . import paper
 from .figures import FIGURES

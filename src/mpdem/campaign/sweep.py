@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 
 from .. import config
-from ..driver import rundir
+from ..io import rundir
 from ..errors import EXIT_RESTART, SweepError
 
 # table column -> (config key, the short name used in run directory names)

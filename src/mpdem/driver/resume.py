@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from ..io import checkpoint
 from .. import config
-from . import rundir
+from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import EXIT_NOT_CONVERGED, EXIT_OK
 from .runstate import RunState

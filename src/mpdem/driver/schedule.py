@@ -18,7 +18,7 @@ import sys
 import time
 from dataclasses import dataclass, field, fields
 
-from . import rundir
+from ..io import rundir
 from ..errors import RunError  # noqa: F401 (schedule.RunError, simulation.RunError)
 
 

@@ -24,7 +24,8 @@ import numpy as np
 from .. import initial
 from ..io import tables
 from ..io import checkpoint
-from . import rundir, summary
+from . import summary
+from ..io import rundir
 from ..config import collision_time
 from ..decomp import Domain
 from ..engine import Engine, Physics

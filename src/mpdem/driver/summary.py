@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from .. import analysis
 from ..io import checkpoint
-from . import rundir
+from ..io import rundir
 
 
 @dataclass

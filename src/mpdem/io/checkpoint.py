@@ -45,7 +45,7 @@ import numpy as np
 from .. import state
 from ..errors import StateFileError
 from ..parallel import channel
-from ..driver.rundir import starts_with
+from .rundir import starts_with
 
 FORMAT = "mpdem-state"
 VERSION = 2

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import checkpoint
 from ..kernels.particle import R    # particle radius [d]
-from ..driver.rundir import write_atomic
+from .rundir import write_atomic
 from ..state import FIELDS, PARTICLE
 
 # XDMF 3 (NumberType, Precision) of the dtypes in a state file. XDMF 3 reads

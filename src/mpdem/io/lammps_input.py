@@ -161,7 +161,7 @@ def write(path, out=None, steps=None, every=None):
     """
     from . import checkpoint
     from .export import lammps_data
-    from ..driver.rundir import write_atomic
+    from .rundir import write_atomic
     arrays, attrs = checkpoint.read_state(path)
     cfg = tomllib.loads(attrs["config"])
     step = int(attrs["step"])

@@ -28,7 +28,7 @@ import numpy as np
 
 from . import checkpoint
 from ..kernels.pairdist import separations
-from ..driver.rundir import write_atomic
+from .rundir import write_atomic
 
 
 # the cell data of a contact (both half-lines carry it)

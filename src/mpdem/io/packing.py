@@ -21,7 +21,7 @@ import zipfile
 import numpy as np
 
 from ..errors import PackingFileError
-from ..driver.rundir import starts_with
+from .rundir import starts_with
 
 FORMAT = "mpdem-packing"
 VERSION = 1

@@ -10,7 +10,7 @@ import gzip
 
 import numpy as np
 
-from ..driver.rundir import write_atomic
+from .rundir import write_atomic
 from ..errors import InputError
 from ..state import INITIAL
 
