@@ -17,8 +17,9 @@ from .kernels import history
 from .kernels.balance import force_balance
 from .kernels.bundles import Lists, Particles, Scratch, Slots, make_box
 from .kernels.exactsum import new_accumulator, to_float
-from .kernels.forces import MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, floor_forces, wall_forces
-from .kernels.integrate import kick, kick_drift, kinetic_energy
+from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, contact_forces_serial, floor_forces,
+                             wall_forces)
+from .kernels.integrate import kick, kick_drift, kick_drift_serial, kinetic_energy
 from .kernels.neighbours import build_neighbours, link_entries
 
 
@@ -273,8 +274,10 @@ class Engine:
         self._epoch += 1
         part = self._particles()
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
-        max_ov, n_c = contact_forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
-                                     self.law, increment, scratch)
+        # one chunk: the serial twin, the same bits without the parallel wrapper's cost
+        forces = contact_forces if self.nchunk > 1 else contact_forces_serial
+        max_ov, n_c = forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
+                             self.law, increment, scratch)
         if p.floor:
             floor_forces(s.n_own, part, p.k_n, p.gamma_n)
         if p.wall:
@@ -323,7 +326,10 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        d2, z_min, z_max = kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
+        if self.nchunk > 1:
+            d2, z_min, z_max = kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
+        else:
+            d2, z_min, z_max = kick_drift_serial(s.n_own, self._particles(), s.x_ref, p.dt, self._box())
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
         red = self._reduce
