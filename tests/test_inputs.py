@@ -147,6 +147,8 @@ def test_runtime_checks_stop_the_run(tmp_path):
     r = Run.new(small_cfg(f'run.initial_file="{p}"', "box.gravity=0.0"), str(tmp_path / "f"), quiet=True)
     with pytest.raises(RunError, match="overlap .* exceeds checks.overlap_error"):
         r.run()
+    # it failed before its first stop-rule sample: no thermo table, not even a header
+    assert not (tmp_path / "f" / "thermo.csv").exists()
     # a sphere dropping past the single bed sphere, beside it
     p = tmp_path / "fall.txt"
     tables.write_table(p, np.array([0, 1]), np.array([[1.0, 1.0, 3.0], [3.5, 3.5, 1.0]]),

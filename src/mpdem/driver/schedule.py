@@ -185,25 +185,30 @@ class Thermo:
     def __init__(self, out_dir, rank):
         self.fh = None
         self.ratio = True
-        if rank == 0:
-            path = os.path.join(out_dir, "thermo.csv")
-            new = not os.path.exists(path) or os.path.getsize(path) == 0
-            if not new:
-                # a table begun before the force_ratio column keeps its columns
-                with open(path) as fh:
-                    self.ratio = fh.readline().rstrip("\n").endswith(",force_ratio")
-            self.fh = open(path, "a")
-            if new:
-                self.fh.write(self.HEADER)
+        # opened at the first line, so that a run that fails before its first sample leaves no table
+        self.path = os.path.join(out_dir, "thermo.csv") if rank == 0 else None
+
+    def _open(self):
+        new = not os.path.exists(self.path) or os.path.getsize(self.path) == 0
+        if not new:
+            # a table begun before the force_ratio column keeps its columns
+            with open(self.path) as fh:
+                self.ratio = fh.readline().rstrip("\n").endswith(",force_ratio")
+        self.fh = open(self.path, "a")
+        if new:
+            self.fh.write(self.HEADER)
 
     def write(self, st, et, er, N, stop, info, rebuilds, wall):
         """One line: energies per mobile particle, the stop window's mean, the step's figures, the
         unbalanced-force ratio."""
-        if self.fh:
-            self.fh.write(f"{st.step},{st.time:.10g},{(et + er) / N:.6e},{et / N:.6e},{er / N:.6e},"
-                          f"{stop.mean:.6e},{info.max_overlap:.6e},{info.n_contacts / N:.5f},"
-                          f"{info.z_max:.6g},{rebuilds},{wall:.3f}"
-                          + (f",{stop.ratio:.6e}\n" if self.ratio else "\n"))
+        if self.path is None:
+            return
+        if self.fh is None:
+            self._open()
+        self.fh.write(f"{st.step},{st.time:.10g},{(et + er) / N:.6e},{et / N:.6e},{er / N:.6e},"
+                      f"{stop.mean:.6e},{info.max_overlap:.6e},{info.n_contacts / N:.5f},"
+                      f"{info.z_max:.6g},{rebuilds},{wall:.3f}"
+                      + (f",{stop.ratio:.6e}\n" if self.ratio else "\n"))
 
     def flush(self):
         if self.fh:
