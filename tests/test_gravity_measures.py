@@ -80,6 +80,29 @@ def test_a_simple_cubic_pile_is_all_backbone_and_its_z_is_six():
         assert s["count_rule"]["rattler_fraction"] == 0.0
 
 
+def test_bed_bed_overlaps_are_not_contacts_and_do_not_weigh_on_the_backbone():
+    # a bed is frozen as it settled, overlapping itself; bed-bed pairs are never computed (docs/model.md
+    # 2.8), so they are no contacts. Were they, their elastic k_n delta (here 2e6 x 1e-3) would set the
+    # bottom band's reference force and make every real contact on the bed "weak": nothing would stand.
+    nxy, nz, a = 4, 5, 1.0 - 1e-3
+    x, L = simple_cubic(nxy, nz, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    pk = bulk.Packing(x, fixed, L, L, mu=0.0)
+    bed = fixed.astype(bool)
+    assert not np.any(bed[pk.pairs[:, 0]] & bed[pk.pairs[:, 1]])
+    # the file's forces: a vertical contact carries the spheres of its column above it, a horizontal none
+    # (a state file lists the computed pairs only: none of the bed's own)
+    layer = np.rint(x[:, 2] / a - 0.5).astype(int)
+    every, _ = bulk.find_contacts(x, L, L)
+    i, j = every[~(bed[every[:, 0]] & bed[every[:, 1]])].T
+    F_n = np.where(layer[i] != layer[j], nz - 1 - np.minimum(layer[i], layer[j]), 0.0).astype(float)
+    arrays = {"id": np.arange(len(x)), "id_i": i, "id_j": j, "F_n": F_n, "F_t": np.zeros((len(i), 3))}
+    cf = contacts.contact_forces(pk, arrays, 2e6, 0.0)
+    assert cf.from_file.all()
+    bb = backbone.of_packing(pk, cf, h=float(x[:, 2].max()) + 0.5, band_width=2.5, force_fraction=0.01)
+    assert bb["kept"].all() and bb["counts"][~bed].min() >= 1
+
+
 # ---- contact forces --------------------------------------------------------------
 
 def test_contact_forces_take_the_files_forces_with_the_sign_of_each_pair():

@@ -171,6 +171,9 @@ class Packing:
     L_x, L_y : box [d]; mu : friction (sets the default rattler threshold)
     n_min : threshold of the count rule; -1 = 4 for mu = 0, 2 for mu > 0
 
+    Contacts (``pairs``, ``r``): every overlapping pair with a mobile sphere in it;
+    two bed spheres overlap where the bed froze, but they never interact.
+
     Rattlers: built with the count rule (``remove_rattlers``, ``kept_count``,
     ``counts_count``); ``use_backbone`` switches ``kept`` and ``counts_nr`` to
     the force-based backbone (docs/model.md 6.2), the default of the analysis.
@@ -185,7 +188,10 @@ class Packing:
         self.L_x, self.L_y, self.mu = float(L_x), float(L_y), float(mu)
         zm = self.x[self.mobile, 2]
         self.z_bed = float(self.x[self.fixed, 2].max()) if self.fixed.any() else float(zm.min()) - R
-        self.pairs, self.r = find_contacts(self.x, self.L_x, self.L_y)
+        pairs, r = find_contacts(self.x, self.L_x, self.L_y)
+        # bed-bed pairs are never computed (docs/model.md 2.8): the bed's own overlaps are no contacts
+        real = ~(self.fixed[pairs[:, 0]] & self.fixed[pairs[:, 1]])
+        self.pairs, self.r = pairs[real], r[real]
         n = len(self.x)
         self.counts = np.bincount(self.pairs.ravel(), minlength=n)
         self.n_min = (4 if mu == 0 else 2) if n_min < 0 else int(n_min)
