@@ -29,6 +29,9 @@ MOVED = {
 class MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     """Finds an old module name and loads it as the module at its new name."""
 
+    def __init__(self):
+        self._specs = {}   # old name -> the new module's own spec, between create and exec
+
     def find_spec(self, name, path=None, target=None):
         if name not in MOVED:
             return None
@@ -39,12 +42,12 @@ class MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         # level 2 is the importing line: warnings skips importlib's own frames
         warnings.warn(f"{spec.name} has moved to {new}; import it from there", DeprecationWarning, stacklevel=2)
         module = importlib.import_module(new)
-        self._spec = module.__spec__
+        self._specs[spec.name] = module.__spec__
         return module
 
     def exec_module(self, module):
         # the import machinery gave the module the old name's spec: give it back its own
-        module.__spec__ = self._spec
+        module.__spec__ = self._specs.pop(module.__spec__.name)
 
 
 def install():

@@ -141,6 +141,9 @@ class Engine:
             self.sync_slots()      # the links of the old chunks say where the history is
         self.nchunk = int(nchunk)
         self._scratch(self._width)
+        # one chunk (one thread): the serial twins, the same bits without numba's parallel wrapper
+        self._contact_forces = contact_forces if self.nchunk > 1 else contact_forces_serial
+        self._kick_drift = kick_drift if self.nchunk > 1 else kick_drift_serial
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
@@ -274,10 +277,8 @@ class Engine:
         self._epoch += 1
         part = self._particles()
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
-        # one chunk: the serial twin, the same bits without the parallel wrapper's cost
-        forces = contact_forces if self.nchunk > 1 else contact_forces_serial
-        max_ov, n_c = forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
-                             self.law, increment, scratch)
+        max_ov, n_c = self._contact_forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
+                                           self.law, increment, scratch)
         if p.floor:
             floor_forces(s.n_own, part, p.k_n, p.gamma_n)
         if p.wall:
@@ -326,10 +327,7 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        if self.nchunk > 1:
-            d2, z_min, z_max = kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
-        else:
-            d2, z_min, z_max = kick_drift_serial(s.n_own, self._particles(), s.x_ref, p.dt, self._box())
+        d2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same rebuild decision on every rank count (NaN -> inf)
         red = self._reduce

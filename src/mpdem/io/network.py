@@ -28,7 +28,7 @@ import numpy as np
 
 from . import checkpoint
 from ..kernels.pairdist import separations
-from .rundir import write_atomic
+from .rundir import CONTACTS_DIR, write_atomic
 
 
 # the cell data of a contact (both half-lines carry it)
@@ -114,9 +114,6 @@ def write_contacts_xdmf(path, out=None):
     ET.indent(root)
     write_atomic(xmf, ['<?xml version="1.0" ?>\n', ET.tostring(root, encoding="unicode"), "\n"])
     return xmf
-
-
-CONTACTS_DIR = "contacts"
 
 
 def contacts_path(path):

@@ -26,6 +26,7 @@ import numpy as np
 
 
 CKPT_DIR, SNAP_DIR = "checkpoints", "snapshots"
+CONTACTS_DIR = "contacts"   # contact networks beside their state files (network.contacts_path)
 
 
 def write_atomic(path, chunks):
@@ -204,8 +205,8 @@ def clear(run):
     """Remove the outputs of an earlier run in ``run`` (a new run with --force)."""
     for p in ([p for _, p in checkpoints(run) + snapshots(run)]
               + glob.glob(os.path.join(run, CKPT_DIR, "*.tmp")) + glob.glob(os.path.join(run, SNAP_DIR, "*"))
-              # the contact networks written beside the states (network.contacts_path)
-              + glob.glob(os.path.join(run, SNAP_DIR, "contacts", "*")) + glob.glob(os.path.join(run, "contacts", "*"))
+              + glob.glob(os.path.join(run, SNAP_DIR, CONTACTS_DIR, "*"))
+              + glob.glob(os.path.join(run, CONTACTS_DIR, "*"))
               + [os.path.join(run, n) for n in ("final.h5", "final.xmf", "summary.json", "thermo.csv", "packing.npz")]):
         if os.path.isfile(p):
             os.remove(p)
