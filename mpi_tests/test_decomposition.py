@@ -156,7 +156,7 @@ def test_ranks_times_threads_match_one_rank_one_thread(comm):
     threads.configure(t)
     try:
         r, s = run(cfg, os.path.join(base, "tp"), comm)
-        assert r.engine.nchunk == (8 if t == 2 else 1)
+        assert r.engine.nchunk == t          # one chunk per thread
         n_contacts = r.engine.contacts()
     finally:
         threads.configure(1)
