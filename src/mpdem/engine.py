@@ -137,8 +137,9 @@ class Engine:
         self._contacts = 0       # this rank's contacts of the last force evaluation
 
     def set_chunks(self, nchunk):
-        """Split the rows into ``nchunk`` chunks for the threads (more than threads
-        balances the load); any count gives the same bits."""
+        """Split the rows into ``nchunk`` chunks for the threads (the engine uses one a
+        thread: numba's static schedule makes more balance nothing); any count gives the
+        same bits."""
         if self.has_lists:
             self.sync_slots()      # the links of the old chunks say where the history is
         self.nchunk = int(nchunk)
