@@ -16,6 +16,7 @@ import numpy as np
 from .kernels import history
 from .kernels.balance import force_balance
 from .kernels.bundles import Lists, Particles, Scratch, Slots, make_box
+from .kernels.calls import Bound
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, contact_forces_serial, floor_forces,
                              wall_forces)
@@ -121,6 +122,7 @@ class Engine:
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
+        self._box_made = None
         state.packer = self.sync_slots
         t = threads.apply()
         # one chunk per thread: numba's prange hands each thread an equal share of the chunks in one
@@ -143,10 +145,14 @@ class Engine:
         if self.has_lists:
             self.sync_slots()      # the links of the old chunks say where the history is
         self.nchunk = int(nchunk)
+        # one chunk (one thread): the serial twins, the same bits without numba's parallel wrapper;
+        # each called through the overload numba chose at its first call after a reallocation
+        self._contact_forces = Bound(contact_forces if self.nchunk > 1 else contact_forces_serial)
+        self._kick_drift = Bound(kick_drift if self.nchunk > 1 else kick_drift_serial)
+        self._kick = Bound(kick)
+        self._floor_forces = Bound(floor_forces)
+        self._wall_forces = Bound(wall_forces)
         self._scratch(self._width)
-        # one chunk (one thread): the serial twins, the same bits without numba's parallel wrapper
-        self._contact_forces = contact_forces if self.nchunk > 1 else contact_forces_serial
-        self._kick_drift = kick_drift if self.nchunk > 1 else kick_drift_serial
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
         self._drift = np.zeros((self.nchunk, 3))
@@ -159,6 +165,13 @@ class Engine:
         self._width = width
         self._found = np.zeros((self.nchunk, width, 2), np.int32)
         self._sep = np.zeros((self.nchunk, width, 4))
+        self._rebind()
+
+    def _rebind(self):
+        """Let numba choose the step's kernels' overloads again at their next calls
+        (``kernels.calls``): arrays were reallocated."""
+        for k in (self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces):
+            k.reset()
 
     # -- the kernels' bundles, made for each call (arrays are reallocated at rebuilds) --
     def _particles(self):
@@ -172,7 +185,10 @@ class Engine:
         return Slots(self.hist, self.stamp, self.pair)
 
     def _box(self):
-        return make_box(self.state.L_x, self.state.L_y)
+        b, s = self._box_made, self.state
+        if b is None or b.L_x != s.L_x or b.L_y != s.L_y:
+            b = self._box_made = make_box(s.L_x, s.L_y)
+        return b
 
     # -- contact history: list entries <-> compact slots --
     def sync_slots(self):
@@ -229,6 +245,7 @@ class Engine:
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
+        self._rebind()
         self.n_rebuilds += 1
         self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
 
@@ -277,15 +294,16 @@ class Engine:
         if len(self.pair) < len(self.hist):
             # one row per slot; each step's computing rows write it before any row sums it
             self.pair = np.empty((len(self.hist), 6))
+            self._rebind()
         self._epoch += 1
         part = self._particles()
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
         max_ov, n_c = self._contact_forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
         if p.floor:
-            floor_forces(s.n_own, part, p.k_n, p.gamma_n)
+            self._floor_forces(s.n_own, part, p.k_n, p.gamma_n)
         if p.wall:
-            max_ov = max(max_ov, wall_forces(s.n_own, part, s.wall_ds, self.law, increment, self._chunk_max))
+            max_ov = max(max_ov, self._wall_forces(s.n_own, part, s.wall_ds, self.law, increment, self._chunk_max))
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c
@@ -347,7 +365,7 @@ class Engine:
         self.last_overlap, self._contacts = self.forces(increment=True)
         t = time.perf_counter()
         # a new bundle: a rebuild may have reallocated the rows
-        kick(s.n_own, self._particles(), p.dt)
+        self._kick(s.n_own, self._particles(), p.dt)
         self.timers["integration"] += time.perf_counter() - t
         s.step += 1
         s.time = s.step * p.dt
