@@ -211,3 +211,20 @@ def test_chunk_of_agrees_with_chunk_bounds():
                 rows = range(lo, hi) if n < 200 or hi - lo < 2 else (lo, lo + 1, hi - 2, hi - 1)
                 assert all(chunk_of(i, n, nchunk) == c for i in rows)
             assert edge == n
+
+
+def test_ghost_rows_gather_and_scatter():
+    from mpdem.kernels.ghosts import gather_rows, scatter_rows
+    g = np.random.default_rng(2)
+    fields = tuple(g.random((20, 3)) for _ in range(3))
+    rows = np.array([7, 2, 19, 0], np.intp)
+    block = np.full((3, 4, 3), np.nan)
+    gather_rows(fields, rows, block)
+    for f in range(3):
+        np.testing.assert_array_equal(block[f], fields[f][rows])
+    before = tuple(a.copy() for a in fields)
+    scatter_rows(fields, 15, block)
+    for f in range(3):
+        np.testing.assert_array_equal(fields[f][15:19], block[f])
+        np.testing.assert_array_equal(fields[f][:15], before[f][:15])
+        np.testing.assert_array_equal(fields[f][19:], before[f][19:])
