@@ -48,6 +48,18 @@ def test_bound_check_catches_a_changed_type(monkeypatch):
     assert k(_particles(3, np.float32), 1.0) == 3
 
 
+def test_bound_check_takes_numbas_types_not_fingerprints(monkeypatch):
+    # a numpy int64 where a Python int was: another fingerprint, the same numba type (int64)
+    monkeypatch.setattr(Bound, "check", 1)
+    k = Bound(_scale_x)
+    p = _particles(2)
+    k(p, 2)
+    assert k(p, np.int64(3)) == 2
+    np.testing.assert_array_equal(p.x, 6.0 * np.arange(6.0).reshape(2, 3))
+    with pytest.raises(TypeError, match="argument types changed"):
+        k(p, 2.0)
+
+
 def test_bound_checks_in_the_test_suite():
     # conftest turns the check on, so the engine's steps in the tests compare the types
     assert Bound.check > 0

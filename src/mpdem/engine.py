@@ -147,11 +147,10 @@ class Engine:
         self.nchunk = int(nchunk)
         # one chunk (one thread): the serial twins, the same bits without numba's parallel wrapper;
         # each called through the overload numba chose at its first call after a reallocation
-        self._contact_forces = Bound(contact_forces if self.nchunk > 1 else contact_forces_serial)
-        self._kick_drift = Bound(kick_drift if self.nchunk > 1 else kick_drift_serial)
-        self._kick = Bound(kick)
-        self._floor_forces = Bound(floor_forces)
-        self._wall_forces = Bound(wall_forces)
+        self._bound = (Bound(contact_forces if self.nchunk > 1 else contact_forces_serial),
+                       Bound(kick_drift if self.nchunk > 1 else kick_drift_serial),
+                       Bound(kick), Bound(floor_forces), Bound(wall_forces))
+        self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces = self._bound
         self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
@@ -170,7 +169,7 @@ class Engine:
     def _rebind(self):
         """Let numba choose the step's kernels' overloads again at their next calls
         (``kernels.calls``): arrays were reallocated."""
-        for k in (self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces):
+        for k in self._bound:
             k.reset()
 
     # -- the kernels' bundles, made for each call (arrays are reallocated at rebuilds) --

@@ -53,11 +53,21 @@ class Bound:
             return self._choose(args)
         if Bound.check:
             self._calls += 1
-            if self._calls % Bound.check == 0 and tuple(map(compute_fingerprint, args)) != self._prints:
-                types = tuple(self.kernel.typeof_pyval(a) for a in args)
-                raise TypeError(f"{self.kernel.__name__}: argument types changed since the overload was chosen "
-                                f"without a reset: {types} against {self._types}")
+            if self._calls % Bound.check == 0:
+                self._verify(args)
         return self._entry(*args)
+
+    def _types_of(self, args):
+        return tuple(self.kernel.typeof_pyval(a) for a in args)
+
+    def _verify(self, args):
+        if tuple(map(compute_fingerprint, args)) == self._prints:
+            return
+        # fingerprints differ where numba's types may not (a Python int and a numpy int64 are both int64)
+        types = self._types_of(args)
+        if types != self._types:
+            raise TypeError(f"{self.kernel.__name__}: argument types changed since the overload was chosen "
+                            f"without a reset: {types} against {self._types}")
 
     def _choose(self, args):
         # numba's own dispatch: types the arguments, compiles a new overload if none fits
@@ -67,7 +77,7 @@ class Bound:
             types = _TYPES.get(prints)
             if types is None:
                 # numba's typing of named tuples runs in Python (some 0.3 ms): once per kind of arguments
-                types = _TYPES[prints] = tuple(self.kernel.typeof_pyval(a) for a in args)
+                types = _TYPES[prints] = self._types_of(args)
             compiled = self.kernel.overloads.get(types)
             # None: numba took an overload of other (convertible) types; keep calling the dispatcher
             if compiled is not None:
