@@ -6,7 +6,7 @@ import pytest
 
 from mpdem.analysis import find_contacts
 from mpdem.build import insert_random, rng
-from mpdem.kernels.bundles import Lists, Particles, Scratch, Slots, make_box
+from mpdem.kernels.bundles import Near, Particles, Scratch, Slots, make_box
 from mpdem.kernels.forces import contact_forces
 from mpdem.kernels.particle import HALF_I
 
@@ -61,9 +61,10 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full: each entry its own slot
     # (link k, hist[k] is entry k's), both entries computed (comp_list = nbr)
-    lists = Lists(nbr_start, nbr, np.arange(2, dtype=np.int32), nbr_start.copy(), nbr.copy())
+    slot = np.arange(2, dtype=np.int32)
+    near = Near(nbr_start, slot, nbr_start.copy(), nbr.copy(), slot.copy())
     scratch = Scratch(np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
-    res = contact_forces(2, Particles(x, v, omega, f, t, fx), lists, Slots(hist, stamp, np.zeros((3, 6))), 1,
+    res = contact_forces(2, Particles(x, v, omega, f, t, fx), near, Slots(hist, stamp, np.zeros((3, 6))), 1,
                          make_box(10.0, 10.0), law, increment, scratch)
     return f, t, (stamp == 1).astype(np.uint8), hist, res
 

@@ -97,6 +97,9 @@ SCHEMA = (
     _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)", param=14),
     _k("integration", "skin", 0.2,
        "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
+    _k("integration", "near_skin", 0.05,
+       "the force kernel's reach beyond contact [d] (<= skin; no effect on results): the list entries"
+       " within 1 + near_skin, filtered again when a particle moved near_skin/2", physics=False),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "force_ratio", 0.01,
@@ -510,6 +513,7 @@ def resolve(raw):
 
     skin = vals["integration.skin"]
     need("integration.skin", 0 < skin <= 1, "0 < skin <= 1 d")
+    need("integration.near_skin", 0 < vals["integration.near_skin"] <= 1, "0 < near_skin <= 1 d")
     for key in ("box.L_x", "box.L_y"):
         need(key, vals[key] >= 3.0 and vals[key] >= 2 * (1.0 + skin),
              f"L >= 3 d and L >= 2 (d + skin) = {2 * (1 + skin):g} d (minimum image)")

@@ -15,12 +15,13 @@ import numpy as np
 
 from .kernels import history
 from .kernels.balance import force_balance
-from .kernels.bundles import Lists, Particles, Scratch, Slots, make_box
+from .kernels.bundles import Lists, Near, Particles, Scratch, Slots, make_box
 from .kernels.calls import Bound
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, contact_forces_serial, floor_forces,
                              wall_forces)
 from .kernels.integrate import kick, kick_drift, kick_drift_serial, kinetic_energy
+from .kernels.near import near_lists
 from .kernels.neighbours import build_neighbours, link_entries
 
 
@@ -34,6 +35,7 @@ class Physics:
     mu: float
     dt: float
     skin: float = 0.2
+    near_skin: float = 0.05
     gravity: float = 1.0
     model: str = "hooke"
     limit_damping: bool = False
@@ -45,7 +47,8 @@ class Physics:
     def from_config(cls, cfg):
         c = cfg.contact
         return cls(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
-                   dt=cfg.integration.dt, skin=cfg.integration.skin, gravity=cfg.box.gravity,
+                   dt=cfg.integration.dt, skin=cfg.integration.skin, near_skin=cfg.integration.near_skin,
+                   gravity=cfg.box.gravity,
                    model=c.model, limit_damping=c.limit_damping,
                    rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
 
@@ -119,6 +122,17 @@ class Engine:
         self.hist = np.zeros((0, 3))
         self.pair = np.zeros((0, 6))
         self.stamp = np.zeros(0, np.uint32)
+        # the near lists (kernels/near.py): the force kernel's entries, filtered from the lists
+        self.near_skin = min(physics.near_skin, physics.skin)
+        self.near_start = np.zeros(state.capacity + 1, np.int64)
+        self.near_cstart = np.zeros(state.capacity + 1, np.int64)
+        self.near_link = np.zeros(0, np.int32)
+        self.near_cj = np.zeros(0, np.int32)
+        self.near_cslot = np.zeros(0, np.int32)
+        self.x_near = np.zeros((0, 3))
+        self.k_near = 0           # near computed entries: the rows of ``pair`` a force evaluation writes
+        self._ref2 = 0.0          # this rank's largest squared displacement from x_ref to x_near
+        self.n_filters = 0
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
@@ -158,6 +172,7 @@ class Engine:
         if self.has_lists:
             self._link()
             self._unpack_slots()
+            self._filter()
 
     def _scratch(self, width):
         """Per-chunk scratch of the force kernel for rows of up to ``width`` entries."""
@@ -179,6 +194,9 @@ class Engine:
 
     def _lists(self):
         return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
+
+    def _near(self):
+        return Near(self.near_start, self.near_link, self.near_cstart, self.near_cj, self.near_cslot)
 
     def _slots(self):
         return Slots(self.hist, self.stamp, self.pair)
@@ -244,6 +262,7 @@ class Engine:
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
+        self._filter()
         self._rebind()
         self.n_rebuilds += 1
         self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
@@ -263,6 +282,33 @@ class Engine:
             link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk)
         self.hist = np.empty((k, 3))
         self.stamp = np.empty(k, np.uint32)
+
+    def _filter(self):
+        """The near lists from the lists, and ``x_near`` = x (``near.near_lists``); the largest
+        displacement since the build, which bounds the rest with the steps' displacements
+        from ``x_near``."""
+        s = self.state
+        n = s.n_own
+        if len(self.near_start) < n + 1:
+            self.near_start = np.zeros(s.capacity + 1, np.int64)
+            self.near_cstart = np.zeros(s.capacity + 1, np.int64)
+        if len(self.x_near) < n:
+            self.x_near = np.zeros((s.capacity, 3))
+        r2 = (1.0 + self.near_skin) ** 2
+        # one entry per slot, only while filtering
+        g2e = np.empty(len(self.hist), np.int32)
+        kc, ke, self._ref2 = near_lists(n, s.x, s.x_ref, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
+        if kc > len(self.near_cj) or ke > len(self.near_link):
+            if kc > len(self.near_cj):
+                self.near_cj = np.zeros(int(kc * 1.1) + 64, np.int32)
+                self.near_cslot = np.zeros(len(self.near_cj), np.int32)
+            if ke > len(self.near_link):
+                self.near_link = np.zeros(int(ke * 1.1) + 64, np.int32)
+            near_lists(n, s.x, s.x_ref, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
+            self._rebind()
+        self.k_near = kc
+        self.x_near[:n] = s.x[:n]
+        self.n_filters += 1
 
     def _alloc_lists(self, size):
         # the history moved to the slots before the lists were rebuilt: nothing to keep
@@ -290,14 +336,14 @@ class Engine:
         """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
         t = time.perf_counter()
         s, p = self.state, self.phys
-        if len(self.pair) < len(self.hist):
-            # one row per slot; each step's computing rows write it before any row sums it
-            self.pair = np.empty((len(self.hist), 6))
+        if len(self.pair) < self.k_near:
+            # one row per near slot; each step's computing rows write it before any row sums it
+            self.pair = np.empty((int(self.k_near * 1.1) + 64, 6))
             self._rebind()
         self._epoch += 1
         part = self._particles()
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
-        max_ov, n_c = self._contact_forces(s.n_own, part, self._lists(), self._slots(), self._epoch, self._box(),
+        max_ov, n_c = self._contact_forces(s.n_own, part, self._near(), self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
         if p.floor:
             self._floor_forces(s.n_own, part, p.k_n, p.gamma_n)
@@ -347,20 +393,27 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        d2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
+        n2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), self.x_near, p.dt, self._box(), self._drift)
         self.timers["integration"] += time.perf_counter() - t
-        # one exact max: the same rebuild decision on every rank count (NaN -> inf)
+        # one exact max: the same decisions on every rank count (NaN -> inf)
         red = self._reduce
-        if len(red) != 4 + len(flags):
-            red = self._reduce = np.zeros(4 + len(flags))
-        red[0], red[1], red[2], red[3] = d2, self.last_overlap, -z_min, z_max
-        red[4:] = flags
-        d2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red)
-        rebuilt = not d2 < 0.25 * p.skin * p.skin
+        if len(red) != 5 + len(flags):
+            red = self._reduce = np.zeros(5 + len(flags))
+        red[0], red[1], red[2], red[3], red[4] = n2, self.last_overlap, -z_min, z_max, self._ref2
+        red[5:] = flags
+        n2, overlap, neg_z_min, z_max, ref2, *agreed = dom.max_many(red)
+        # |x - x_ref| <= |x - x_near| + |x_near - x_ref| bounds every displacement since the build
+        # (rebuilding early changes no bit: sums run in partner-id order and left-out pairs add zeros)
+        rebuilt = not math.sqrt(n2) + math.sqrt(ref2) < 0.5 * p.skin
         if rebuilt:
             self.rebuild()
         else:
             dom.refresh(s)
+            # a pair left out of the near lists may come within reach once a particle moved near_skin/2
+            if not n2 < 0.25 * self.near_skin * self.near_skin:
+                t = time.perf_counter()
+                self._filter()
+                self.timers["lists"] += time.perf_counter() - t
         self.last_overlap, self._contacts = self.forces(increment=True)
         t = time.perf_counter()
         # a new bundle: a rebuild may have reallocated the rows
@@ -369,7 +422,7 @@ class Engine:
         s.step += 1
         s.time = s.step * p.dt
         # an infinite displacement: a position became NaN or infinite
-        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(d2) else -neg_z_min, z_max,
+        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
                              flags._make(agreed))
         return self.info
 
@@ -402,10 +455,10 @@ class Engine:
         if self._epoch == 0:
             return math.nan, -1
         s = self.state
-        if len(self.pair) < len(self.hist):
+        if len(self.pair) < self.k_near:
             # the slot forces were freed when the history was packed (a state file written since)
             return math.nan, -1
-        acc = self.domain.sum_int(force_balance(s.n_own, self._particles(), self._lists(), self._slots(),
+        acc = self.domain.sum_int(force_balance(s.n_own, self._particles(), self._near(), self._slots(),
                                                 self._epoch, self.nchunk))
         res, con, n_c, free = (to_float(a) for a in acc)
         n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
@@ -416,4 +469,6 @@ class Engine:
         """Bytes held by the particle arrays and the lists with their history."""
         return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
                                                              self.comp_start, self.comp_list, self.hist,
-                                                             self.pair, self.stamp))
+                                                             self.pair, self.stamp, self.near_start,
+                                                             self.near_cstart, self.near_link, self.near_cj,
+                                                             self.near_cslot, self.x_near))

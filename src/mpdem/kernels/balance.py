@@ -23,14 +23,15 @@ from .history import slot_of, stamp_of
 
 
 @njit(cache=True, parallel=True)
-def force_balance(n_own, particles, lists, slots, epoch, nchunk):
+def force_balance(n_own, particles, near, slots, epoch, nchunk):
     """Exact sums of the resultant and the contact forces of the owned mobile rows.
 
     Parameters
     ----------
     particles : Particles; ``f`` (n, 3), the forces of the last evaluation (contacts and gravity)
         [m g], and ``fixed`` are read
-    lists : Lists; ``nbr_start`` and ``link`` (the rows' list entries and their slots) are read
+    near : Near; ``start``, ``link`` and ``cslot`` (the rows' near entries, their near slots and
+        those slots' slots) are read: every contact is a near entry
     slots : Slots; ``pair`` (K, 6) slot forces (columns 0-2 the contact force [m g]) and ``stamp`` are read
     epoch : int, the last evaluation
     nchunk : int, chunks of rows (the sums do not depend on it)
@@ -41,7 +42,7 @@ def force_balance(n_own, particles, lists, slots, epoch, nchunk):
     and the mobile rows without a contact
     """
     f, fixed = particles.f, particles.fixed
-    nbr_start, link = lists.nbr_start, lists.link
+    start, link, cslot = near.start, near.link, near.cslot
     pair, stamp = slots.pair, slots.stamp
     now = stamp_of(epoch)
     part = np.zeros((nchunk, 4, NLIMBS), np.int64)
@@ -52,10 +53,10 @@ def force_balance(n_own, particles, lists, slots, epoch, nchunk):
                 continue
             add_exact(part[c, 0], math.sqrt(f[i, 0] ** 2 + f[i, 1] ** 2 + f[i, 2] ** 2))
             m = 0
-            for k in range(nbr_start[i], nbr_start[i + 1]):
-                g = slot_of(link[k])
-                if stamp[g] == now:
-                    add_exact(part[c, 1], math.sqrt(pair[g, 0] ** 2 + pair[g, 1] ** 2 + pair[g, 2] ** 2))
+            for k in range(start[i], start[i + 1]):
+                e = slot_of(link[k])
+                if stamp[cslot[e]] == now:
+                    add_exact(part[c, 1], math.sqrt(pair[e, 0] ** 2 + pair[e, 1] ** 2 + pair[e, 2] ** 2))
                     m += 1
             add_exact(part[c, 2], float(m))
             if m == 0:

@@ -75,6 +75,33 @@ class Lists(NamedTuple):
     comp_list: np.ndarray
 
 
+class Near(NamedTuple):
+    """The entries of the lists within the near reach 1 + near_skin, the force kernel's lists.
+
+    Between two filterings (``near.near_lists``) no particle moves near_skin/2, so a pair
+    left out is out of contact and would add only zeros to its rows' sums: leaving it out
+    changes no bit. The near computed entries are numbered e = 0..K_near-1 in the order of
+    the slots g they come from (so a row's are still in partner-id order).
+
+    start : (n_own + 1,) int64
+        CSR offsets into ``link``.
+    link : (E_near,) int32
+        Each near entry's near slot: e, or ~e for an entry that takes its pair (as ``Lists.link``).
+    cstart : (n_own + 1,) int64
+        CSR offsets into ``cj`` and ``cslot``.
+    cj : (K_near,) int32
+        Partner rows of the near computed entries.
+    cslot : (K_near,) int32
+        The slot g (``Slots.hist``, ``Slots.stamp``) of each near computed entry;
+        ``Slots.pair`` is indexed by e.
+    """
+    start: np.ndarray
+    link: np.ndarray
+    cstart: np.ndarray
+    cj: np.ndarray
+    cslot: np.ndarray
+
+
 class Slots(NamedTuple):
     """The contact of each slot (computed pair) of the lists, between rebuilds.
 
@@ -82,9 +109,10 @@ class Slots(NamedTuple):
         Delta s [d], the computing row's view; valid where ``stamp`` is the last evaluation's.
     stamp : (K,) uint32
         Number (mod 2**32) of the last force evaluation that found the pair in contact.
-    pair : (>= K, 6) float64
+    pair : (>= K_near, 6) float64
         The computing row's contact force [m g] and torque [m g d] of the last
-        evaluation (zeros out of contact); may be empty where unused (``Engine.sync_slots``).
+        evaluation (zeros out of contact), by near slot e (``Near``); may be empty
+        where unused (``Engine.sync_slots``).
     """
     hist: np.ndarray
     stamp: np.ndarray

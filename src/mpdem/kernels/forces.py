@@ -47,7 +47,7 @@ class Law(NamedTuple):
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def contact_forces(n_own, particles, lists, slots, epoch, box, law, increment, scratch):
+def contact_forces(n_own, particles, near, slots, epoch, box, law, increment, scratch):
     """Forces and torques on owned rows, updating the contact history in place.
 
     Parameters
@@ -60,17 +60,18 @@ def contact_forces(n_own, particles, lists, slots, epoch, box, law, increment, s
         values of velocity Verlet; ``fixed`` (n_rows,) uint8: 1 for bed
         particles (never moved; zero force and torque here); ``f``, ``torque``
         (n_rows, 3) float64, out: force [m g] including gravity, torque [m g d].
-    lists : Lists
-        Full neighbour lists (E entries, each row's sorted by partner id),
-        each entry's slot ``link`` and the K entries the rows compute
-        (``link_entries``).
+    near : Near
+        The entries of the full neighbour lists within the near reach
+        (``near.near_lists``; each row's sorted by partner id), each entry's
+        near slot ``link`` and the K_near entries the rows compute with their
+        slots ``cslot``; every pair in contact is among them.
     slots : Slots
         ``hist`` (K, 3) float64, in/out: Delta s [d] of each slot's pair (the
         computing row's view), read only if the pair was in contact at the
         previous evaluation; ``stamp`` (K,) uint32, in/out: set to ``epoch``
-        for the contacts of this evaluation; ``pair`` (>= K, 6) float64, out:
-        the computing row's contact force [m g] and torque [m g d] (zeros out
-        of contact; the torque only with friction).
+        for the contacts of this evaluation; ``pair`` (>= K_near, 6) float64,
+        out, by near slot: the computing row's contact force [m g] and torque
+        [m g d] (zeros out of contact; the torque only with friction).
     epoch : int
         The number of this evaluation (the previous one is ``epoch - 1``).
     box : Box
@@ -95,7 +96,7 @@ def contact_forces(n_own, particles, lists, slots, epoch, box, law, increment, s
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
-        mo, nc = _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, (found[c], sep[c]))
+        mo, nc = _rows(lo, hi, particles, near, slots, epoch, box, law, increment, (found[c], sep[c]))
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -107,19 +108,20 @@ def contact_forces(n_own, particles, lists, slots, epoch, box, law, increment, s
 
 
 @njit(cache=True)
-def contact_forces_serial(n_own, particles, lists, slots, epoch, box, law, increment, scratch):
+def contact_forces_serial(n_own, particles, near, slots, epoch, box, law, increment, scratch):
     """``contact_forces`` with one chunk (``scratch`` of C = 1), without the parallel
     wrapper: the same arithmetic in the same order, so the same bits, and 2-3 % faster
     on one thread (docs/performance.md). Arguments and returns as ``contact_forces``."""
     found, sep = scratch.found, scratch.sep
-    return _rows(0, n_own, particles, lists, slots, epoch, box, law, increment, (found[0], sep[0]))
+    return _rows(0, n_own, particles, near, slots, epoch, box, law, increment, (found[0], sep[0]))
 
 
 @njit(cache=True, error_model="numpy")
-def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
+def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
     ``room`` is the chunk's (found (W, 2) int32, sep (W, 4) float64) of ``Scratch``.
+    Slots: e indexes ``near.cj``, ``near.cslot`` and ``pair``; g = cslot[e] the history.
 
     Per row: a screening pass over the entries the row computes records the
     contacts (slot, partner) in ``found`` and their separations in ``sep``
@@ -132,7 +134,7 @@ def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
     or -0.0 to a sum that started at +0.0 or -gravity leaves it as it is).
     """
     x, v, omega, f, torque, fixed = particles
-    nbr_start, nbr_list, link, comp_start, comp_list = lists
+    start, link, cstart, cj, cslot = near
     hist, stamp, pair = slots
     L_x, L_y, hx, hy = box
     found, sep = room
@@ -152,14 +154,14 @@ def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
         zi = x[i, 2]
         m = 0
         # unsigned indices: numba adds no negative-index wrap-around to their loads (4-6 % here)
-        for g in range(np.uint64(comp_start[i]), np.uint64(comp_start[i + 1])):
-            j = np.uint64(comp_list[g])
+        for e in range(np.uint64(cstart[i]), np.uint64(cstart[i + 1])):
+            j = np.uint64(cj[e])
             dx = min_image(xi - x[j, 0], L_x, hx)
             dy = min_image(yi - x[j, 1], L_y, hy)
             dz = zi - x[j, 2]
             r2 = dx * dx + dy * dy + dz * dz
             on = np.uint8(r2 < 1.0)
-            found[m, 0] = g
+            found[m, 0] = e
             found[m, 1] = j
             sep[m, 0] = dx
             sep[m, 1] = dy
@@ -167,13 +169,13 @@ def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
             sep[m, 3] = r2
             m += on
             # out of contact, the slot adds zeros (the law overwrites a contact's)
-            pair[g, 0] = 0.0
-            pair[g, 1] = 0.0
-            pair[g, 2] = 0.0
+            pair[e, 0] = 0.0
+            pair[e, 1] = 0.0
+            pair[e, 2] = 0.0
             if friction:
-                pair[g, 3] = 0.0
-                pair[g, 4] = 0.0
-                pair[g, 5] = 0.0
+                pair[e, 3] = 0.0
+                pair[e, 4] = 0.0
+                pair[e, 5] = 0.0
         vix = v[i, 0]
         viy = v[i, 1]
         viz = v[i, 2]
@@ -181,8 +183,9 @@ def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
         rwiy = R * omega[i, 1]
         rwiz = R * omega[i, 2]
         for q in range(m):
-            g = np.uint64(found[q, 0])
+            e = np.uint64(found[q, 0])
             j = np.uint64(found[q, 1])
+            g = np.uint64(cslot[e])
             # in contact at the previous evaluation too, or a new contact (history from zero)
             was = stamp[g] == before
             stamp[g] = now
@@ -227,31 +230,31 @@ def _rows(lo, hi, particles, lists, slots, epoch, box, law, increment, room):
                 fcy += fty
                 fcz += ftz
                 # T_i += -R n x F_t (the same for both partners)
-                pair[g, 3] = -(R * (ny * ftz - nz * fty))
-                pair[g, 4] = -(R * (nz * ftx - nx * ftz))
-                pair[g, 5] = -(R * (nx * fty - ny * ftx))
+                pair[e, 3] = -(R * (ny * ftz - nz * fty))
+                pair[e, 4] = -(R * (nz * ftx - nx * ftz))
+                pair[e, 5] = -(R * (nx * fty - ny * ftx))
             # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
-            pair[g, 0] = fcx
-            pair[g, 1] = fcy
-            pair[g, 2] = fcz
+            pair[e, 0] = fcx
+            pair[e, 1] = fcy
+            pair[e, 2] = fcz
         fx = 0.0
         fy = 0.0
         fz = -law.gravity
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        for k in range(np.uint64(nbr_start[i]), np.uint64(nbr_start[i + 1])):
+        for k in range(np.uint64(start[i]), np.uint64(start[i + 1])):
             lk = link[k]
-            g = np.uint64(slot_of(lk))
+            e = np.uint64(slot_of(lk))
             # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
             sign = 1.0 + 2.0 * (lk >> 31)
-            fx += sign * pair[g, 0]
-            fy += sign * pair[g, 1]
-            fz += sign * pair[g, 2]
+            fx += sign * pair[e, 0]
+            fy += sign * pair[e, 1]
+            fz += sign * pair[e, 2]
             if friction:
-                tx += pair[g, 3]
-                ty += pair[g, 4]
-                tz += pair[g, 5]
+                tx += pair[e, 3]
+                ty += pair[e, 4]
+                tz += pair[e, 5]
         f[i, 0] = fx
         f[i, 1] = fy
         f[i, 2] = fz

@@ -30,8 +30,9 @@ def kick_drift(n_own, particles, x_ref, dt, box, scratch):
         ``x`` [d], ``v`` [sqrt(g d)] and ``omega`` [sqrt(g/d)] (n_rows, 3)
         are updated in place from ``f`` [m g] and ``torque`` [m g d]
         (m = 1, I = ``particle.INERTIA``).
-    x_ref : (n_rows, 3) float64
-        Positions at the last neighbour-list build [d].
+    x_ref : (>= n_own, 3) float64
+        Positions the displacement is measured from [d] (the engine's: those of the
+        last filtering of the near lists, ``near.near_lists``).
     dt : float
         Time step [tau].
     box : Box
