@@ -129,9 +129,9 @@ class Engine:
         self.near_link = np.zeros(0, np.int32)
         self.near_cj = np.zeros(0, np.int32)
         self.near_cslot = np.zeros(0, np.int32)
-        self.x_near = np.zeros((0, 3))
         self.k_near = 0           # near computed entries: the rows of ``pair`` a force evaluation writes
-        self._ref2 = 0.0          # this rank's largest squared displacement from x_ref to x_near
+        # a bound of every displacement since the build, up to the last filtering [d] (the same on all ranks)
+        self._moved = 0.0
         self.n_filters = 0
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self.has_lists = False
@@ -262,6 +262,7 @@ class Engine:
         self._unpack_slots()
         self.has_lists = True
         s.x_ref[:s.n_rows] = s.x[:s.n_rows]
+        self._moved = 0.0
         self._filter()
         self._rebind()
         self.n_rebuilds += 1
@@ -284,30 +285,27 @@ class Engine:
         self.stamp = np.empty(k, np.uint32)
 
     def _filter(self):
-        """The near lists from the lists, and ``x_near`` = x (``near.near_lists``); the largest
-        displacement since the build, which bounds the rest with the steps' displacements
-        from ``x_near``."""
+        """The near lists from the lists (``near.near_lists``), and ``x_ref`` = x: the steps
+        measure displacements from the last filtering (``_moved`` bounds those before)."""
         s = self.state
         n = s.n_own
         if len(self.near_start) < n + 1:
             self.near_start = np.zeros(s.capacity + 1, np.int64)
             self.near_cstart = np.zeros(s.capacity + 1, np.int64)
-        if len(self.x_near) < n:
-            self.x_near = np.zeros((s.capacity, 3))
         r2 = (1.0 + self.near_skin) ** 2
         # one entry per slot, only while filtering
         g2e = np.empty(len(self.hist), np.int32)
-        kc, ke, self._ref2 = near_lists(n, s.x, s.x_ref, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
+        kc, ke = near_lists(n, s.x, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
         if kc > len(self.near_cj) or ke > len(self.near_link):
             if kc > len(self.near_cj):
                 self.near_cj = np.zeros(int(kc * 1.1) + 64, np.int32)
                 self.near_cslot = np.zeros(len(self.near_cj), np.int32)
             if ke > len(self.near_link):
                 self.near_link = np.zeros(int(ke * 1.1) + 64, np.int32)
-            near_lists(n, s.x, s.x_ref, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
+            near_lists(n, s.x, s.fixed, self._box(), self._lists(), r2, self._near(), g2e)
             self._rebind()
         self.k_near = kc
-        self.x_near[:n] = s.x[:n]
+        s.x_ref[:n] = s.x[:n]
         self.n_filters += 1
 
     def _alloc_lists(self, size):
@@ -338,7 +336,7 @@ class Engine:
         s, p = self.state, self.phys
         if len(self.pair) < self.k_near:
             # one row per near slot; each step's computing rows write it before any row sums it
-            self.pair = np.empty((int(self.k_near * 1.1) + 64, 6))
+            self.pair = np.empty((self.k_near, 6))
             self._rebind()
         self._epoch += 1
         part = self._particles()
@@ -393,18 +391,19 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        n2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), self.x_near, p.dt, self._box(), self._drift)
+        n2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same decisions on every rank count (NaN -> inf)
         red = self._reduce
-        if len(red) != 5 + len(flags):
-            red = self._reduce = np.zeros(5 + len(flags))
-        red[0], red[1], red[2], red[3], red[4] = n2, self.last_overlap, -z_min, z_max, self._ref2
-        red[5:] = flags
-        n2, overlap, neg_z_min, z_max, ref2, *agreed = dom.max_many(red)
-        # |x - x_ref| <= |x - x_near| + |x_near - x_ref| bounds every displacement since the build
+        if len(red) != 4 + len(flags):
+            red = self._reduce = np.zeros(4 + len(flags))
+        red[0], red[1], red[2], red[3] = n2, self.last_overlap, -z_min, z_max
+        red[4:] = flags
+        n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red)
+        # the displacement since the last filtering plus those before bounds every one since the build
         # (rebuilding early changes no bit: sums run in partner-id order and left-out pairs add zeros)
-        rebuilt = not math.sqrt(n2) + math.sqrt(ref2) < 0.5 * p.skin
+        moved = math.sqrt(n2)
+        rebuilt = not moved + self._moved < 0.5 * p.skin
         if rebuilt:
             self.rebuild()
         else:
@@ -412,6 +411,7 @@ class Engine:
             # a pair left out of the near lists may come within reach once a particle moved near_skin/2
             if not n2 < 0.25 * self.near_skin * self.near_skin:
                 t = time.perf_counter()
+                self._moved += moved
                 self._filter()
                 self.timers["lists"] += time.perf_counter() - t
         self.last_overlap, self._contacts = self.forces(increment=True)
@@ -471,4 +471,4 @@ class Engine:
                                                              self.comp_start, self.comp_list, self.hist,
                                                              self.pair, self.stamp, self.near_start,
                                                              self.near_cstart, self.near_link, self.near_cj,
-                                                             self.near_cslot, self.x_near))
+                                                             self.near_cslot))

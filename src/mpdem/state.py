@@ -147,7 +147,7 @@ FIELDS = (
           doc="(M, 3) tangential displacement Delta s of each slot [d]"),
     Field("wall_ds", np.float64, 3, group="wall", migrates=True, optional="wall", history=True,
           doc="(n, 3) Delta s of the contact with the wall plane [d] (bed.wall)"),
-    Field("x_ref", np.float64, 3, doc="(n, 3) position at the last neighbour-list build [d] (reset at rebuilds)"),
+    Field("x_ref", np.float64, 3, doc="(n, 3) position at the last near-list filtering [d] (reset at rebuilds)"),
     Field("id_i", np.int64, per=PAIR, group="pairs", doc="(P,) id of the first particle of each contact"),
     Field("id_j", np.int64, per=PAIR, group="pairs", doc="(P,) id of the second (id_i < id_j, or j in the bed)"),
     Field("delta", np.float64, per=PAIR, group="pairs", doc="(P,) overlap [d]"),

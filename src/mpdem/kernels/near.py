@@ -17,7 +17,7 @@ from .history import slot_of
 
 
 @njit(cache=True, error_model="numpy")
-def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
+def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e):
     """Filter the computed and the taken entries of the owned rows to the near reach.
 
     A computed entry is kept when its pair's squared distance is below ``r2_near``;
@@ -30,8 +30,6 @@ def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
         Rows ``0..n_own-1`` have lists.
     x : (n_rows, 3) float64
         Positions [d], ghosts included and current.
-    x_ref : (>= n_own, 3) float64
-        Positions at the last list build [d].
     fixed : (n_rows,) uint8
         1 for bed rows (they compute nothing: their near lists are empty).
     box : Box
@@ -50,8 +48,6 @@ def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
     K_near, E_near : int
         Near computed entries and near entries. If either exceeds the length of
         its arrays, those were not all written: grow them and call again.
-    ref2 : float
-        The largest squared displacement of an owned mobile row since ``x_ref`` [d^2].
     """
     nbr_start, link, comp_start, comp_list = lists.nbr_start, lists.link, lists.comp_start, lists.comp_list
     start, nlink, cstart, cj, cslot = near.start, near.link, near.cstart, near.cj, near.cslot
@@ -61,7 +57,6 @@ def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
     # first the computed entries of every row, so that a taking entry finds its slot's fate
     e = 0
     cstart[0] = 0
-    ref2 = 0.0
     for i in range(n_own):
         if fixed[i]:
             for g in range(comp_start[i], comp_start[i + 1]):
@@ -71,10 +66,6 @@ def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
         xi = x[i, 0]
         yi = x[i, 1]
         zi = x[i, 2]
-        dx = min_image(xi - x_ref[i, 0], L_x, hx)
-        dy = min_image(yi - x_ref[i, 1], L_y, hy)
-        dz = zi - x_ref[i, 2]
-        ref2 = max(ref2, dx * dx + dy * dy + dz * dz)
         for g in range(comp_start[i], comp_start[i + 1]):
             j = comp_list[g]
             dx = min_image(xi - x[j, 0], L_x, hx)
@@ -101,4 +92,4 @@ def near_lists(n_own, x, x_ref, fixed, box, lists, r2_near, near, g2e):
                         nlink[k] = t if lk >= 0 else ~t
                     k += 1
         start[i + 1] = k
-    return e, k, ref2
+    return e, k
