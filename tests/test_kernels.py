@@ -8,7 +8,7 @@ import pytest
 from mpdem.kernels.bundles import Lists, Particles, Slots, make_box
 from mpdem.kernels.chunks import chunk_bounds, chunk_of
 from mpdem.kernels.exactsum import add_exact, new_accumulator, to_float
-from mpdem.kernels.neighbours import build_neighbours
+from mpdem.kernels.neighbours import build_neighbours, build_neighbours_serial
 from mpdem.kernels.particle import INERTIA
 
 
@@ -43,6 +43,13 @@ def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
             continue
         assert sorted(got.tolist()) == sorted(np.flatnonzero(ref[i]).tolist())
         assert np.all(np.diff(ids[got]) > 0)
+    # the one-pass serial build: the same lists; short of room, it counts on and asks for more
+    s_start = np.zeros(n + 1, np.int64)
+    short = np.zeros(need // 2, np.int32)
+    assert build_neighbours_serial(x, n, n, fixed, ids, box, rc, s_start, short, 1) == need
+    s_lst = np.zeros(need, np.int32)
+    assert build_neighbours_serial(x, n, n, fixed, ids, box, rc, s_start, s_lst, 1) == need
+    assert np.array_equal(s_start, start) and np.array_equal(s_lst, lst)
 
 
 def test_exact_sum_is_order_independent_and_correctly_rounded():

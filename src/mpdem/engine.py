@@ -20,9 +20,9 @@ from .kernels.calls import Bound
 from .kernels.exactsum import new_accumulator, to_float
 from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, contact_forces_serial, floor_forces,
                              wall_forces)
-from .kernels.integrate import kick, kick_drift, kick_drift_serial, kinetic_energy
+from .kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
 from .kernels.near import near_lists
-from .kernels.neighbours import build_neighbours, link_entries
+from .kernels.neighbours import build_neighbours, build_neighbours_serial, link_entries
 
 
 @dataclass(frozen=True)
@@ -163,7 +163,7 @@ class Engine:
         # each called through the overload numba chose at its first call after a reallocation
         self._bound = (Bound(contact_forces if self.nchunk > 1 else contact_forces_serial),
                        Bound(kick_drift if self.nchunk > 1 else kick_drift_serial),
-                       Bound(kick), Bound(floor_forces), Bound(wall_forces))
+                       Bound(kick if self.nchunk > 1 else kick_serial), Bound(floor_forces), Bound(wall_forces))
         self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces = self._bound
         self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
@@ -249,12 +249,13 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(),
-                                self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
+        build = build_neighbours if self.nchunk > 1 else build_neighbours_serial
+        need = build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
+                     self.nbr_list, self.nchunk)
         if need > len(self.nbr_list):
             self._alloc_lists(int(need * 1.1) + 64)
-            build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(),
-                             self.r_list, self.nbr_start, self.nbr_list, self.nchunk)
+            build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
+                  self.nbr_list, self.nchunk)
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
         if longest > self._width:
             self._scratch(2 * longest)

@@ -137,6 +137,16 @@ def kick(n_own, particles, dt):
             _half_kick(i, v, omega, f, torque, h)
 
 
+@njit(cache=True)
+def kick_serial(n_own, particles, dt):
+    """``kick`` without the parallel wrapper (one thread): the same rows, the same bits."""
+    v, omega, f, torque, fixed = particles.v, particles.omega, particles.f, particles.torque, particles.fixed
+    h = 0.5 * dt
+    for i in range(n_own):
+        if not fixed[i]:
+            _half_kick(i, v, omega, f, torque, h)
+
+
 @njit(cache=True, parallel=True)
 def kinetic_energy(n_own, particles, acc, nchunk):
     """Kinetic energies of owned mobile rows as exact fixed-point sums.

@@ -69,9 +69,9 @@ def _bin(x, n_rows, box, r_list):
 
 
 @njit(cache=True)
-def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, write):
+def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, limit):
     """Partners of row i within the list cutoff (squared distance r2 [d^2]) in the ``cells`` of ``_bin``;
-    written from ``first`` (sorted by id) if ``write``.
+    written from ``first`` (sorted by id) while they end below index ``limit`` (0: only counted).
 
     Returns the number of partners.
     """
@@ -101,7 +101,7 @@ def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, write):
                     dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
                     dz = x[i, 2] - x[j, 2]
                     if dx * dx + dy * dy + dz * dz < r2:
-                        if write:
+                        if total < limit:
                             # insertion sort by partner id keeps the list ordered
                             p = total
                             jid = ids[j]
@@ -161,7 +161,7 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
         for i in range(lo, hi):
             m = 0
             if not fixed[i]:
-                m = _scan_row(i, x, ids, box, r2, cells, nbr_list, 0, False)
+                m = _scan_row(i, x, ids, box, r2, cells, nbr_list, 0, 0)
             nbr_start[i + 1] = m
     total = _offsets(nbr_start, n_own)
     if total > len(nbr_list):
@@ -170,7 +170,27 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
         lo, hi = chunk_bounds(c, n_own, nchunk)
         for i in range(lo, hi):
             if not fixed[i]:
-                _scan_row(i, x, ids, box, r2, cells, nbr_list, nbr_start[i], True)
+                _scan_row(i, x, ids, box, r2, cells, nbr_list, nbr_start[i], len(nbr_list))
+    return total
+
+
+@njit(cache=True)
+def build_neighbours_serial(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_list, nchunk):
+    """``build_neighbours`` on one thread in one pass: each row's list is written as it is
+    found, after the rows before it (the two passes of the parallel version scan every
+    candidate twice). The same lists; arguments and return as ``build_neighbours``
+    (``nchunk`` is not read). Entries beyond ``len(nbr_list)`` are only counted."""
+    cells = _bin(x, n_rows, box, r_list)
+    r2 = r_list * r_list
+    cap = len(nbr_list)
+    nbr_start[0] = 0
+    total = 0
+    for i in range(n_own):
+        m = 0
+        if not fixed[i]:
+            m = _scan_row(i, x, ids, box, r2, cells, nbr_list, total, cap)
+        total += m
+        nbr_start[i + 1] = total
     return total
 
 
