@@ -10,19 +10,21 @@ leave out cannot touch. Such a pair would only add zeros to its rows' sums
 the near lists gives the same bits as over the whole lists, whenever and on
 whichever rank they were filtered (docs/computing.md, "The near lists").
 """
-from numba import njit
+from numba import njit, prange
 
+from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of
 
 
-@njit(cache=True, error_model="numpy")
-def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e):
+@njit(cache=True, parallel=True, error_model="numpy")
+def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
     """Filter the computed and the taken entries of the owned rows to the near reach.
 
     A computed entry is kept when its pair's squared distance is below ``r2_near``;
     an entry that takes its pair is kept when the computing entry was, so the two
-    views of a pair are kept or left out together.
+    views of a pair are kept or left out together (an entry takes its pair from a
+    lower row of its own chunk, ``neighbours.link_entries``).
 
     Parameters
     ----------
@@ -39,57 +41,77 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e):
         (1 + near_skin)^2 [d^2].
     near : Near, out
         ``start`` and ``cstart`` (>= n_own + 1,) int64; ``link`` int32 and ``cj``,
-        ``cslot`` int32, written up to their lengths.
+        ``cslot`` int32, written if they have room for all.
     g2e : (K,) int32, scratch
-        One per slot of ``lists``: its near slot, or -1.
+        One per slot of ``lists``: its near slot within its chunk, or -1.
+    nchunk : int
+        The chunks of the lists' links (the near lists do not depend on it otherwise).
 
     Returns
     -------
     K_near, E_near : int
         Near computed entries and near entries. If either exceeds the length of
-        its arrays, those were not all written: grow them and call again.
+        its arrays, only ``start`` and ``cstart`` were written: grow them and call again.
     """
+    # fields by attribute before the loops, never unpacked as a tuple (bundles.py: numba's prange)
     nbr_start, link, comp_start, comp_list = lists.nbr_start, lists.link, lists.comp_start, lists.comp_list
     start, nlink, cstart, cj, cslot = near.start, near.link, near.cstart, near.cj, near.cslot
-    L_x, L_y, hx, hy = box
-    cap_c = len(cj)
-    cap_e = len(nlink)
-    # first the computed entries of every row, so that a taking entry finds its slot's fate
-    e = 0
-    cstart[0] = 0
-    for i in range(n_own):
-        if fixed[i]:
-            for g in range(comp_start[i], comp_start[i + 1]):
-                g2e[g] = -1
-            cstart[i + 1] = e
-            continue
-        xi = x[i, 0]
-        yi = x[i, 1]
-        zi = x[i, 2]
-        for g in range(comp_start[i], comp_start[i + 1]):
-            j = comp_list[g]
-            dx = min_image(xi - x[j, 0], L_x, hx)
-            dy = min_image(yi - x[j, 1], L_y, hy)
-            dz = zi - x[j, 2]
-            if dx * dx + dy * dy + dz * dz < r2_near:
-                if e < cap_c:
-                    cj[e] = j
-                    cslot[e] = g
-                g2e[g] = e
-                e += 1
+    L_x, L_y, hx, hy = box.L_x, box.L_y, box.half_x, box.half_y
+    # per chunk, in row order: each row's kept entries counted, each slot numbered within its chunk
+    for c in prange(nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        e = 0
+        for i in range(lo, hi):
+            kc = 0
+            ke = 0
+            if fixed[i]:
+                for g in range(comp_start[i], comp_start[i + 1]):
+                    g2e[g] = -1
             else:
-                g2e[g] = -1
-        cstart[i + 1] = e
-    k = 0
+                xi = x[i, 0]
+                yi = x[i, 1]
+                zi = x[i, 2]
+                for g in range(comp_start[i], comp_start[i + 1]):
+                    j = comp_list[g]
+                    dx = min_image(xi - x[j, 0], L_x, hx)
+                    dy = min_image(yi - x[j, 1], L_y, hy)
+                    dz = zi - x[j, 2]
+                    if dx * dx + dy * dy + dz * dz < r2_near:
+                        g2e[g] = e + kc
+                        kc += 1
+                    else:
+                        g2e[g] = -1
+                # a taken entry's slot is a lower row's of this chunk: numbered already
+                for a in range(nbr_start[i], nbr_start[i + 1]):
+                    ke += g2e[slot_of(link[a])] >= 0
+            e += kc
+            cstart[i + 1] = kc
+            start[i + 1] = ke
+    cstart[0] = 0
     start[0] = 0
     for i in range(n_own):
-        if not fixed[i]:
+        cstart[i + 1] += cstart[i]
+        start[i + 1] += start[i]
+    k_near = cstart[n_own]
+    e_near = start[n_own]
+    if k_near > len(cj) or e_near > len(nlink):
+        return k_near, e_near
+    for c in prange(nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        base = cstart[lo]
+        for i in range(lo, hi):
+            if fixed[i]:
+                continue
+            for g in range(comp_start[i], comp_start[i + 1]):
+                t = g2e[g]
+                if t >= 0:
+                    cj[base + t] = comp_list[g]
+                    cslot[base + t] = g
+            k = start[i]
             for a in range(nbr_start[i], nbr_start[i + 1]):
                 lk = link[a]
                 t = g2e[slot_of(lk)]
                 if t >= 0:
-                    if k < cap_e:
-                        nlink[k] = t if lk >= 0 else ~t
+                    nlink[k] = base + t if lk >= 0 else ~(base + t)
                     k += 1
-        start[i + 1] = k
-    return e, k
+    return k_near, e_near
