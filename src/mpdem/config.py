@@ -97,7 +97,7 @@ SCHEMA = (
     _k("integration", "dt", DERIVED, "time step [tau]; default 1e-4 sqrt(2e5 / k_n)", param=14),
     _k("integration", "skin", 0.2,
        "Verlet neighbour-list skin [d]; lists are rebuilt when a particle moved skin/2", physics=False),
-    _k("integration", "near_skin", 0.05,
+    _k("integration", "near_skin", 0.03,
        "the force kernel's reach beyond contact [d] (<= skin; no effect on results): the list entries"
        " within 1 + near_skin, filtered again when a particle moved near_skin/2", physics=False),
     _k("stop", "E_stop", DERIVED,

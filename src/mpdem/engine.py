@@ -35,7 +35,7 @@ class Physics:
     mu: float
     dt: float
     skin: float = 0.2
-    near_skin: float = 0.05
+    near_skin: float = 0.03
     gravity: float = 1.0
     model: str = "hooke"
     limit_damping: bool = False
