@@ -297,11 +297,12 @@ class Engine:
         # one entry per slot, only while filtering
         g2e = np.empty(len(self.hist), np.int32)
         kc, ke = near_lists(n, s.x, s.fixed, self._box(), self._lists(), r2, self._near(), g2e, self.nchunk)
-        if kc > len(self.near_cj) or ke > len(self.near_link):
-            if kc > len(self.near_cj):
+        # the kernel needs one spare element past the entries
+        if kc >= len(self.near_cj) or ke >= len(self.near_link):
+            if kc >= len(self.near_cj):
                 self.near_cj = np.zeros(int(kc * 1.1) + 64, np.int32)
                 self.near_cslot = np.zeros(len(self.near_cj), np.int32)
-            if ke > len(self.near_link):
+            if ke >= len(self.near_link):
                 self.near_link = np.zeros(int(ke * 1.1) + 64, np.int32)
             near_lists(n, s.x, s.fixed, self._box(), self._lists(), r2, self._near(), g2e, self.nchunk)
             self._rebind()

@@ -41,7 +41,7 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
         (1 + near_skin)^2 [d^2].
     near : Near, out
         ``start`` and ``cstart`` (>= n_own + 1,) int64; ``link`` int32 and ``cj``,
-        ``cslot`` int32, written if they have room for all.
+        ``cslot`` int32, written if they have room for all and one spare element.
     g2e : (K,) int32, scratch
         One per slot of ``lists``: its near slot within its chunk, or -1.
     nchunk : int
@@ -50,8 +50,9 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
     Returns
     -------
     K_near, E_near : int
-        Near computed entries and near entries. If either exceeds the length of
-        its arrays, only ``start`` and ``cstart`` were written: grow them and call again.
+        Near computed entries and near entries. If ``cj`` is not longer than K_near or
+        ``link`` not longer than E_near, only ``start`` and ``cstart`` were written: grow
+        them and call again.
     """
     # fields by attribute before the loops, never unpacked as a tuple (bundles.py: numba's prange)
     nbr_start, link, comp_start, comp_list = lists.nbr_start, lists.link, lists.comp_start, lists.comp_list
@@ -76,11 +77,10 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
                     dx = min_image(xi - x[j, 0], L_x, hx)
                     dy = min_image(yi - x[j, 1], L_y, hy)
                     dz = zi - x[j, 2]
-                    if dx * dx + dy * dy + dz * dz < r2_near:
-                        g2e[g] = e + kc
-                        kc += 1
-                    else:
-                        g2e[g] = -1
+                    # without a branch on the outcome (about a third are left out, in no predictable order)
+                    keep = dx * dx + dy * dy + dz * dz < r2_near
+                    g2e[g] = e + kc if keep else -1
+                    kc += keep
                 # a taken entry's slot is a lower row's of this chunk: numbered already
                 for a in range(nbr_start[i], nbr_start[i + 1]):
                     ke += g2e[slot_of(link[a])] >= 0
@@ -94,24 +94,31 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
         start[i + 1] += start[i]
     k_near = cstart[n_own]
     e_near = start[n_own]
-    if k_near > len(cj) or e_near > len(nlink):
+    if k_near >= len(cj) or e_near >= len(nlink):
         return k_near, e_near
+    # each entry is written at the row's next place, which only a kept one takes (no branch on
+    # the outcome); past the row's end, into the spare last element, so no chunk's is touched
+    spare_c = len(cj) - 1
+    spare_e = len(nlink) - 1
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         base = cstart[lo]
         for i in range(lo, hi):
             if fixed[i]:
                 continue
+            p = cstart[i]
+            end = cstart[i + 1]
             for g in range(comp_start[i], comp_start[i + 1]):
-                t = g2e[g]
-                if t >= 0:
-                    cj[base + t] = comp_list[g]
-                    cslot[base + t] = g
-            k = start[i]
+                w = p if p < end else spare_c
+                cj[w] = comp_list[g]
+                cslot[w] = g
+                p += g2e[g] >= 0
+            p = start[i]
+            end = start[i + 1]
             for a in range(nbr_start[i], nbr_start[i + 1]):
                 lk = link[a]
                 t = g2e[slot_of(lk)]
-                if t >= 0:
-                    nlink[k] = base + t if lk >= 0 else ~(base + t)
-                    k += 1
+                w = p if p < end else spare_e
+                nlink[w] = base + t if lk >= 0 else ~(base + t)
+                p += t >= 0
     return k_near, e_near
