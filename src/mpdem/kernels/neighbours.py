@@ -68,6 +68,20 @@ def _bin(x, n_rows, box, r_list):
     return nx, ny, nz, cell, count, order
 
 
+@njit(cache=True, inline="always")
+def _next_cell(i, a, n):
+    """The a-th (0, 1, 2) of the cells around cell i along an axis of n cells, periodic
+    ((i + a - 1) mod n; a itself when n < 3), without an integer division."""
+    if n < 3:
+        return a
+    j = i + a - 1
+    if j < 0:
+        return j + n
+    if j >= n:
+        return j - n
+    return j
+
+
 @njit(cache=True)
 def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, limit):
     """Partners of row i within the list cutoff (squared distance r2 [d^2]) in the ``cells`` of ``_bin``;
@@ -87,11 +101,11 @@ def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, limit):
     oz = 3 if nz >= 3 else nz
     total = first
     for a in range(oz):
-        jz = (iz + a - 1) % nz if nz >= 3 else a
+        jz = _next_cell(iz, a, nz)
         for b in range(oy):
-            jy = (iy + b - 1) % ny if ny >= 3 else b
+            jy = _next_cell(iy, b, ny)
             for e in range(ox):
-                jx = (ix + e - 1) % nx if nx >= 3 else e
+                jx = _next_cell(ix, e, nx)
                 cc = (jz * ny + jy) * nx + jx
                 for kk in range(count[cc], count[cc + 1]):
                     j = order[kk]
