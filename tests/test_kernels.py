@@ -100,11 +100,10 @@ def _lists(n=300, L=5.0, nchunk=3, seed=9):
     build_neighbours(x, n, n, fixed, ids, box, 1.2, start, lst, nchunk)
     link = np.zeros(len(lst), np.int32)
     comp_start = np.zeros(n + 1, np.int64)
-    k = int(link_entries(n, fixed, ids, Lists(start, lst, link, comp_start, np.zeros(1, np.int32)), nchunk))
-    lists = Lists(start, lst, link, comp_start, np.zeros(k, np.int32))
-    assert link_entries(n, fixed, ids, lists, nchunk) == k
+    lists = Lists(start, lst, link, comp_start)
+    k = int(link_entries(n, fixed, ids, lists, nchunk))
     return dict(n=n, x=x, fixed=fixed, ids=ids, start=start, lst=lst, link=link, comp_start=comp_start,
-                comp_list=lists.comp_list, k=k, nchunk=nchunk, lists=lists)
+                k=k, nchunk=nchunk, lists=lists)
 
 
 @pytest.mark.parametrize("nchunk", [1, 3, 7])
@@ -128,8 +127,9 @@ def test_link_entries_give_each_pair_one_computing_row_in_a_chunk(nchunk):
         else:
             assert v >= 0                                           # bed partner or other chunk: its own
     for i in range(n):
-        mine = [int(j) for e, j in zip(range(start[i], start[i + 1]), lst[start[i]:start[i + 1]]) if link[e] >= 0]
-        assert t["comp_list"][t["comp_start"][i]:t["comp_start"][i + 1]].tolist() == mine
+        # a row's computed entries are its slots, in the order of its list
+        mine = [int(link[e]) for e in range(start[i], start[i + 1]) if link[e] >= 0]
+        assert mine == list(range(t["comp_start"][i], t["comp_start"][i + 1]))
 
 
 def test_history_slots_round_trip_through_the_list_entries():

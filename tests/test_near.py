@@ -25,10 +25,14 @@ def test_near_lists_keep_exactly_the_list_entries_within_reach_in_partner_order(
     eng.set_chunks(3)
     s = eng.state
     r2_near = 1.1 ** 2
+    # each slot's computing row and partner, from the lists
     hist_rows = np.full(len(eng.hist), -1)
+    partner = np.full(len(eng.hist), -1)
     for i in range(s.n_own):
-        for g in range(eng.comp_start[i], eng.comp_start[i + 1]):
-            hist_rows[g] = i
+        for k in range(eng.nbr_start[i], eng.nbr_start[i + 1]):
+            if eng.link[k] >= 0:
+                hist_rows[eng.link[k]], partner[eng.link[k]] = i, eng.nbr_list[k]
+    assert np.all(hist_rows >= 0)
     kept = 0
     for i in range(s.n_own):
         full = range(eng.nbr_start[i], eng.nbr_start[i + 1])
@@ -49,7 +53,7 @@ def test_near_lists_keep_exactly_the_list_entries_within_reach_in_partner_order(
         # a row's computed near entries are its own slots' partners
         for e in range(eng.near_cstart[i], eng.near_cstart[i + 1]):
             g = eng.near_cslot[e]
-            assert hist_rows[g] == i and eng.near_cj[e] == eng.comp_list[g]
+            assert hist_rows[g] == i and eng.near_cj[e] == partner[g]
     assert 0 < kept < eng.nbr_start[s.n_own]
     assert 0 < eng.k_near < len(eng.hist)
 

@@ -118,7 +118,6 @@ class Engine:
         self.nbr_list = np.zeros(0, np.int32)
         self.link = np.zeros(0, np.int32)
         self.comp_start = np.zeros(state.capacity + 1, np.int64)
-        self.comp_list = np.zeros(0, np.int32)
         self.hist = np.zeros((0, 3))
         self.pair = np.zeros((0, 6))
         self.stamp = np.zeros(0, np.uint32)
@@ -193,7 +192,7 @@ class Engine:
         return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
 
     def _lists(self):
-        return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start, self.comp_list)
+        return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start)
 
     def _near(self):
         return Near(self.near_start, self.near_link, self.near_cstart, self.near_cj, self.near_cslot)
@@ -279,9 +278,6 @@ class Engine:
         if len(self.comp_start) < s.n_own + 1:
             self.comp_start = np.zeros(s.capacity + 1, np.int64)
         k = int(link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk))
-        if k > len(self.comp_list):
-            self.comp_list = np.zeros(int(k * 1.1) + 64, np.int32)
-            link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk)
         self.hist = np.empty((k, 3))
         self.stamp = np.empty(k, np.uint32)
 
@@ -470,7 +466,7 @@ class Engine:
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
         return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
-                                                             self.comp_start, self.comp_list, self.hist,
+                                                             self.comp_start, self.hist,
                                                              self.pair, self.stamp, self.near_start,
                                                              self.near_cstart, self.near_link, self.near_cj,
                                                              self.near_cslot))

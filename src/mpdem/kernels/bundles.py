@@ -64,15 +64,13 @@ class Lists(NamedTuple):
         The slot of each entry: g, or ~g for an entry that takes its pair from
         the lower row of its chunk (``link_entries``).
     comp_start : (n_own + 1,) int64
-        CSR offsets into ``comp_list``.
-    comp_list : (K,) int32
-        Partner rows of the entries each row computes; slot g is the position here.
+        The slots of the entries row i computes are comp_start[i]..comp_start[i + 1] - 1,
+        in the order of its list.
     """
     nbr_start: np.ndarray
     nbr_list: np.ndarray
     link: np.ndarray
     comp_start: np.ndarray
-    comp_list: np.ndarray
 
 
 class Near(NamedTuple):

@@ -55,35 +55,34 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
         them and call again.
     """
     # fields by attribute before the loops, never unpacked as a tuple (bundles.py: numba's prange)
-    nbr_start, link, comp_start, comp_list = lists.nbr_start, lists.link, lists.comp_start, lists.comp_list
+    nbr_start, nbr_list, link = lists.nbr_start, lists.nbr_list, lists.link
     start, nlink, cstart, cj, cslot = near.start, near.link, near.cstart, near.cj, near.cslot
     L_x, L_y, hx, hy = box.L_x, box.L_y, box.half_x, box.half_y
     # per chunk, in row order: each row's kept entries counted, each slot numbered within its chunk
+    # (without a branch on the outcome; the branch on computed / taken was the faster here)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         e = 0
         for i in range(lo, hi):
             kc = 0
             ke = 0
-            if fixed[i]:
-                for g in range(comp_start[i], comp_start[i + 1]):
-                    g2e[g] = -1
-            else:
+            if not fixed[i]:
                 xi = x[i, 0]
                 yi = x[i, 1]
                 zi = x[i, 2]
-                for g in range(comp_start[i], comp_start[i + 1]):
-                    j = comp_list[g]
-                    dx = min_image(xi - x[j, 0], L_x, hx)
-                    dy = min_image(yi - x[j, 1], L_y, hy)
-                    dz = zi - x[j, 2]
-                    # without a branch on the outcome (about a third are left out, in no predictable order)
-                    keep = dx * dx + dy * dy + dz * dz < r2_near
-                    g2e[g] = e + kc if keep else -1
-                    kc += keep
-                # a taken entry's slot is a lower row's of this chunk: numbered already
                 for a in range(nbr_start[i], nbr_start[i + 1]):
-                    ke += g2e[slot_of(link[a])] >= 0
+                    lk = link[a]
+                    g = slot_of(lk)
+                    # a computed slot gets its number or -1; a taken one was numbered by its lower row
+                    if lk >= 0:
+                        j = nbr_list[a]
+                        dx = min_image(xi - x[j, 0], L_x, hx)
+                        dy = min_image(yi - x[j, 1], L_y, hy)
+                        dz = zi - x[j, 2]
+                        keep = dx * dx + dy * dy + dz * dz < r2_near
+                        g2e[g] = e + kc if keep else -1
+                        kc += keep
+                    ke += g2e[g] >= 0
             e += kc
             cstart[i + 1] = kc
             start[i + 1] = ke
@@ -96,29 +95,29 @@ def near_lists(n_own, x, fixed, box, lists, r2_near, near, g2e, nchunk):
     e_near = start[n_own]
     if k_near >= len(cj) or e_near >= len(nlink):
         return k_near, e_near
-    # each entry is written at the row's next place, which only a kept one takes (no branch on
-    # the outcome); past the row's end, into the spare last element, so no chunk's is touched
+    # each entry is written at the row's next place, which only a kept one takes; past the row's
+    # end (or a taken entry's cj), into the spare last element, so no other row's is touched
     spare_c = len(cj) - 1
     spare_e = len(nlink) - 1
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         base = cstart[lo]
         for i in range(lo, hi):
-            if fixed[i]:
-                continue
-            p = cstart[i]
-            end = cstart[i + 1]
-            for g in range(comp_start[i], comp_start[i + 1]):
-                w = p if p < end else spare_c
-                cj[w] = comp_list[g]
-                cslot[w] = g
-                p += g2e[g] >= 0
-            p = start[i]
-            end = start[i + 1]
+            pc = cstart[i]
+            end_c = cstart[i + 1]
+            pe = start[i]
+            end_e = start[i + 1]
             for a in range(nbr_start[i], nbr_start[i + 1]):
                 lk = link[a]
-                t = g2e[slot_of(lk)]
-                w = p if p < end else spare_e
-                nlink[w] = base + t if lk >= 0 else ~(base + t)
-                p += t >= 0
+                g = slot_of(lk)
+                t = g2e[g]
+                kept = t >= 0
+                computed = lk >= 0
+                w = pc if computed and pc < end_c else spare_c
+                cj[w] = nbr_list[a]
+                cslot[w] = g
+                pc += kept & computed
+                w = pe if pe < end_e else spare_e
+                nlink[w] = base + t if computed else ~(base + t)
+                pe += kept
     return k_near, e_near

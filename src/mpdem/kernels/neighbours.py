@@ -236,14 +236,13 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
     contact once and the higher row takes it; every other entry (ghost, bed
     or other-chunk partner) is computed by its row (why: docs/computing.md,
     "The force sum: two passes per row"). The computed entries of row i
-    are ``comp_list[comp_start[i]:comp_start[i + 1]]`` (partner rows, in id
+    are the slots ``comp_start[i]..comp_start[i + 1] - 1`` (in partner-id
     order), numbered chunk after chunk and row after row, so a row reads and
-    writes its slots in sequence; slot g holds that contact's history and
-    result. ``link[k]`` is the slot of entry k: ``g`` for an entry its row
-    computes, ``~g`` (negative) for one it takes, whose slot keeps Delta s as
-    seen from the lower row. Lists are
-    symmetric (the distance test is mirror-exact) and sorted by id, so the
-    mirror entry is found by bisection.
+    writes its slots in sequence; slot g holds that contact's history.
+    ``link[k]`` is the slot of entry k: ``g`` for an entry its row computes,
+    ``~g`` (negative) for one it takes, whose slot keeps Delta s as seen from
+    the lower row. Lists are symmetric (the distance test is mirror-exact)
+    and sorted by id, so the mirror entry is found by bisection.
 
     Parameters
     ----------
@@ -255,21 +254,19 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
         Particle ids (the lists' order).
     lists : Lists
         ``nbr_start`` and ``nbr_list`` are read (``build_neighbours``);
-        ``link`` (len(nbr_list),) int32, ``comp_start`` (>= n_own + 1,) int64
-        and ``comp_list`` (>= K,) int32 (the partner rows of the computed
-        entries) are written.
+        ``link`` (len(nbr_list),) int32 and ``comp_start`` (>= n_own + 1,) int64
+        are written.
     nchunk : int
         The chunks of rows of ``contact_forces`` (``chunks.chunk_bounds``).
 
     Returns
     -------
     K : int
-        Computed entries. If larger than ``len(comp_list)``, only ``comp_start``
-        was written: grow ``comp_list`` and call again.
+        Computed entries (slots).
     """
     # fields by attribute before the loops, never unpacked as a tuple (bundles.py: numba's prange)
     nbr_start, nbr_list, link = lists.nbr_start, lists.nbr_list, lists.link
-    comp_start, comp_list = lists.comp_start, lists.comp_list
+    comp_start = lists.comp_start
     comp_start[0] = 0
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
@@ -280,8 +277,6 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
                 m += j > i or not _linked(j, n_own, fixed, nchunk, c)
             comp_start[i + 1] = m
     total = _offsets(comp_start, n_own)
-    if total > len(comp_list):
-        return total
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         for i in range(lo, hi):
@@ -291,12 +286,10 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
                 j = nbr_list[k]
                 if not _linked(j, n_own, fixed, nchunk, c):
                     link[k] = g
-                    comp_list[g] = j
                     g += 1
                 elif j > i:
                     # the higher row's entry of this pair is set here, before that row is reached
                     link[k] = g
                     link[_mirror_entry(nbr_start, nbr_list, ids, j, idi)] = ~g
-                    comp_list[g] = j
                     g += 1
     return total
