@@ -61,8 +61,8 @@ def test_near_lists_keep_exactly_the_list_entries_within_reach_in_partner_order(
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_near_lists_change_no_bit_of_a_pour(mu):
     """A pour landing for 60 000 steps: near lists as long as the lists (nothing left
-    out), and a near skin of 0.01 d filtered again every few dozen steps, on one chunk
-    and on three, give one digest."""
+    out), and a near skin of 0.01 d filtered again every few dozen steps (and rebuilt at
+    other steps), on one chunk and on three, give one digest."""
     x, L = _pour()
     runs = []
     for near_skin, nchunk in ((0.2, 1), (0.01, 1), (0.01, 3)):
@@ -71,9 +71,12 @@ def test_near_lists_change_no_bit_of_a_pour(mu):
         eng.phys = dataclasses.replace(eng.phys, floor=True)
         eng.advance(60000)
         assert eng.contacts() > len(x) // 2
-        runs.append((digest(gather_state(eng.state)), eng.n_filters - eng.n_rebuilds, eng.k_near, len(eng.hist)))
+        runs.append((digest(gather_state(eng.state)), eng.n_filters - eng.n_rebuilds, eng.k_near, len(eng.hist),
+                     eng.n_rebuilds))
     assert len({r[0] for r in runs}) == 1
     whole, small = runs[0], runs[1]
     # nothing left out with the whole reach; the small reach filtered between rebuilds and kept fewer
     assert whole[2] == whole[3]
     assert small[1] > 20 and small[2] < 0.8 * small[3]
+    # the small reach's bound of the displacement since the build rebuilt at other steps: no bit changed
+    assert small[4] != whole[4]

@@ -1,7 +1,7 @@
 """The near lists: the entries of the neighbour lists within a shorter reach.
 
-The force kernel screens every computed entry of the Verlet lists (reach
-1 + skin) and sums every entry of a row. Most of them are out of contact.
+Over the Verlet lists (reach 1 + skin) the force kernel would screen every
+computed entry and sum every entry of a row, most of them out of contact.
 Between two list rebuilds the near lists keep only the entries within
 1 + near_skin (near_skin <= skin); they are filtered again whenever a
 particle has moved near_skin/2 since the last filtering, so a pair they
