@@ -32,7 +32,8 @@ def force_balance(n_own, particles, near, slots, epoch, nchunk):
         [m g], and ``fixed`` are read
     near : Near; ``start``, ``link`` and ``cslot`` (the rows' near entries, their near slots and
         those slots' slots) are read: every contact is a near entry
-    slots : Slots; ``pair`` (K, 6) slot forces (columns 0-2 the contact force [m g]) and ``stamp`` are read
+    slots : Slots; ``pair`` (K_near, 6) forces by near slot (columns 0-2 the contact force [m g]) and
+        ``stamp`` are read
     epoch : int, the last evaluation
     nchunk : int, chunks of rows (the sums do not depend on it)
 
