@@ -164,6 +164,8 @@ class Engine:
                        Bound(kick_drift if self.nchunk > 1 else kick_drift_serial),
                        Bound(kick if self.nchunk > 1 else kick_serial), Bound(floor_forces), Bound(wall_forces))
         self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces = self._bound
+        # the list build at rebuilds (called directly: rare)
+        self._build_neighbours = build_neighbours if self.nchunk > 1 else build_neighbours_serial
         self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
@@ -248,7 +250,7 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        build = build_neighbours if self.nchunk > 1 else build_neighbours_serial
+        build = self._build_neighbours
         need = build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
                      self.nbr_list, self.nchunk)
         if need > len(self.nbr_list):
