@@ -185,12 +185,39 @@ def test_kick_drift_is_a_half_kick_a_drift_and_a_wrap():
     for nchunk in (1, 5):
         xs, vs, ws = x.copy(), v.copy(), omega.copy()
         d2, zlo, zhi = kick_drift(n, Particles(xs, vs, ws, f, torque, fixed), x_ref, dt, make_box(L, L),
-                                  np.zeros((nchunk, 3)))
+                                  np.zeros((nchunk, 3)), False)
         assert np.allclose(xs, want["x"], rtol=0, atol=1e-12) and np.array_equal(vs, want["v"])
         assert np.allclose(ws, want["omega"], rtol=1e-15) and np.array_equal(xs[~mob], x[~mob])
         assert 0 <= xs[0, 0] < L and 0 <= xs[1, 1] < L
         assert d2 == pytest.approx((d ** 2).sum(axis=1).max(), rel=1e-9)
         assert (zlo, zhi) == (xs[mob, 2].min(), xs[mob, 2].max())
+
+
+def test_kick_drift_with_a_pending_kick_is_kick_then_kick_drift_bit_for_bit():
+    """The deferred second half-kick (``pending``) in the first pass gives the bits of the
+    separate ``kick`` followed by ``kick_drift``, serial and over chunks."""
+    from mpdem.kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial
+    g = np.random.default_rng(5)
+    n, L, dt = 500, 6.0, 1e-3
+    x = np.column_stack([g.random(n) * L, g.random(n) * L, 1 + g.random(n) * 5])
+    v, omega = g.standard_normal((n, 3)), g.standard_normal((n, 3))
+    f, torque = 1e3 * g.standard_normal((n, 3)), 1e3 * g.standard_normal((n, 3))
+    fixed = (g.random(n) < 0.1).astype(np.uint8)
+    x_ref = x - 0.01 * g.standard_normal((n, 3))
+    box = make_box(L, L)
+    for kd, kk, nchunk in ((kick_drift_serial, kick_serial, 1), (kick_drift, kick, 3)):
+        want = [a.copy() for a in (x, v, omega)]
+        kk(n, Particles(*want, f, torque, fixed), dt)
+        r_want = kd(n, Particles(*want, f, torque, fixed), x_ref, dt, box, np.zeros((nchunk, 3)), False)
+        got = [a.copy() for a in (x, v, omega)]
+        r_got = kd(n, Particles(*got, f, torque, fixed), x_ref, dt, box, np.zeros((nchunk, 3)), True)
+        assert r_got == r_want
+        for a, b in zip(got, want):
+            assert np.array_equal(a, b)
+        # and the pending kick did something: without it the velocities differ
+        once = [a.copy() for a in (x, v, omega)]
+        kd(n, Particles(*once, f, torque, fixed), x_ref, dt, box, np.zeros((nchunk, 3)), False)
+        assert not np.array_equal(once[1], want[1])
 
 
 def test_particle_constants_agree_with_each_other():

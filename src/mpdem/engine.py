@@ -136,7 +136,9 @@ class Engine:
         self.has_lists = False
         self._width = 64          # scratch for rows of up to this many entries (grown at rebuilds)
         self._box_made = None
-        state.packer = self.sync_slots
+        # the second half-kick of the last step, left for the next step's first pass (``step(defer_kick=True)``)
+        self._kick_due = False
+        state.sync = self.sync_state
         t = threads.apply()
         # one chunk per thread: numba's prange hands each thread an equal share of the chunks in one
         # piece (a static schedule), so more chunks balance nothing, and pairs across a border are
@@ -207,6 +209,12 @@ class Engine:
         if b is None or b.L_x != s.L_x or b.L_y != s.L_y:
             b = self._box_made = make_box(s.L_x, s.L_y)
         return b
+
+    def sync_state(self):
+        """Bring the state's arrays current for a reader (``State.sync``): the deferred
+        half-kick (``complete``), then the contact history into the compact slots."""
+        self.complete()
+        self.sync_slots()
 
     # -- contact history: list entries <-> compact slots --
     def sync_slots(self):
@@ -375,8 +383,14 @@ class Engine:
         self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
-    def step(self, flags=NO_FLAGS):
+    def step(self, flags=NO_FLAGS, defer_kick=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks).
+
+        With ``defer_kick`` the step's second half-kick is left for the next step's first
+        pass over the rows (``kick_drift``'s ``pending``): the same operations in the same
+        order, so the same bits, with one pass over the rows less a step. Until then ``v``
+        and ``omega`` are the half-step values; ``complete`` applies the kick, and every
+        reader of the state's rows (``State.sync``) and ``kinetic`` call it first.
 
         ``info.max_overlap`` is that of the previous force evaluation: it
         travels in the one allreduce of the step, with the displacement that
@@ -391,7 +405,9 @@ class Engine:
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
-        n2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift)
+        n2, z_min, z_max = self._kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self._box(), self._drift,
+                                            self._kick_due)
+        self._kick_due = False
         self.timers["integration"] += time.perf_counter() - t
         # one exact max: the same decisions on every rank count (NaN -> inf)
         red = self._reduce
@@ -415,16 +431,24 @@ class Engine:
                 self._filter()
                 self.timers["lists"] += time.perf_counter() - t
         self.last_overlap, self._contacts = self.forces(increment=True)
-        t = time.perf_counter()
-        # a new bundle: a rebuild may have reallocated the rows
-        self._kick(s.n_own, self._particles(), p.dt)
-        self.timers["integration"] += time.perf_counter() - t
+        self._kick_due = True
+        if not defer_kick:
+            self.complete()
         s.step += 1
         s.time = s.step * p.dt
         # an infinite displacement: a position became NaN or infinite
         self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
                              flags._make(agreed))
         return self.info
+
+    def complete(self):
+        """Apply the second half-kick that ``step(defer_kick=True)`` left (nothing if none)."""
+        if self._kick_due:
+            t = time.perf_counter()
+            # a new bundle: a rebuild may have reallocated the rows
+            self._kick(self.state.n_own, self._particles(), self.phys.dt)
+            self._kick_due = False
+            self.timers["integration"] += time.perf_counter() - t
 
     def contacts(self):
         """Global number of contacts (counted from both partners) of the last evaluation."""
@@ -433,14 +457,17 @@ class Engine:
         return n
 
     def advance(self, n):
-        """Advance n steps (no monitors); returns the last StepInfo."""
+        """Advance n steps (no monitors; each step's second half-kick deferred to the next
+        step's first pass, the last one's applied); returns the last StepInfo."""
         info = self.info
         for _ in range(n):
-            info = self.step()
+            info = self.step(defer_kick=True)
+        self.complete()
         return info
 
     def kinetic(self):
         """Global (translational, rotational) kinetic energy sums [m g d], exact."""
+        self.complete()
         s = self.state
         acc = new_accumulator(2)
         kinetic_energy(s.n_own, self._particles(), acc, self.nchunk)

@@ -13,8 +13,9 @@ compact slots are those of the owned rows in row order: ``count[i]``
 partners of row i, their ids ascending in ``partner`` and their tangential
 displacements [d] in ``ds`` (flat, CSR by ``count``). ``slots_current`` says
 whether they hold the history of the last force evaluation; when they do
-not, a reader of the slots has the engine pack them first (``packer``, set
-to ``Engine.sync_slots``).
+not, a reader of the slots has the engine pack them first (``sync``, set
+to ``Engine.sync_state``, which also applies a deferred half-kick to ``v``
+and ``omega``: every reader of rows through ``select`` calls it).
 
 The field registry
 ------------------
@@ -312,8 +313,9 @@ class State:
             if a is not None:
                 getattr(self, name)[:n] = a
         self.slots_current = True
-        # set by the engine that holds the history between rebuilds: packs it into the slots
-        self.packer = None
+        # set by the engine that holds the history between rebuilds: brings the rows (a deferred
+        # half-kick) and the slots current for a reader
+        self.sync = None
 
     @classmethod
     def from_arrays(cls, a, L_x, L_y, capacity=None):
@@ -372,10 +374,11 @@ class State:
         self.slots_current = False
 
     def _check_slots(self):
-        if not self.slots_current:
-            if self.packer is None:
-                raise RuntimeError("contact slots are stale and no engine holds the history")
-            self.packer()
+        """Rows and slots current before a read: the engine's ``sync`` if one is attached."""
+        if self.sync is not None:
+            self.sync()
+        elif not self.slots_current:
+            raise RuntimeError("contact slots are stale and no engine holds the history")
 
     def select(self, rows, fields=None):
         """Copies of some owned rows with their slots, as a state-array dict.

@@ -224,7 +224,9 @@ class Run:
             handlers = {s: signal.signal(s, lambda signum, frame: self.signals.append(int(signum)))
                         for s in STOP_SIGNALS}
             while self.status is None and st.step < max_steps:
-                info = eng.step(self._flags_now())
+                # the step's second half-kick joins the next step's first pass; whatever reads the
+                # rows below (the stop sample, a state file) has the engine apply it first
+                info = eng.step(self._flags_now(), defer_kick=True)
                 self.checks(info, st.step)
                 sample, show = self.stop.due(st.step), progress.due(st.step)
                 if sample or show:
@@ -248,6 +250,7 @@ class Run:
                 signal.signal(s, h)
             self.thermo.close()
         self.status = self.status or "max_steps"
+        eng.complete()
         self.wall = time.perf_counter() - self.t0
         et, er = eng.kinetic()
         self.ek = (et + er) / N

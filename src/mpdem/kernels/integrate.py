@@ -19,8 +19,13 @@ def _half_kick(i, v, omega, f, torque, h):
 
 
 @njit(cache=True, parallel=True)
-def kick_drift(n_own, particles, x_ref, dt, box, scratch):
+def kick_drift(n_own, particles, x_ref, dt, box, scratch, pending):
     """First half-kick and drift of owned mobile rows; wrap x and y.
+
+    With ``pending``, the previous step's second half-kick, which the engine
+    deferred, is applied first in the same pass (the same operations in the
+    same order as ``kick`` then this, so the same bits; one pass over the rows
+    less).
 
     Parameters
     ----------
@@ -39,6 +44,9 @@ def kick_drift(n_own, particles, x_ref, dt, box, scratch):
         Periodic box [d]; x and y are wrapped into [0, L_x) x [0, L_y).
     scratch : (C, 3) float64
         One row per chunk of rows for the threads (any C >= 1, same result).
+    pending : bool
+        Apply the previous step's second half-kick first (``f`` and ``torque``
+        are still that step's).
 
     Returns
     -------
@@ -51,7 +59,7 @@ def kick_drift(n_own, particles, x_ref, dt, box, scratch):
     nchunk = scratch.shape[0]
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
-        d2, zlo, zhi = _kick_drift_rows(lo, hi, particles, x_ref, dt, box)
+        d2, zlo, zhi = _kick_drift_rows(lo, hi, particles, x_ref, dt, box, pending)
         scratch[c, 0] = d2
         scratch[c, 1] = zlo
         scratch[c, 2] = zhi
@@ -72,15 +80,15 @@ def kick_drift(n_own, particles, x_ref, dt, box, scratch):
 
 
 @njit(cache=True)
-def kick_drift_serial(n_own, particles, x_ref, dt, box, scratch):
+def kick_drift_serial(n_own, particles, x_ref, dt, box, scratch, pending):
     """``kick_drift`` on one chunk, without the parallel wrapper, whose loop over the rows
     runs a third slower on one thread; the same bits. Arguments and returns as
     ``kick_drift``; ``scratch`` is not needed with one chunk and is left as it is."""
-    return _kick_drift_rows(0, n_own, particles, x_ref, dt, box)
+    return _kick_drift_rows(0, n_own, particles, x_ref, dt, box, pending)
 
 
 @njit(cache=True)
-def _kick_drift_rows(lo, hi, particles, x_ref, dt, box):
+def _kick_drift_rows(lo, hi, particles, x_ref, dt, box, pending):
     """Rows lo..hi-1 of ``kick_drift``; returns (max d^2 or NaN, z_min, z_max)."""
     x, v, omega, f, torque, fixed = particles
     L_x, L_y, hx, hy = box
@@ -92,9 +100,20 @@ def _kick_drift_rows(lo, hi, particles, x_ref, dt, box):
     for i in range(lo, hi):
         if fixed[i]:
             continue
-        _half_kick(i, v, omega, f, torque, h)
+        # in registers: v, f and x are distinct arrays, which the compiler cannot know
         for a in range(3):
-            x[i, a] += dt * v[i, a]
+            fa = h * f[i, a]
+            ta = h * INV_I * torque[i, a]
+            va = v[i, a]
+            wa = omega[i, a]
+            if pending:
+                va += fa
+                wa += ta
+            va += fa
+            wa += ta
+            v[i, a] = va
+            omega[i, a] = wa
+            x[i, a] += dt * va
         # one correction suffices: nothing moves a box length in one step
         if x[i, 0] >= L_x:
             x[i, 0] -= L_x
