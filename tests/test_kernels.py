@@ -21,7 +21,7 @@ def brute_pairs(x, L_x, L_y, rc):
     return r2 < rc * rc
 
 
-@pytest.mark.parametrize("L_x,L_y,zspan", [(10.0, 10.0, 8.0), (3.0, 2.5, 5.0), (7.3, 4.1, 2000.0)])
+@pytest.mark.parametrize("L_x,L_y,zspan", [(10.0, 10.0, 8.0), (3.0, 2.5, 5.0), (3.7, 3.7, 5.0), (7.3, 4.1, 2000.0)])
 def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
     g = np.random.default_rng(5)
     n = 600

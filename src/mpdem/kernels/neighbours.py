@@ -6,8 +6,11 @@ pile is very tall or a particle flies far away, so memory stays O(N); a hashed
 cell only adds candidates that the distance test rejects.
 
 Lists are built in two passes over the rows (count, then fill), each split
-over threads by rows; a row's list depends only on the positions, so the
-lists are the same for any thread count.
+over threads by rows, or on one thread in one pass; a row's list depends
+only on the positions, so the lists are the same for any thread count. A
+row's candidates are read from a copy of the positions in cell order, the
+three cells along x as one run where they are consecutive, and its partners
+sorted by id in a scratch before they are written.
 """
 import numpy as np
 from numba import njit, prange
@@ -83,9 +86,38 @@ def _next_cell(i, a, n):
 
 
 @njit(cache=True)
-def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, limit):
-    """Partners of row i within the list cutoff (squared distance r2 [d^2]) in the ``cells`` of ``_bin``;
-    written from ``first`` (sorted by id) while they end below index ``limit`` (0: only counted).
+def _sorted_positions(x, cells):
+    """(n_rows, 3) float64: the positions in cell order (``cells``' ``order``), so a
+    cell's candidates are read in sequence."""
+    order = cells[5]
+    xs = np.empty((len(order), 3))
+    for k in range(len(order)):
+        j = order[k]
+        xs[k, 0] = x[j, 0]
+        xs[k, 1] = x[j, 1]
+        xs[k, 2] = x[j, 2]
+    return xs
+
+
+@njit(cache=True, inline="always")
+def _x_runs(row, ix, nx):
+    """The cells ix - 1, ix, ix + 1 (periodic; all nx if nx < 3) of the x-row of cells starting
+    at cell ``row``, as at most two runs of consecutive cells: (a0, a1, b0, b1)."""
+    if nx < 3:
+        return row, row + nx, row, row
+    if ix == 0:
+        return row, row + 2, row + nx - 1, row + nx
+    if ix == nx - 1:
+        return row + nx - 2, row + nx, row, row + 1
+    return row + ix - 1, row + ix + 2, row, row
+
+
+@njit(cache=True)
+def _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, first, limit):
+    """Partners of row i within the list cutoff (squared distance r2 [d^2]) in the ``cells`` of ``_bin``
+    (``xs``: the positions in cell order, ``_sorted_positions``); sorted by id in the row's scratch
+    ``buf_id``, ``buf_j`` (length >= the rows), then written from ``first`` if they end at or below
+    index ``limit`` (``limit`` 0: only counted).
 
     Returns the number of partners.
     """
@@ -95,36 +127,45 @@ def _scan_row(i, x, ids, box, r2, cells, nbr_list, first, limit):
     ix = c % nx
     iy = (c // nx) % ny
     iz = c // (nx * ny)
-    # distinct neighbouring cells along each axis (all cells if fewer than 3)
-    ox = 3 if nx >= 3 else nx
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
+    # distinct neighbouring cells along y and z (all cells if fewer than 3); along x in runs
     oy = 3 if ny >= 3 else ny
     oz = 3 if nz >= 3 else nz
-    total = first
+    write = limit > 0
+    m = 0
     for a in range(oz):
         jz = _next_cell(iz, a, nz)
         for b in range(oy):
             jy = _next_cell(iy, b, ny)
-            for e in range(ox):
-                jx = _next_cell(ix, e, nx)
-                cc = (jz * ny + jy) * nx + jx
-                for kk in range(count[cc], count[cc + 1]):
-                    j = order[kk]
-                    if j == i:
-                        continue
-                    dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
-                    dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
-                    dz = x[i, 2] - x[j, 2]
+            a0, a1, b0, b1 = _x_runs((jz * ny + jy) * nx, ix, nx)
+            for run in range(2):
+                c0 = a0 if run == 0 else b0
+                c1 = a1 if run == 0 else b1
+                for kk in range(count[c0], count[c1]):
+                    dx = min_image(xi - xs[kk, 0], L_x, hx)
+                    dy = min_image(yi - xs[kk, 1], L_y, hy)
+                    dz = zi - xs[kk, 2]
                     if dx * dx + dy * dy + dz * dz < r2:
-                        if total < limit:
-                            # insertion sort by partner id keeps the list ordered
-                            p = total
+                        j = order[kk]
+                        if j == i:
+                            continue
+                        if write:
+                            # insertion sort by partner id in the row's scratch
+                            p = m
                             jid = ids[j]
-                            while p > first and ids[nbr_list[p - 1]] > jid:
-                                nbr_list[p] = nbr_list[p - 1]
+                            while p > 0 and buf_id[p - 1] > jid:
+                                buf_id[p] = buf_id[p - 1]
+                                buf_j[p] = buf_j[p - 1]
                                 p -= 1
-                            nbr_list[p] = j
-                        total += 1
-    return total - first
+                            buf_id[p] = jid
+                            buf_j[p] = j
+                        m += 1
+    if write and first + m <= limit:
+        for p in range(m):
+            nbr_list[first + p] = buf_j[p]
+    return m
 
 
 @njit(cache=True)
@@ -168,23 +209,29 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
         was written: grow ``nbr_list`` and call again.
     """
     cells = _bin(x, n_rows, box, r_list)
+    xs = _sorted_positions(x, cells)
     r2 = r_list * r_list
     nbr_start[0] = 0
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
+        none_id = np.empty(0, np.int64)
+        none_j = np.empty(0, np.int32)
         for i in range(lo, hi):
             m = 0
             if not fixed[i]:
-                m = _scan_row(i, x, ids, box, r2, cells, nbr_list, 0, 0)
+                m = _scan_row(i, x, xs, ids, box, r2, cells, none_id, none_j, nbr_list, 0, 0)
             nbr_start[i + 1] = m
     total = _offsets(nbr_start, n_own)
     if total > len(nbr_list):
         return total
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
+        # the chunk's scratch for one row's partners
+        buf_id = np.empty(max(n_rows, 1), np.int64)
+        buf_j = np.empty(max(n_rows, 1), np.int32)
         for i in range(lo, hi):
             if not fixed[i]:
-                _scan_row(i, x, ids, box, r2, cells, nbr_list, nbr_start[i], len(nbr_list))
+                _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, nbr_start[i], len(nbr_list))
     return total
 
 
@@ -195,14 +242,18 @@ def build_neighbours_serial(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start
     candidate twice). The same lists; arguments and return as ``build_neighbours``
     (``nchunk`` is not read). Entries beyond ``len(nbr_list)`` are only counted."""
     cells = _bin(x, n_rows, box, r_list)
+    xs = _sorted_positions(x, cells)
     r2 = r_list * r_list
     cap = len(nbr_list)
+    buf_id = np.empty(max(n_rows, 1), np.int64)
+    buf_j = np.empty(max(n_rows, 1), np.int32)
     nbr_start[0] = 0
     total = 0
     for i in range(n_own):
         m = 0
         if not fixed[i]:
-            m = _scan_row(i, x, ids, box, r2, cells, nbr_list, total, cap)
+            # past the room, rows are only counted (limit 0)
+            m = _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, total, cap if total < cap else 0)
         total += m
         nbr_start[i + 1] = total
     return total
