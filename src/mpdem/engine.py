@@ -25,6 +25,10 @@ from .kernels.near import near_lists
 from .kernels.neighbours import build_neighbours, build_neighbours_serial, link_entries
 
 
+# the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells
+SORT_COLUMN = 16
+
+
 @dataclass(frozen=True)
 class Physics:
     """Scalars of the force law and integrator (reduced units)."""
@@ -322,7 +326,9 @@ class Engine:
         self.link = np.zeros(size, np.int32)
 
     def _sort_rows(self):
-        """Order owned rows by cell so neighbours are near in memory.
+        """Order owned rows by cell so neighbours are near in memory: columns of
+        ``SORT_COLUMN`` x ``SORT_COLUMN`` cells (the list build's), one after the
+        other, z-major inside each.
 
         Sums run in partner-id order, so row order changes no result bit
         (docs/computing.md, "The force sum: two passes per row").
@@ -333,8 +339,18 @@ class Engine:
             return
         c = 1.0 + self.phys.skin
         x = s.x[:n]
-        key = (np.floor((x[:, 2] - x[:, 2].min()) / c) * (s.L_y // c + 1)
-               + np.floor(x[:, 1] / c)) * (s.L_x // c + 1) + np.floor(x[:, 0] / c)
+        # the cells of the list build (neighbours._bin): nx x ny across the box, c tall
+        nx, ny = max(int(s.L_x // c), 1), max(int(s.L_y // c), 1)
+        ix = np.minimum(np.floor(x[:, 0] * (nx / s.L_x)), nx - 1).astype(np.int64)
+        iy = np.minimum(np.floor(x[:, 1] * (ny / s.L_y)), ny - 1).astype(np.int64)
+        iz = np.floor((x[:, 2] - x[:, 2].min()) / c).astype(np.int64)
+        # columns of B x B cells, each z-major inside: a row's partners stay within a few
+        # hundred rows of it however wide the pile (z-major over the whole layer put them
+        # a layer of cells away)
+        B = SORT_COLUMN
+        nbx = -(-nx // B)
+        nz = int(iz.max()) + 1
+        key = ((((iy // B) * nbx + ix // B) * nz + iz) * B + iy % B) * B + ix % B
         s.permute(np.argsort(key, kind="stable"))
 
     # -- forces --
