@@ -8,7 +8,7 @@ import pytest
 from mpdem.kernels.bundles import Lists, Particles, Slots, make_box
 from mpdem.kernels.chunks import chunk_bounds, chunk_of
 from mpdem.kernels.exactsum import add_exact, new_accumulator, to_float
-from mpdem.kernels.neighbours import build_neighbours, build_neighbours_serial
+from mpdem.kernels.neighbours import build_neighbours
 from mpdem.kernels.particle import INERTIA
 
 
@@ -32,9 +32,12 @@ def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
     start = np.zeros(n + 1, np.int64)
     lst = np.zeros(10, np.int32)
     box = make_box(L_x, L_y)
+    # short of room, the build asks for more (each chunk's share must hold its rows' lists)
     need = build_neighbours(x, n, n, fixed, ids, box, rc, start, lst, 3)
+    assert need > len(lst)
     lst = np.zeros(need, np.int32)
-    assert build_neighbours(x, n, n, fixed, ids, box, rc, start, lst, 5) == need
+    total = build_neighbours(x, n, n, fixed, ids, box, rc, start, lst, 3)
+    assert total <= need and start[n] == total
     ref = brute_pairs(x, L_x, L_y, rc)
     for i in range(n):
         got = lst[start[i]:start[i + 1]]
@@ -43,13 +46,15 @@ def test_neighbour_lists_match_brute_force(L_x, L_y, zspan):
             continue
         assert sorted(got.tolist()) == sorted(np.flatnonzero(ref[i]).tolist())
         assert np.all(np.diff(ids[got]) > 0)
-    # the one-pass serial build: the same lists; short of room, it counts on and asks for more
-    s_start = np.zeros(n + 1, np.int64)
-    short = np.zeros(need // 2, np.int32)
-    assert build_neighbours_serial(x, n, n, fixed, ids, box, rc, s_start, short, 1) == need
-    s_lst = np.zeros(need, np.int32)
-    assert build_neighbours_serial(x, n, n, fixed, ids, box, rc, s_start, s_lst, 1) == need
-    assert np.array_equal(s_start, start) and np.array_equal(s_lst, lst)
+    # other chunk counts: the same lists; one chunk needs room for exactly the entries
+    for nchunk in (1, 2, 5, 700):
+        s_start = np.zeros(n + 1, np.int64)
+        short = np.zeros(total - 1, np.int32)
+        need = build_neighbours(x, n, n, fixed, ids, box, rc, s_start, short, nchunk)
+        assert need > len(short) and (nchunk > 1 or need == total)
+        s_lst = np.zeros(need, np.int32)
+        assert build_neighbours(x, n, n, fixed, ids, box, rc, s_start, s_lst, nchunk) == total
+        assert np.array_equal(s_start, start) and np.array_equal(s_lst[:total], lst[:total])
 
 
 def test_exact_sum_is_order_independent_and_correctly_rounded():

@@ -22,7 +22,7 @@ from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, cont
                              wall_forces)
 from .kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
 from .kernels.near import near_lists
-from .kernels.neighbours import build_neighbours, build_neighbours_serial, link_entries
+from .kernels.neighbours import build_neighbours, link_entries
 
 
 # the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells
@@ -170,8 +170,6 @@ class Engine:
                        Bound(kick_drift if self.nchunk > 1 else kick_drift_serial),
                        Bound(kick if self.nchunk > 1 else kick_serial), Bound(floor_forces), Bound(wall_forces))
         self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces = self._bound
-        # the list build at rebuilds (called directly: rare)
-        self._build_neighbours = build_neighbours if self.nchunk > 1 else build_neighbours_serial
         self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
@@ -262,7 +260,7 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        build = self._build_neighbours
+        build = build_neighbours
         need = build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
                      self.nbr_list, self.nchunk)
         if need > len(self.nbr_list):

@@ -5,9 +5,10 @@ least ``r_list`` wide. In z the cell index is hashed modulo ``nz`` when the
 pile is very tall or a particle flies far away, so memory stays O(N); a hashed
 cell only adds candidates that the distance test rejects.
 
-Lists are built in two passes over the rows (count, then fill), each split
-over threads by rows, or on one thread in one pass; a row's list depends
-only on the positions, so the lists are the same for any thread count. A
+Lists are built in one pass over the rows, each chunk of rows (a thread's)
+into its own share of the list array, then moved together; a row's list
+depends only on the positions, so the lists are the same for any thread
+count. A
 row's candidates are read from a copy of the positions in cell order, the
 three cells along x as one run where they are consecutive, and its partners
 sorted by id in a scratch before they are written.
@@ -180,6 +181,10 @@ def _offsets(start, n):
 def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_list, nchunk):
     """Full neighbour lists of the owned mobile rows, each sorted by partner id.
 
+    In one pass over the rows: each chunk of rows writes its rows' lists one
+    after the other into its own share of ``nbr_list`` (chunk c from
+    c * len(nbr_list) // nchunk), then the shares are moved together.
+
     Parameters
     ----------
     x : (n_rows_cap, 3) float64
@@ -205,58 +210,51 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
     Returns
     -------
     int
-        Entries needed. If larger than ``len(nbr_list)``, only ``nbr_start``
-        was written: grow ``nbr_list`` and call again.
+        The entries, if they were written; else (a chunk's share was too short) the
+        length ``nbr_list`` needs, larger than it is: grow it and call again.
     """
     cells = _bin(x, n_rows, box, r_list)
     xs = _sorted_positions(x, cells)
     r2 = r_list * r_list
-    nbr_start[0] = 0
+    cap = len(nbr_list)
+    share = cap // nchunk
+    # each chunk's entries; and a flag set when a chunk's share was too short
+    total = np.zeros(nchunk + 1, np.int64)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
-        none_id = np.empty(0, np.int64)
-        none_j = np.empty(0, np.int32)
-        for i in range(lo, hi):
-            m = 0
-            if not fixed[i]:
-                m = _scan_row(i, x, xs, ids, box, r2, cells, none_id, none_j, nbr_list, 0, 0)
-            nbr_start[i + 1] = m
-    total = _offsets(nbr_start, n_own)
-    if total > len(nbr_list):
-        return total
-    for c in prange(nchunk):
-        lo, hi = chunk_bounds(c, n_own, nchunk)
+        first = c * share
         # the chunk's scratch for one row's partners
         buf_id = np.empty(max(n_rows, 1), np.int64)
         buf_j = np.empty(max(n_rows, 1), np.int32)
+        t = 0
         for i in range(lo, hi):
+            m = 0
             if not fixed[i]:
-                _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, nbr_start[i], len(nbr_list))
-    return total
-
-
-@njit(cache=True)
-def build_neighbours_serial(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_list, nchunk):
-    """``build_neighbours`` on one thread in one pass: each row's list is written as it is
-    found, after the rows before it (the two passes of the parallel version scan every
-    candidate twice). The same lists; arguments and return as ``build_neighbours``
-    (``nchunk`` is not read). Entries beyond ``len(nbr_list)`` are only counted."""
-    cells = _bin(x, n_rows, box, r_list)
-    xs = _sorted_positions(x, cells)
-    r2 = r_list * r_list
-    cap = len(nbr_list)
-    buf_id = np.empty(max(n_rows, 1), np.int64)
-    buf_j = np.empty(max(n_rows, 1), np.int32)
+                # past the share, rows are only counted (limit 0)
+                limit = first + share if t <= share else 0
+                m = _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, first + t, limit)
+            t += m
+            # for now relative to the chunk's first entry
+            nbr_start[i + 1] = t
+        total[c + 1] = t
+    longest = 0
+    for c in range(nchunk):
+        longest = max(longest, total[c + 1])
+        total[c + 1] += total[c]
+    if longest > share:
+        return longest * nchunk
+    # the shares moved together in chunk order (each moves down, never over one not yet moved)
     nbr_start[0] = 0
-    total = 0
-    for i in range(n_own):
-        m = 0
-        if not fixed[i]:
-            # past the room, rows are only counted (limit 0)
-            m = _scan_row(i, x, xs, ids, box, r2, cells, buf_id, buf_j, nbr_list, total, cap if total < cap else 0)
-        total += m
-        nbr_start[i + 1] = total
-    return total
+    for c in range(nchunk):
+        lo, hi = chunk_bounds(c, n_own, nchunk)
+        src = c * share
+        dst = total[c]
+        if dst != src:
+            for k in range(total[c + 1] - dst):
+                nbr_list[dst + k] = nbr_list[src + k]
+        for i in range(lo, hi):
+            nbr_start[i + 1] += dst
+    return total[nchunk]
 
 
 @njit(cache=True, inline="always")
