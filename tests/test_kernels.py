@@ -106,7 +106,7 @@ def _lists(n=300, L=5.0, nchunk=3, seed=9):
     link = np.zeros(len(lst), np.int32)
     comp_start = np.zeros(n + 1, np.int64)
     lists = Lists(start, lst, link, comp_start)
-    k = int(link_entries(n, fixed, ids, lists, nchunk))
+    k = int(link_entries(n, fixed, lists, nchunk))
     return dict(n=n, x=x, fixed=fixed, ids=ids, start=start, lst=lst, link=link, comp_start=comp_start,
                 k=k, nchunk=nchunk, lists=lists)
 

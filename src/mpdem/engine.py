@@ -289,7 +289,7 @@ class Engine:
         s = self.state
         if len(self.comp_start) < s.n_own + 1:
             self.comp_start = np.zeros(s.capacity + 1, np.int64)
-        k = int(link_entries(s.n_own, s.fixed, s.id, self._lists(), self.nchunk))
+        k = int(link_entries(s.n_own, s.fixed, self._lists(), self.nchunk))
         self.hist = np.empty((k, 3))
         self.stamp = np.empty(k, np.uint32)
 

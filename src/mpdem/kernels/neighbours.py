@@ -258,17 +258,15 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
 
 
 @njit(cache=True, inline="always")
-def _mirror_entry(nbr_start, nbr_list, ids, j, idi):
-    """The entry of row j's list (sorted by id) whose partner has id ``idi``."""
-    lo = nbr_start[j]
-    hi = nbr_start[j + 1]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if ids[nbr_list[mid]] < idi:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+def _mirror_entry(nbr_start, nbr_list, j, i):
+    """The entry of row j's list whose partner is row i (lists are symmetric: there is one).
+
+    A scan of the short list for the row index: one or two cache lines, where a bisection
+    by id loaded the id of each probed partner."""
+    k = nbr_start[j]
+    while nbr_list[k] != i:
+        k += 1
+    return k
 
 
 @njit(cache=True, inline="always")
@@ -278,7 +276,7 @@ def _linked(j, n_own, fixed, nchunk, c):
 
 
 @njit(cache=True, parallel=True)
-def link_entries(n_own, fixed, ids, lists, nchunk):
+def link_entries(n_own, fixed, lists, nchunk):
     """Split the entries into those a row computes and those it takes, and give each its slot.
 
     Of a pair of two owned mobile rows of one chunk the lower row computes the
@@ -290,8 +288,8 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
     writes its slots in sequence; slot g holds that contact's history.
     ``link[k]`` is the slot of entry k: ``g`` for an entry its row computes,
     ``~g`` (negative) for one it takes, whose slot keeps Delta s as seen from
-    the lower row. Lists are symmetric (the distance test is mirror-exact)
-    and sorted by id, so the mirror entry is found by bisection.
+    the lower row. Lists are symmetric (the distance test is mirror-exact),
+    so the mirror entry is found by a scan of the partner's list.
 
     Parameters
     ----------
@@ -299,8 +297,6 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
         Rows ``0..n_own-1`` have lists.
     fixed : (n_rows,) uint8
         1 for bed rows.
-    ids : (n_rows,) int64
-        Particle ids (the lists' order).
     lists : Lists
         ``nbr_start`` and ``nbr_list`` are read (``build_neighbours``);
         ``link`` (len(nbr_list),) int32 and ``comp_start`` (>= n_own + 1,) int64
@@ -329,7 +325,6 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         for i in range(lo, hi):
-            idi = ids[i]
             g = comp_start[i]
             for k in range(nbr_start[i], nbr_start[i + 1]):
                 j = nbr_list[k]
@@ -339,6 +334,6 @@ def link_entries(n_own, fixed, ids, lists, nchunk):
                 elif j > i:
                     # the higher row's entry of this pair is set here, before that row is reached
                     link[k] = g
-                    link[_mirror_entry(nbr_start, nbr_list, ids, j, idi)] = ~g
+                    link[_mirror_entry(nbr_start, nbr_list, j, i)] = ~g
                     g += 1
     return total
