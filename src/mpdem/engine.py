@@ -25,7 +25,7 @@ from .kernels.near import near_lists
 from .kernels.neighbours import build_neighbours, link_entries
 
 
-# the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells
+# the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells (about)
 SORT_COLUMN = 16
 
 
@@ -324,7 +324,7 @@ class Engine:
         self.link = np.zeros(size, np.int32)
 
     def _sort_rows(self):
-        """Order owned rows by cell so neighbours are near in memory: columns of
+        """Order owned rows by cell so neighbours are near in memory: columns of about
         ``SORT_COLUMN`` x ``SORT_COLUMN`` cells (the list build's), one after the
         other, z-major inside each.
 
@@ -342,13 +342,15 @@ class Engine:
         ix = np.minimum(np.floor(x[:, 0] * (nx / s.L_x)), nx - 1).astype(np.int64)
         iy = np.minimum(np.floor(x[:, 1] * (ny / s.L_y)), ny - 1).astype(np.int64)
         iz = np.floor((x[:, 2] - x[:, 2].min()) / c).astype(np.int64)
-        # columns of B x B cells, each z-major inside: a row's partners stay within a few
-        # hundred rows of it however wide the pile (z-major over the whole layer put them
-        # a layer of cells away)
-        B = SORT_COLUMN
-        nbx = -(-nx // B)
+        # columns of about SORT_COLUMN x SORT_COLUMN cells (as many along an axis as fit, all
+        # about as wide: a thin column's rows would have their partners far away), each z-major
+        # inside: a row's partners stay within a few hundred rows of it however wide the pile
+        # (z-major over the whole layer put them a layer of cells away)
+        cx = max(int(round(nx / SORT_COLUMN)), 1)
+        cy = max(int(round(ny / SORT_COLUMN)), 1)
+        column = (iy * cy // ny) * cx + ix * cx // nx
         nz = int(iz.max()) + 1
-        key = ((((iy // B) * nbx + ix // B) * nz + iz) * B + iy % B) * B + ix % B
+        key = ((column * nz + iz) * ny + iy) * nx + ix
         s.permute(np.argsort(key, kind="stable"))
 
     # -- forces --
