@@ -8,10 +8,9 @@ cell only adds candidates that the distance test rejects.
 Lists are built in one pass over the rows, each chunk of rows (a thread's)
 into its own share of the list array, then moved together; a row's list
 depends only on the positions, so the lists are the same for any thread
-count. A
-row's candidates are read from a copy of the positions in cell order, the
-three cells along x as one run where they are consecutive, and its partners
-sorted by id in a scratch before they are written.
+count. A row's candidates are read from a copy of the positions in cell
+order, the three cells along x as one run where they are consecutive, and
+its partners sorted by id in a scratch before they are written.
 """
 import numpy as np
 from numba import njit, prange
@@ -218,7 +217,7 @@ def build_neighbours(x, n_rows, n_own, fixed, ids, box, r_list, nbr_start, nbr_l
     r2 = r_list * r_list
     cap = len(nbr_list)
     share = cap // nchunk
-    # each chunk's entries; and a flag set when a chunk's share was too short
+    # each chunk's entries (then, summed, where each chunk's entries go)
     total = np.zeros(nchunk + 1, np.int64)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
