@@ -260,13 +260,13 @@ class Engine:
         self.domain.rebuild(s)
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        build = build_neighbours
-        need = build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
-                     self.nbr_list, self.nchunk)
-        if need > len(self.nbr_list):
+        # a list buffer too short for a chunk's share is grown and the build run again
+        while True:
+            need = build_neighbours(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list,
+                                    self.nbr_start, self.nbr_list, self.nchunk)
+            if need <= len(self.nbr_list):
+                break
             self._alloc_lists(int(need * 1.1) + 64)
-            build(s.x, s.n_rows, s.n_own, s.fixed, s.id, self._box(), self.r_list, self.nbr_start,
-                  self.nbr_list, self.nchunk)
         longest = int(np.diff(self.nbr_start[:s.n_own + 1]).max(initial=0))
         if longest > self._width:
             self._scratch(2 * longest)
