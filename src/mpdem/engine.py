@@ -27,6 +27,10 @@ from .kernels.neighbours import build_neighbours, link_entries
 
 # the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells (about)
 SORT_COLUMN = 16
+# room in the pair slots, a fraction of the near entries: they drift up by a few between filterings,
+# and a new array's first touch stalls the force pass (some 2 ms of page faults on the 20k pile,
+# which the other ranks wait out)
+PAIR_ROOM = 0.01
 
 
 @dataclass(frozen=True)
@@ -360,7 +364,8 @@ class Engine:
         s, p = self.state, self.phys
         if len(self.pair) < self.k_near:
             # one row per near slot; each step's computing rows write it before any row sums it
-            self.pair = np.empty((self.k_near, 6))
+            self.pair = None
+            self.pair = np.empty((int(self.k_near * (1.0 + PAIR_ROOM)) + 64, 6))
             self._rebind()
         self._epoch += 1
         part = self._particles()
