@@ -22,6 +22,10 @@ def test_max_many_maps_nan_to_inf_into_a_reused_read_only_buffer():
     assert ch.max_many([1.0, 2.0, 3.0, 4.0, 0.0, 1.0, 0.0]).tolist() == [1, 2, 3, 4, 0, 1, 0]
     assert a.tolist() == [4.0, 1.0, math.inf, -1.0]
     assert Domain(None).max(math.nan) == math.inf
+    # every number passes unchanged: infinities, the largest finite, and -0.0 with its sign
+    c = ch.max_many([-0.0, -math.inf, math.inf, 1.7976931348623157e308, 5e-324])
+    assert c.tolist() == [0.0, -math.inf, math.inf, 1.7976931348623157e308, 5e-324]
+    assert math.copysign(1.0, c[0]) == -1.0
 
 
 def test_sum_int_keeps_shape_and_casts_like_before():

@@ -434,9 +434,11 @@ class Engine:
         red = self._reduce
         if len(red) != 4 + len(flags):
             red = self._reduce = np.zeros(4 + len(flags))
-        red[0], red[1], red[2], red[3] = n2, self.last_overlap, -z_min, z_max
-        red[4:] = flags
-        n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red)
+        # whole slices, and the result back as Python floats: numpy scalars cost microseconds a step
+        red[:4] = (n2, self.last_overlap, -z_min, z_max)
+        if flags:
+            red[4:] = flags
+        n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red).tolist()
         # the displacement since the last filtering plus those before bounds every one since the build
         # (rebuilding early changes no bit: sums run in partner-id order and left-out pairs add zeros)
         moved = math.sqrt(n2)

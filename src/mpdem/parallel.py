@@ -106,7 +106,7 @@ class Channel:
             from mpi4py import MPI
             self.mpi = MPI
         self.seconds = 0.0
-        self._max = {}      # length -> (buffer, NaN mask, +inf row, read-only view)
+        self._max = {}      # length -> (buffer, read-only view)
         self._sum = {}      # shape -> (buffer, read-only view)
 
     @property
@@ -131,12 +131,11 @@ class Channel:
             buf = np.zeros(k)
             view = buf.view()
             view.flags.writeable = False
-            self._max[k] = (buf, np.zeros(k, bool), np.full(k, np.inf), view)
-        buf, nan, inf, view = self._max[k]
-        np.copyto(buf, values)
-        # NaN -> +inf, so that a NaN on any rank wins the max on every rank
-        np.isnan(buf, out=nan)
-        np.copyto(buf, inf, where=nan)
+            self._max[k] = (buf, view)
+        buf, view = self._max[k]
+        # NaN -> +inf, so that a NaN on any rank wins the max on every rank (fmin takes the
+        # number of a NaN and a number, and leaves every number, -0.0 included, as it is)
+        np.fmin(values, np.inf, out=buf)
         self._allreduce(buf, self.mpi.MAX if self.parallel else None)
         return view
 
