@@ -143,7 +143,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     before = stamp_of(epoch - 1)
     max_overlap = 0.0
     n_contacts = 0
-    # unsigned rows and counters too: numba wraps no negative index of theirs (1-1.5 % here)
+    # unsigned rows and counters too: numba adds no negative-index wrap-around to them (1-1.5 % here)
     for i in range(np.uint64(lo), np.uint64(hi)):
         if fixed[i]:
             for a in range(3):
