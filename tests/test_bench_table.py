@@ -2,6 +2,7 @@
 import argparse
 import re
 
+import numpy as np
 import pytest
 
 from mpdem import bench
@@ -25,6 +26,19 @@ def test_phase_lines_add_up_to_the_loop():
     lines = bench.phase_lines(before, after, 10.0)
     share = {ln.split()[2]: float(ln.split()[-1].rstrip("%")) for ln in lines}
     assert share == {"forces": 60.0, "lists": 10.0, "integration": 10.0, "communication": 5.0, "glue": 15.0}
+
+
+def test_steadiness_leaves_list_steps_out_and_counts_the_slow_ones_beyond_the_median():
+    steps = np.array([1.0, 1.0, 1.05, 1.0, 3.0, 1.0, 9.0, 1.0, 1.0, 1.0])
+    lists = np.zeros(10, bool)
+    lists[6] = True
+    st = bench.steadiness(steps, lists, 20.0, 40)
+    # the 9 s step rebuilt: left out; of the others only the 3 s one is over 1.1 x the median (1 s)
+    assert st["median"] == 1.0 and st["slow"] == 2.0 / 20.0 and st["switches"] == 2.0
+    assert st["p90"] == np.percentile(np.delete(steps, 6), 90)
+    line = bench.steadiness_line([st, dict(st, switches=3.0)])
+    assert "median 1000.000 / 1000.000 ms" in line and "took 10.0 / 10.0 %" in line
+    assert "switches 2 / 3 a second" in line
 
 
 def test_cli_bench_table_output_and_tiling(tmp_path):
@@ -73,3 +87,6 @@ def test_bench_reports_every_phase_of_the_loop(tmp_path, capsys):
     # the phases are disjoint parts of the loop: they and the glue add up to it
     assert abs(sum(shares) - 100) < 0.5 and shares[-1] >= 0 and shares[0] > 0
     assert "engine arrays" in next(ln for ln in out if ln.startswith("bench: memory"))
+    steps = next(ln for ln in out if ln.startswith("bench: steps"))
+    median, p90 = (float(re.search(rf"{k} ([0-9.]+) ms", steps)[1]) for k in ("median", "percentile"))
+    assert 0 < median <= p90 and 0 <= float(re.search(r"took ([0-9.]+) %", steps)[1]) <= 100

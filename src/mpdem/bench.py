@@ -21,6 +21,7 @@ cached).
 from __future__ import annotations
 
 import gc
+import math
 import os
 import resource
 import time
@@ -188,14 +189,66 @@ def phase_lines(before, after, wall):
 
 
 def timed_loop(eng, dom, steps):
-    """Run ``steps`` steps; wall seconds, rebuilds and phase clocks before and after."""
+    """Run ``steps`` steps; wall seconds, rebuilds, phase clocks before and after, and the
+    steadiness of the steps (``steadiness``)."""
     r0, before = eng.n_rebuilds, phase_clock(eng, dom)
+    timers = eng.timers
+    lists0 = timers["lists"]
+    # each step's end and the lists clock after it (a step that rebuilt or filtered moved it):
+    # two appends a step, some 0.1 us
+    ends, lists = [], []
+    switches = resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw
     t0 = time.perf_counter()
     for _ in range(steps):
         eng.step(defer_kick=True)
+        ends.append(time.perf_counter())
+        lists.append(timers["lists"])
     eng.complete()
     wall = time.perf_counter() - t0
-    return wall, eng.n_rebuilds - r0, before, phase_clock(eng, dom)
+    switches = resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw - switches
+    steady = steadiness(np.diff(np.array([t0] + ends)), np.diff(np.array([lists0] + lists)) > 0.0, wall, switches)
+    return wall, eng.n_rebuilds - r0, before, phase_clock(eng, dom), steady
+
+
+def steadiness(step_s, list_work, wall, switches):
+    """How steady a timed loop's steps were on this rank: what a busy machine costs a run.
+
+    On several ranks every step waits for the slowest rank, so a step that one rank loses to
+    the machine's own work (another process, the kernel's threads, interrupts) is lost on all.
+
+    Parameters
+    ----------
+    step_s : (S,) float
+        Wall seconds of each step.
+    list_work : (S,) bool
+        Steps that rebuilt or filtered the lists (left out: they are slower by design).
+    wall : float
+        The loop's wall seconds.
+    switches : int
+        Involuntary context switches of this process during the loop.
+
+    Returns
+    -------
+    dict: ``median`` and ``p90`` step [s] of the other steps; ``slow`` the share of the loop
+    that their steps above 1.1 x the median took beyond the median; ``switches`` a second.
+    """
+    plain = step_s[~list_work]
+    if len(plain) == 0:
+        return dict(median=math.nan, p90=math.nan, slow=math.nan, switches=switches / wall)
+    med = float(np.median(plain))
+    slow = plain[plain > 1.1 * med]
+    return dict(median=med, p90=float(np.percentile(plain, 90)), slow=float((slow - med).sum()) / wall,
+                switches=switches / wall)
+
+
+def steadiness_line(per_rank):
+    """The ``bench: steps`` line from each rank's ``steadiness``, ranks joined by " / "."""
+    def each(key, scale, fmt):
+        return " / ".join(fmt.format(scale * r[key]) for r in per_rank)
+    return ("bench: steps (rebuilds and filterings aside): median " + each("median", 1e3, "{:.3f}")
+            + " ms, 90th percentile " + each("p90", 1e3, "{:.3f}") + " ms; those over 1.1 x the median took "
+            + each("slow", 100, "{:.1f}") + " % of the loop beyond it; involuntary context switches "
+            + each("switches", 1, "{:.0f}") + " a second")
 
 
 def run_table_bench(args, net):
@@ -223,10 +276,11 @@ def run_table_bench(args, net):
     eng = Engine(st, phys, dom)
     eng.start()
     eng.advance(WARMUP_STEPS)
-    wall, rebuilds, before, after = timed_loop(eng, dom, args.steps)
+    wall, rebuilds, before, after, steady = timed_loop(eng, dom, args.steps)
     fig = dict(table=args.table, tile=tuple(args.tile), n_atoms=n_atoms, n_mobile=n_mobile, L_x=L_x, L_y=L_y,
                cfg=cfg, ranks=dom.size, steps=args.steps, wall=wall, wall_max=dom.max(wall), rebuilds=rebuilds,
-               phases=(before, after), **after_loop(eng, dom, st, baseline, (before, after)))
+               phases=(before, after), steadiness=dom.allgather(steady),
+               **after_loop(eng, dom, st, baseline, (before, after)))
     for line in report_lines(fig):
         say(line)
     return fig["ns"]
@@ -269,6 +323,7 @@ def report_lines(fig):
         *(["bench: seconds per rank: " + "; ".join(
             f"{k} " + " / ".join(f"{p[k]:.3f}" for p in fig["per_rank"]) for k in fig["per_rank"][0])]
           if par else []),
+        steadiness_line(fig["steadiness"]),
         f"bench: memory {fig['grown'] / n:.0f} bytes per atom (peak RSS minus the import baseline"
         + (", summed over ranks" if par else "") + ")"
         + f", engine arrays {fig['engine_bytes'] / n:.0f} bytes per atom"
