@@ -22,7 +22,7 @@ from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, cont
                              wall_forces)
 from .kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
 from .kernels.near import near_lists
-from .kernels.neighbours import build_neighbours, link_entries
+from .kernels.neighbours import build_neighbours, cell_axis, link_entries
 
 
 # the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells (about)
@@ -339,10 +339,10 @@ class Engine:
         n = s.n_own
         if n < 2:
             return
-        c = 1.0 + self.phys.skin
+        c = self.r_list
         x = s.x[:n]
         # the cells of the list build (neighbours._bin): nx x ny across the box, c tall
-        nx, ny = max(int(s.L_x // c), 1), max(int(s.L_y // c), 1)
+        nx, ny = cell_axis(s.L_x, c), cell_axis(s.L_y, c)
         ix = np.minimum(np.floor(x[:, 0] * (nx / s.L_x)), nx - 1).astype(np.int64)
         iy = np.minimum(np.floor(x[:, 1] * (ny / s.L_y)), ny - 1).astype(np.int64)
         iz = np.floor((x[:, 2] - x[:, 2].min()) / c).astype(np.int64)
@@ -364,6 +364,7 @@ class Engine:
         s, p = self.state, self.phys
         if len(self.pair) < self.k_near:
             # one row per near slot; each step's computing rows write it before any row sums it
+            # the old array freed first, so that its memory can serve the new one
             self.pair = None
             self.pair = np.empty((int(self.k_near * (1.0 + PAIR_ROOM)) + 64, 6))
             self._rebind()

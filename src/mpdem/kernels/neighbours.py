@@ -20,7 +20,9 @@ from .geometry import min_image
 
 
 @njit(cache=True)
-def _cell_axis(length, r_list):
+def cell_axis(length, r_list):
+    """Cells of the list build along a periodic axis of ``length`` [d]: as many as are at least
+    ``r_list`` wide, and at least one (``Engine._sort_rows`` orders rows by the same cells)."""
     n = int(length // r_list)
     return max(n, 1)
 
@@ -34,8 +36,8 @@ def _bin(x, n_rows, box, r_list):
     prange loop (bundles.py).
     """
     L_x, L_y = box.L_x, box.L_y
-    nx = _cell_axis(L_x, r_list)
-    ny = _cell_axis(L_y, r_list)
+    nx = cell_axis(L_x, r_list)
+    ny = cell_axis(L_y, r_list)
     cx = L_x / nx
     cy = L_y / ny
     zmin = np.inf
