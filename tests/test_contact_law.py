@@ -63,7 +63,8 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     # (link k, hist[k] is entry k's), both entries computed (cj = nbr)
     slot = np.arange(2, dtype=np.int32)
     near = Near(nbr_start, slot, nbr_start.copy(), nbr.copy(), slot.copy())
-    scratch = Scratch(np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 2), np.int32), np.zeros((2, 4, 4)))
+    scratch = Scratch(np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 3), np.int32), np.zeros((2, 4, 4)),
+                      np.zeros((2, 4, 9)))
     res = contact_forces(2, Particles(x, v, omega, f, t, fx), near, Slots(hist, stamp, np.zeros((3, 6))), 1,
                          make_box(10.0, 10.0), law, increment, scratch)
     return f, t, (stamp == 1).astype(np.uint8), hist, res

@@ -31,6 +31,9 @@ SORT_COLUMN = 16
 # and a new array's first touch stalls the force pass (some 2 ms of page faults on the 20k pile,
 # which the other ranks wait out)
 PAIR_ROOM = 0.01
+# the force pass's block of rows: room for this many computed entries (or a row's longest list), in
+# which the contact law runs over a whole block's contacts (44 kB a chunk; 256-1024 time alike)
+FORCE_BLOCK = 1024
 
 
 @dataclass(frozen=True)
@@ -186,8 +189,10 @@ class Engine:
     def _scratch(self, width):
         """Per-chunk scratch of the force kernel for rows of up to ``width`` entries."""
         self._width = width
-        self._found = np.zeros((self.nchunk, width, 2), np.int32)
-        self._sep = np.zeros((self.nchunk, width, 4))
+        room = max(width, FORCE_BLOCK)
+        self._found = np.zeros((self.nchunk, room, 3), np.int32)
+        self._sep = np.zeros((self.nchunk, room, 4))
+        self._tangent = np.zeros((self.nchunk, room, 9))
         self._rebind()
 
     def _rebind(self):
@@ -370,7 +375,7 @@ class Engine:
             self._rebind()
         self._epoch += 1
         part = self._particles()
-        scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep)
+        scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep, self._tangent)
         max_ov, n_c = self._contact_forces(s.n_own, part, self._near(), self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
         if p.floor:

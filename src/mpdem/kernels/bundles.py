@@ -124,12 +124,18 @@ class Scratch(NamedTuple):
         Each chunk's largest overlap [d].
     chunk_count : (C,) int64
         Each chunk's contacts.
-    found : (C, W, 2) int32
-        Slot and partner row of each contact of a row; W >= the longest list of a row.
+    found : (C, W, 3) int32
+        Slot, partner row and row of each contact of a block of rows; W >= the
+        longest list of a row (a block is as many rows as fit).
     sep : (C, W, 4) float64
         Their separations x_i - x_j [d] and its square [d^2].
+    tangent : (C, W, 9) float64
+        What the tangential law needs of each (with friction): the tangential
+        relative velocity [sqrt(g d)] (3), the unit normal (3), f_n [m g], the
+        Hertz scale sqrt(delta) [d^1/2] and m_eff [m].
     """
     chunk_max: np.ndarray
     chunk_count: np.ndarray
     found: np.ndarray
     sep: np.ndarray
+    tangent: np.ndarray

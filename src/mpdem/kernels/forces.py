@@ -81,8 +81,8 @@ def contact_forces(n_own, particles, near, slots, epoch, box, law, increment, sc
         False on the set-up evaluation at t = 0 (no history increment).
     scratch : Scratch
         Per chunk of rows (C >= 1 chunks; any C gives the same result): the
-        largest overlap, the contacts, and room for a row's computed
-        contacts (W >= the longest list of a row).
+        largest overlap, the contacts, and room for the computed contacts of
+        a block of rows (W >= the longest list of a row).
 
     Returns
     -------
@@ -92,11 +92,12 @@ def contact_forces(n_own, particles, near, slots, epoch, box, law, increment, sc
         Contacts counted from owned mobile particles (bed partners included).
     """
     # fields by attribute before the loop, never unpacked as a tuple (bundles.py: numba's prange)
-    chunk_max, chunk_count, found, sep = scratch.chunk_max, scratch.chunk_count, scratch.found, scratch.sep
+    chunk_max, chunk_count = scratch.chunk_max, scratch.chunk_count
+    found, sep, tangent = scratch.found, scratch.sep, scratch.tangent
     nchunk = len(chunk_max)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
-        mo, nc = _rows(lo, hi, particles, near, slots, epoch, box, law, increment, (found[c], sep[c]))
+        mo, nc = _rows(lo, hi, particles, near, slots, epoch, box, law, increment, (found[c], sep[c], tangent[c]))
         chunk_max[c] = mo
         chunk_count[c] = nc
     max_overlap = 0.0
@@ -112,84 +113,96 @@ def contact_forces_serial(n_own, particles, near, slots, epoch, box, law, increm
     """``contact_forces`` with one chunk (``scratch`` of C = 1), without the parallel
     wrapper: the same arithmetic in the same order, so the same bits, and 2-3 % faster
     on one thread (docs/performance.md). Arguments and returns as ``contact_forces``."""
-    found, sep = scratch.found, scratch.sep
-    return _rows(0, n_own, particles, near, slots, epoch, box, law, increment, (found[0], sep[0]))
+    found, sep, tangent = scratch.found, scratch.sep, scratch.tangent
+    return _rows(0, n_own, particles, near, slots, epoch, box, law, increment, (found[0], sep[0], tangent[0]))
 
 
 @njit(cache=True, error_model="numpy")
 def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     """Rows lo..hi-1 of ``contact_forces``; returns (max overlap, contacts).
 
-    ``room`` is the chunk's (found (W, 2) int32, sep (W, 4) float64) of ``Scratch``.
-    Slots: e indexes ``near.cj``, ``near.cslot`` and ``pair``; g = cslot[e] the history.
+    ``room`` is the chunk's (found (W, 3) int32, sep (W, 4) float64, tangent
+    (W, 9) float64) of ``Scratch``. Slots: e indexes ``near.cj``,
+    ``near.cslot`` and ``pair``; g = cslot[e] the history.
 
-    Per row: a screening pass over the entries the row computes records the
-    contacts (slot, partner) in ``found`` and their separations in ``sep``
-    (kept for the law, not read or computed again), without a branch on the
-    outcome (about half the entries are contacts, in no predictable order, so
-    a branch there is mispredicted often); the law is applied to them, each
-    result left in its slot of ``pair``. Then one pass over all the row's
-    entries in partner-id order sums their slots, again without a branch on
-    the outcome: a slot out of contact holds zeros (adding +0.0
-    or -0.0 to a sum that started at +0.0 or -gravity leaves it as it is).
+    The rows go in blocks: as many consecutive rows as have their computed
+    entries fit in the W places of ``room`` (at least one: W >= the longest
+    list of a row). For a block:
+
+    1. A screening pass over the entries its rows compute records the
+       contacts (slot, partner, row) in ``found`` and their separations in
+       ``sep`` (kept for the law, not read or computed again), without a
+       branch on the outcome (about half the entries are contacts, in no
+       predictable order, so a branch there is mispredicted often).
+    2. The normal law over all the block's contacts; with friction, what the
+       tangential law needs is left in ``tangent`` and
+    3. the tangential law over them. Each contact's result is left in its
+       slot of ``pair``. Short loops over the whole block, not the 2-3
+       contacts of a row, let the CPU overlap contacts (docs/performance.md).
+    4. One pass over each row's entries in partner-id order sums their
+       slots, again without a branch on the outcome: a slot out of contact
+       holds zeros (adding +0.0 or -0.0 to a sum that started at +0.0 or
+       -gravity leaves it as it is).
+
+    Every slot a row sums is computed by the row itself or by a lower row of
+    the chunk, so of its own block or an earlier one. Each value is the same
+    arithmetic on the same operands as with one row at a time: the same bits.
     """
     x, v, omega, f, torque, fixed = particles
     start, link, cstart, cj, cslot = near
     hist, stamp, pair = slots
     L_x, L_y, hx, hy = box
-    found, sep = room
+    found, sep, tangent = room
+    room_w = np.uint64(len(found))
     friction = law.mu > 0.0
     now = stamp_of(epoch)
     before = stamp_of(epoch - 1)
     max_overlap = 0.0
     n_contacts = 0
-    # unsigned rows and counters too: numba adds no negative-index wrap-around to them (1-1.5 % here)
-    for i in range(np.uint64(lo), np.uint64(hi)):
-        if fixed[i]:
-            for a in range(3):
-                f[i, a] = 0.0
-                torque[i, a] = 0.0
-            continue
-        xi = x[i, 0]
-        yi = x[i, 1]
-        zi = x[i, 2]
+    one = np.uint64(1)
+    row_hi = np.uint64(hi)
+    # unsigned rows, counters and entries: numba adds no negative-index wrap-around to them (5-7 % here)
+    b0 = np.uint64(lo)
+    while b0 < row_hi:
         m = np.uint64(0)
-        # unsigned indices: numba adds no negative-index wrap-around to their loads (4-6 % here)
-        for e in range(np.uint64(cstart[i]), np.uint64(cstart[i + 1])):
-            j = np.uint64(cj[e])
-            dx = min_image(xi - x[j, 0], L_x, hx)
-            dy = min_image(yi - x[j, 1], L_y, hy)
-            dz = zi - x[j, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            on = np.uint8(r2 < 1.0)
-            found[m, 0] = e
-            found[m, 1] = j
-            sep[m, 0] = dx
-            sep[m, 1] = dy
-            sep[m, 2] = dz
-            sep[m, 3] = r2
-            m += np.uint64(on)
-            # out of contact, the slot adds zeros (the law overwrites a contact's)
-            pair[e, 0] = 0.0
-            pair[e, 1] = 0.0
-            pair[e, 2] = 0.0
-            if friction:
-                pair[e, 3] = 0.0
-                pair[e, 4] = 0.0
-                pair[e, 5] = 0.0
-        vix = v[i, 0]
-        viy = v[i, 1]
-        viz = v[i, 2]
-        rwix = R * omega[i, 0]
-        rwiy = R * omega[i, 1]
-        rwiz = R * omega[i, 2]
+        b = b0
+        while b < row_hi:
+            c0 = np.uint64(cstart[b])
+            c1 = np.uint64(cstart[b + one])
+            if m + (c1 - c0) > room_w:
+                break
+            if not fixed[b]:
+                xi = x[b, 0]
+                yi = x[b, 1]
+                zi = x[b, 2]
+                for e in range(c0, c1):
+                    j = np.uint64(cj[e])
+                    dx = min_image(xi - x[j, 0], L_x, hx)
+                    dy = min_image(yi - x[j, 1], L_y, hy)
+                    dz = zi - x[j, 2]
+                    r2 = dx * dx + dy * dy + dz * dz
+                    on = np.uint8(r2 < 1.0)
+                    found[m, 0] = e
+                    found[m, 1] = j
+                    found[m, 2] = b
+                    sep[m, 0] = dx
+                    sep[m, 1] = dy
+                    sep[m, 2] = dz
+                    sep[m, 3] = r2
+                    m += np.uint64(on)
+                    # out of contact, the slot adds zeros (the law overwrites a contact's)
+                    pair[e, 0] = 0.0
+                    pair[e, 1] = 0.0
+                    pair[e, 2] = 0.0
+                    if friction:
+                        pair[e, 3] = 0.0
+                        pair[e, 4] = 0.0
+                        pair[e, 5] = 0.0
+            b += one
         for q in range(np.uint64(0), m):
             e = np.uint64(found[q, 0])
             j = np.uint64(found[q, 1])
-            g = np.uint64(cslot[e])
-            # in contact at the previous evaluation too, or a new contact (history from zero)
-            was = stamp[g] == before
-            stamp[g] = now
+            i = np.uint64(found[q, 2])
             # the higher row of a pair within the chunk counts it too
             n_contacts += 1 + (lo <= found[q, 1] < hi and not fixed[j])
             dx = sep[q, 0]
@@ -204,64 +217,89 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
             ny = dy * rinv
             nz = dz * rinv
             meff = 1.0 if fixed[j] else 0.5
-            vrx = vix - v[j, 0]
-            vry = viy - v[j, 1]
-            vrz = viz - v[j, 2]
+            vrx = v[i, 0] - v[j, 0]
+            vry = v[i, 1] - v[j, 1]
+            vrz = v[i, 2] - v[j, 2]
             vn = vrx * nx + vry * ny + vrz * nz
             fn, scale = _normal(delta, vn, meff, law)
-            fcx = fn * nx
-            fcy = fn * ny
-            fcz = fn * nz
             if friction:
                 # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
-                wx = rwix + R * omega[j, 0]
-                wy = rwiy + R * omega[j, 1]
-                wz = rwiz + R * omega[j, 2]
-                vtx = vrx - vn * nx - (wy * nz - wz * ny)
-                vty = vry - vn * ny - (wz * nx - wx * nz)
-                vtz = vrz - vn * nz - (wx * ny - wy * nx)
+                wx = R * omega[i, 0] + R * omega[j, 0]
+                wy = R * omega[i, 1] + R * omega[j, 1]
+                wz = R * omega[i, 2] + R * omega[j, 2]
+                tangent[q, 0] = vrx - vn * nx - (wy * nz - wz * ny)
+                tangent[q, 1] = vry - vn * ny - (wz * nx - wx * nz)
+                tangent[q, 2] = vrz - vn * nz - (wx * ny - wy * nx)
+                tangent[q, 3] = nx
+                tangent[q, 4] = ny
+                tangent[q, 5] = nz
+                tangent[q, 6] = fn
+                tangent[q, 7] = scale
+                tangent[q, 8] = meff
+            else:
+                stamp[np.uint64(cslot[e])] = now
+                # the partner's view is the exact negative (n flips sign, fn is the same)
+                pair[e, 0] = fn * nx
+                pair[e, 1] = fn * ny
+                pair[e, 2] = fn * nz
+        if friction:
+            for q in range(np.uint64(0), m):
+                e = np.uint64(found[q, 0])
+                g = np.uint64(cslot[e])
+                # in contact at the previous evaluation too, or a new contact (history from zero)
+                was = stamp[g] == before
+                stamp[g] = now
+                nx = tangent[q, 3]
+                ny = tangent[q, 4]
+                nz = tangent[q, 5]
+                fn = tangent[q, 6]
                 sx, sy, sz, ftx, fty, ftz = _tangential(
                     (hist[g, 0] if was else 0.0, hist[g, 1] if was else 0.0, hist[g, 2] if was else 0.0),
-                    (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
+                    (tangent[q, 0], tangent[q, 1], tangent[q, 2]), (nx, ny, nz), tangent[q, 7], tangent[q, 8],
+                    abs(fn), law, increment)
                 # + 0.0 stores a zero as +0.0 whichever way it was reached
                 hist[g, 0] = sx + 0.0
                 hist[g, 1] = sy + 0.0
                 hist[g, 2] = sz + 0.0
-                fcx += ftx
-                fcy += fty
-                fcz += ftz
+                # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
+                pair[e, 0] = fn * nx + ftx
+                pair[e, 1] = fn * ny + fty
+                pair[e, 2] = fn * nz + ftz
                 # T_i += -R n x F_t (the same for both partners)
                 pair[e, 3] = -(R * (ny * ftz - nz * fty))
                 pair[e, 4] = -(R * (nz * ftx - nx * ftz))
                 pair[e, 5] = -(R * (nx * fty - ny * ftx))
-            # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
-            pair[e, 0] = fcx
-            pair[e, 1] = fcy
-            pair[e, 2] = fcz
-        fx = 0.0
-        fy = 0.0
-        fz = -law.gravity
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
-        for k in range(np.uint64(start[i]), np.uint64(start[i + 1])):
-            lk = link[k]
-            e = np.uint64(slot_of(lk))
-            # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
-            sign = 1.0 + 2.0 * (lk >> 31)
-            fx += sign * pair[e, 0]
-            fy += sign * pair[e, 1]
-            fz += sign * pair[e, 2]
-            if friction:
-                tx += pair[e, 3]
-                ty += pair[e, 4]
-                tz += pair[e, 5]
-        f[i, 0] = fx
-        f[i, 1] = fy
-        f[i, 2] = fz
-        torque[i, 0] = tx
-        torque[i, 1] = ty
-        torque[i, 2] = tz
+        for i in range(b0, b):
+            if fixed[i]:
+                for a in range(3):
+                    f[i, a] = 0.0
+                    torque[i, a] = 0.0
+                continue
+            fx = 0.0
+            fy = 0.0
+            fz = -law.gravity
+            tx = 0.0
+            ty = 0.0
+            tz = 0.0
+            for k in range(np.uint64(start[i]), np.uint64(start[i + one])):
+                lk = link[k]
+                e = np.uint64(slot_of(lk))
+                # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
+                sign = 1.0 + 2.0 * (lk >> 31)
+                fx += sign * pair[e, 0]
+                fy += sign * pair[e, 1]
+                fz += sign * pair[e, 2]
+                if friction:
+                    tx += pair[e, 3]
+                    ty += pair[e, 4]
+                    tz += pair[e, 5]
+            f[i, 0] = fx
+            f[i, 1] = fy
+            f[i, 2] = fz
+            torque[i, 0] = tx
+            torque[i, 1] = ty
+            torque[i, 2] = tz
+        b0 = b
     return max_overlap, n_contacts
 
 

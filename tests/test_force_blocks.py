@@ -1,0 +1,41 @@
+"""The force pass's blocks of rows (``engine.FORCE_BLOCK``, ``forces._rows``) change no bit:
+blocks of one or two rows and blocks of hundreds give the same trajectory, with and without friction."""
+import numpy as np
+import pytest
+
+from helpers import make_engine
+from mpdem import engine
+from mpdem.io.checkpoint import digest, gather_state
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_blocks_of_any_size_give_the_same_bits(mu, monkeypatch):
+    # a jittered cubic lattice a little tighter than touching: some 3 contacts a sphere from the start
+    g = np.random.default_rng(3)
+    a, m = 0.997, 9
+    L = a * m
+    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    x += 0.004 * g.standard_normal(x.shape)
+    x[:, 2] += 0.5
+    n = len(x)
+    v = 0.05 * g.standard_normal(x.shape)
+    omega = 0.1 * g.standard_normal(x.shape)
+    # the lowest layer frozen: rows the pass skips, and partners of infinite mass
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    runs = []
+    for block in (1, engine.FORCE_BLOCK):
+        monkeypatch.setattr(engine, "FORCE_BLOCK", block)
+        eng = make_engine(x, v.copy(), omega.copy(), fixed.copy(), L=L, mu=mu, gravity=1.0,
+                          gamma_t=10.0 if mu else 0.0)
+        eng.advance(500)
+        room = eng._found.shape[1]
+        # a block of 1: room for the longest list only, so a block is a row or two; else many rows
+        assert room == (eng._width if block == 1 else max(block, eng._width))
+        assert eng.contacts() > n // 2          # the law ran on many contacts a block
+        runs.append((digest(gather_state(eng.state)), eng.state.f[:eng.state.n_own].copy(),
+                     eng.state.torque[:eng.state.n_own].copy()))
+    assert runs[0][0] == runs[1][0]
+    assert np.array_equal(runs[0][1].view(np.int64), runs[1][1].view(np.int64))
+    assert np.array_equal(runs[0][2].view(np.int64), runs[1][2].view(np.int64))
+    if mu:
+        assert np.any(runs[0][2] != 0.0)
