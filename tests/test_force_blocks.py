@@ -6,6 +6,8 @@ import pytest
 from helpers import make_engine
 from mpdem import engine
 from mpdem.io.checkpoint import digest, gather_state
+from mpdem.kernels.bundles import Scratch
+from mpdem.kernels.forces import contact_forces_serial
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])
@@ -39,3 +41,20 @@ def test_blocks_of_any_size_give_the_same_bits(mu, monkeypatch):
     assert np.array_equal(runs[0][2].view(np.int64), runs[1][2].view(np.int64))
     if mu:
         assert np.any(runs[0][2] != 0.0)
+
+
+def test_scratch_narrower_than_a_row_is_an_error_not_an_endless_loop():
+    g = np.random.default_rng(4)
+    a, m = 0.997, 5
+    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    x += 0.004 * g.standard_normal(x.shape)
+    eng = make_engine(x, L=a * m, mu=0.5, gamma_t=10.0)
+    eng.advance(2)
+    longest = int(np.diff(eng.near_cstart[:eng.state.n_own + 1]).max())
+    assert longest >= 2
+    w = longest - 1
+    narrow = Scratch(np.zeros(1), np.zeros(1, np.int64), np.zeros((1, w, 3), np.int32), np.zeros((1, w, 4)),
+                     np.zeros((1, w, 9)))
+    with pytest.raises(ValueError, match="narrower"):
+        contact_forces_serial(eng.state.n_own, eng._particles(), eng._near(), eng._slots(), eng._epoch + 1,
+                              eng._box(), eng.law, True, narrow)

@@ -32,7 +32,7 @@ SORT_COLUMN = 16
 # which the other ranks wait out)
 PAIR_ROOM = 0.01
 # the force pass's block of rows: room for this many computed entries (or a row's longest list), in
-# which the contact law runs over a whole block's contacts (44 kB a chunk; 256-1024 time alike)
+# which the contact law runs over a whole block's contacts (116 kB a chunk; 256 and 1024 time alike)
 FORCE_BLOCK = 1024
 
 

@@ -161,7 +161,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     n_contacts = 0
     one = np.uint64(1)
     row_hi = np.uint64(hi)
-    # unsigned rows, counters and entries: numba adds no negative-index wrap-around to them (5-7 % here)
+    # unsigned rows, counters and entries: numba adds no negative-index wrap-around to them (5-7 % in all)
     b0 = np.uint64(lo)
     while b0 < row_hi:
         m = np.uint64(0)
@@ -170,6 +170,9 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
             c0 = np.uint64(cstart[b])
             c1 = np.uint64(cstart[b + one])
             if m + (c1 - c0) > room_w:
+                if b == b0:
+                    # never with the engine's scratch (W >= a row's longest list); not an endless loop
+                    raise ValueError("force scratch narrower than a row's computed entries")
                 break
             if not fixed[b]:
                 xi = x[b, 0]
