@@ -442,8 +442,12 @@ def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     assert [f for f, m in fams if len(m) == 1][0]["stop.energy"] == "translational"
     out = tmp_path / "out"
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
-    trend = [ln for ln in (out / "README.md").read_text().splitlines() if ln.startswith("| z(mu) trend")]
+    text = (out / "README.md").read_text().splitlines()
+    trend = [ln for ln in text if ln.startswith("| z(mu) trend")]
     assert len(trend) == 1 and "decreasing at every step" in trend[0], trend
+    # the README says which set ran under the other rule, below the sets table
+    marked = [ln for ln in text if ln.startswith("- S") and "stop.energy = translational" in ln]
+    assert len(marked) == 1, marked
 
 
 def test_figures_in_several_formats(tree, tmp_path):

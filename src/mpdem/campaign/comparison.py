@@ -33,11 +33,16 @@ def _size_note(s):
     return f"; N = {N}, {L_x:g}d x {L_y:g}d box (paper: {paper.REFERENCE['N']}, {paper.REFERENCE['L']:g}d)"
 
 
+def _extras(s):
+    """A set's settings away from their defaults outside the parameter columns (``Set.extra``), as text."""
+    return ", ".join(f"{k} = {v}" for k, v in sorted(s.extra.items()))
+
+
 def _cond(s, alpha=False):
     base = f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}"
     if alpha:
         base += f", k_n = {fmt_kn(s.p('k_n'))}, phi_i = {s.p('phi_i'):g}"
-    return base + _size_note(s)
+    return base + (f", {_extras(s)}" if s.extra else "") + _size_note(s)
 
 
 def _verdict(value, accept):
@@ -170,6 +175,9 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
                          fmt_pm(*s.stat("phi")[:2], 4, len(s.runs)),
                          fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
                          fmt_pm(*s.stat("rattler_fraction")[:2], 3, len(s.runs))] for s in sets]), ""]
+    # settings outside the columns (e.g. the stop rule) that a set ran with away from their defaults
+    other = [f"- {s.id}: run with {_extras(s)} (not the default; docs/config.md)" for s in sets if s.extra]
+    L += other + ([""] if other else [])
     L += ["## Comparison with the paper", ""]
     if rows:
         L += [_table(["quantity", "conditions", "set(s)", "this work", "paper", "acceptance", "verdict"],
