@@ -60,9 +60,9 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
     t = np.zeros((2, 3))
     law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full: each entry its own slot
-    # (link k, hist[k] is entry k's), both entries computed (cj = nbr)
+    # (link k, hist[k] is entry k's, and so is place k of the pair store), both entries computed (cj = nbr)
     slot = np.arange(2, dtype=np.int32)
-    near = Near(nbr_start, slot, nbr_start.copy(), nbr.copy(), slot.copy())
+    near = Near(nbr_start, slot, nbr_start.copy(), nbr.copy(), slot.copy(), slot.copy())
     scratch = Scratch(np.zeros(2), np.zeros(2, np.int64), np.zeros((2, 4, 3), np.int32), np.zeros((2, 4, 4)),
                       np.zeros((2, 4, 9)))
     res = contact_forces(2, Particles(x, v, omega, f, t, fx), near, Slots(hist, stamp, np.zeros((3, 6))), 1,

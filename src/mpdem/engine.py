@@ -22,6 +22,7 @@ from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, cont
                              wall_forces)
 from .kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
 from .kernels.near import near_lists
+from .kernels.pairstore import pair_places
 from .kernels.neighbours import build_neighbours, cell_axis, link_entries
 
 
@@ -34,6 +35,9 @@ PAIR_ROOM = 0.01
 # the force pass's block of rows: room for this many computed entries (or a row's longest list), in
 # which the contact law runs over a whole block's contacts (116 kB a chunk; 256 and 1024 time alike)
 FORCE_BLOCK = 1024
+# places of each chunk's ring in the pair store (kernels/pairstore.py; 384 kB, within a core's L2),
+# raised to a power of two of at least 4 blocks of the force pass
+PAIR_RING = 8192
 
 
 @dataclass(frozen=True)
@@ -139,7 +143,14 @@ class Engine:
         self.near_link = np.zeros(0, np.int32)
         self.near_cj = np.zeros(0, np.int32)
         self.near_cslot = np.zeros(0, np.int32)
-        self.k_near = 0           # near computed entries: the rows of ``pair`` a force evaluation writes
+        self.k_near = 0           # near computed entries
+        # the pair store's places of the near entries (kernels/pairstore.py), made anew when stale
+        self.near_cpair = np.zeros(0, np.int32)
+        self.near_plink = np.zeros(0, np.int32)
+        self._ring = np.zeros((0, 6))
+        self._places_stale = True
+        self.pair_ring = 0        # places of each chunk's ring (``_place_pairs``)
+        self._pairs_kept = False  # ``pair`` holds every pair of the last evaluation (``step(keep_pairs=True)``)
         # a bound of every displacement since the build, up to the last filtering [d] (the same on all ranks)
         self._moved = 0.0
         self.n_filters = 0
@@ -193,6 +204,8 @@ class Engine:
         self._found = np.zeros((self.nchunk, room, 3), np.int32)
         self._sep = np.zeros((self.nchunk, room, 4))
         self._tangent = np.zeros((self.nchunk, room, 9))
+        # the places depend on the block's room
+        self._places_stale = True
         self._rebind()
 
     def _rebind(self):
@@ -210,7 +223,13 @@ class Engine:
         return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start)
 
     def _near(self):
-        return Near(self.near_start, self.near_link, self.near_cstart, self.near_cj, self.near_cslot)
+        return Near(self.near_start, self.near_link, self.near_cstart, self.near_cj, self.near_cslot,
+                    self.near_cpair)
+
+    def _near_places(self):
+        """The near lists as the force pass reads them with the ring store: places for slots."""
+        return Near(self.near_start, self.near_plink, self.near_cstart, self.near_cj, self.near_cslot,
+                    self.near_cpair)
 
     def _slots(self):
         return Slots(self.hist, self.stamp, self.pair)
@@ -233,8 +252,8 @@ class Engine:
         s = self.state
         if s.slots_current:
             return
-        # the pair slots are scratch of one force evaluation: freed while the slots are
-        # made (forces() takes them back), so the peak memory holds the history once
+        # a kept pair store (one place per near slot) is scratch of one force evaluation: freed
+        # while the slots are made, so the peak memory holds the history once
         self.pair = np.zeros((0, 6))
         n = s.n_own
         total = history.count_contacts(n, self._lists(), self._slots(), self._epoch, s.count, self.nchunk)
@@ -319,13 +338,33 @@ class Engine:
             if kc >= len(self.near_cj):
                 self.near_cj = np.zeros(int(kc * 1.1) + 64, np.int32)
                 self.near_cslot = np.zeros(len(self.near_cj), np.int32)
+                self.near_cpair = np.zeros(len(self.near_cj), np.int32)
             if ke >= len(self.near_link):
                 self.near_link = np.zeros(int(ke * 1.1) + 64, np.int32)
+                self.near_plink = np.zeros(len(self.near_link), np.int32)
             near_lists(n, s.x, s.fixed, self._box(), self._lists(), r2, self._near(), g2e, self.nchunk)
             self._rebind()
         self.k_near = kc
+        self._places_stale = True
         s.x_ref[:n] = s.x[:n]
         self.n_filters += 1
+
+    def _place_pairs(self):
+        """Each near entry's place in the ring store (``kernels.pairstore``); the store grown if short."""
+        n = self.state.n_own
+        room = self._found.shape[1]
+        # every chunk's ring no longer than its entries need, at least 4 blocks long where shorter
+        most = max(int(self.near_cstart[(c + 1) * n // self.nchunk] - self.near_cstart[c * n // self.nchunk])
+                   for c in range(self.nchunk))
+        ring = 1 << max(PAIR_RING - 1, 4 * room - 1).bit_length()
+        ring = min(ring, 1 << max(most - 1, 0).bit_length())
+        self.pair_ring = ring
+        places = int(pair_places(n, self._near(), room, ring, self.nchunk, self.near_cpair, self.near_plink))
+        if len(self._ring) < places:
+            # freed first, so that its memory can serve the new one
+            self._ring = None
+            self._ring = np.empty((int(places * (1.0 + PAIR_ROOM)) + 64, 6))
+        self._places_stale = False
 
     def _alloc_lists(self, size):
         # the history moved to the slots before the lists were rebuilt: nothing to keep
@@ -363,20 +402,29 @@ class Engine:
         s.permute(np.argsort(key, kind="stable"))
 
     # -- forces --
-    def forces(self, increment=True):
-        """Contact forces on owned rows, history updated in place; returns (max overlap, contacts)."""
+    def forces(self, increment=True, keep_pairs=False):
+        """Contact forces on owned rows, history updated in place; returns (max overlap, contacts).
+
+        With ``keep_pairs`` every pair's force stays in ``pair`` after the pass, one place per
+        near slot (for ``force_ratio``); otherwise the pass leaves them in the ring store
+        (``kernels.pairstore``), which the rows reuse. The same values either way.
+        """
         t = time.perf_counter()
         s, p = self.state, self.phys
-        if len(self.pair) < self.k_near:
-            # one row per near slot; each step's computing rows write it before any row sums it
-            # the old array freed first, so that its memory can serve the new one
-            self.pair = None
-            self.pair = np.empty((int(self.k_near * (1.0 + PAIR_ROOM)) + 64, 6))
-            self._rebind()
+        if keep_pairs:
+            # a store of its own, made for this pass (its first touch costs some 2 ms on the 20k pile)
+            near = self._near()._replace(cpair=np.arange(self.k_near + 1, dtype=np.int32))
+            self.pair = np.empty((self.k_near + 1, 6))
+        else:
+            if self._places_stale:
+                self._place_pairs()
+            near = self._near_places()
+            self.pair = self._ring
+        self._pairs_kept = keep_pairs
         self._epoch += 1
         part = self._particles()
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep, self._tangent)
-        max_ov, n_c = self._contact_forces(s.n_own, part, self._near(), self._slots(), self._epoch, self._box(),
+        max_ov, n_c = self._contact_forces(s.n_own, part, near, self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
         if p.floor:
             self._floor_forces(s.n_own, part, p.k_n, p.gamma_n)
@@ -410,7 +458,7 @@ class Engine:
         self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
-    def step(self, flags=NO_FLAGS, defer_kick=False):
+    def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks).
 
         With ``defer_kick`` the step's second half-kick is left for the next step's first
@@ -429,6 +477,9 @@ class Engine:
             The driver's per-rank flags (``simulation.StepFlags``: signal, wall
             time, clock checkpoint), agreed by max in the same allreduce;
             ``info.flags`` is the agreed record, of the same type.
+        keep_pairs : bool
+            Keep every pair's force of this step's evaluation for ``force_ratio``
+            (``forces``); the same bits either way.
         """
         s, p, dom = self.state, self.phys, self.domain
         t = time.perf_counter()
@@ -459,7 +510,7 @@ class Engine:
                 self._moved += moved
                 self._filter()
                 self.timers["lists"] += time.perf_counter() - t
-        self.last_overlap, self._contacts = self.forces(increment=True)
+        self.last_overlap, self._contacts = self.forces(increment=True, keep_pairs=keep_pairs)
         self._kick_due = True
         if not defer_kick:
             self.complete()
@@ -507,8 +558,9 @@ class Engine:
         """(ratio, in flight) of the last force evaluation (``kernels.balance``), exact on any number of
         ranks: the unbalanced-force ratio, mean |resultant| over the mobile spheres / mean |contact
         force| (inf without contacts), and the mobile spheres without a contact. (nan, -1) before any
-        evaluation of this segment, or once the slot forces are freed (``sync_slots``)."""
-        if self._epoch == 0:
+        evaluation of this segment, after one that did not keep its pairs' forces (``step``'s
+        ``keep_pairs``), or once they are freed (``sync_slots``)."""
+        if self._epoch == 0 or not self._pairs_kept:
             return math.nan, -1
         s = self.state
         if len(self.pair) < self.k_near:
@@ -523,8 +575,9 @@ class Engine:
 
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""
-        return self.state.nbytes() + sum(a.nbytes for a in (self.nbr_start, self.nbr_list, self.link,
-                                                             self.comp_start, self.hist,
-                                                             self.pair, self.stamp, self.near_start,
-                                                             self.near_cstart, self.near_link, self.near_cj,
-                                                             self.near_cslot))
+        arrays = (self.nbr_start, self.nbr_list, self.link, self.comp_start, self.hist, self.stamp,
+                  self.near_start, self.near_cstart, self.near_link, self.near_cj, self.near_cslot,
+                  self.near_cpair, self.near_plink, self._ring)
+        # the pair store is the ring or a kept store of its own
+        kept = self.pair.nbytes if self.pair is not self._ring else 0
+        return self.state.nbytes() + sum(a.nbytes for a in arrays) + kept

@@ -226,7 +226,8 @@ class Run:
             while self.status is None and st.step < max_steps:
                 # the step's second half-kick joins the next step's first pass; whatever reads the
                 # rows below (the stop sample, a state file) has the engine apply it first
-                info = eng.step(self._flags_now(), defer_kick=True)
+                # a stop sample after the step reads every pair's force of its evaluation
+                info = eng.step(self._flags_now(), defer_kick=True, keep_pairs=self.stop.due(st.step + 1))
                 self.checks(info, st.step)
                 sample, show = self.stop.due(st.step), progress.due(st.step)
                 if sample or show:

@@ -84,20 +84,25 @@ class Near(NamedTuple):
     start : (n_own + 1,) int64
         CSR offsets into ``link``.
     link : (E_near,) int32
-        Each near entry's near slot: e, or ~e for an entry that takes its pair (as ``Lists.link``).
+        Each near entry's place in ``Slots.pair``: p, or ~p for an entry that takes its
+        pair (as ``Lists.link``). The near lists' own (``Engine._near``) have the near
+        slot e for p; the force pass's (``Engine._near_places``) the place ``cpair[e]``.
     cstart : (n_own + 1,) int64
         CSR offsets into ``cj`` and ``cslot``.
     cj : (K_near,) int32
         Partner rows of the near computed entries.
     cslot : (K_near,) int32
-        The slot g (``Slots.hist``, ``Slots.stamp``) of each near computed entry;
-        ``Slots.pair`` is indexed by e.
+        The slot g (``Slots.hist``, ``Slots.stamp``) of each near computed entry.
+    cpair : (K_near,) int32
+        The place in ``Slots.pair`` of each near computed entry (``kernels.pairstore``;
+        e itself where the store has a place per near slot).
     """
     start: np.ndarray
     link: np.ndarray
     cstart: np.ndarray
     cj: np.ndarray
     cslot: np.ndarray
+    cpair: np.ndarray
 
 
 class Slots(NamedTuple):
@@ -107,10 +112,12 @@ class Slots(NamedTuple):
         Delta s [d], the computing row's view; valid where ``stamp`` is the last evaluation's.
     stamp : (K,) uint32
         Number (mod 2**32) of the last force evaluation that found the pair in contact.
-    pair : (>= K_near, 6) float64
+    pair : (places, 6) float64
         The computing row's contact force [m g] and torque [m g d] of the last
-        evaluation (zeros out of contact), by near slot e (``Near``); may be empty
-        where unused (``Engine.sync_slots``).
+        evaluation (zeros out of contact), by place (``Near.cpair``): the pair
+        store. A store of one place per near slot (``Engine.step(keep_pairs=True)``)
+        keeps every pair's after the pass; a ring store (``kernels.pairstore``) only
+        scratch of it. May be empty where unused (``Engine.sync_slots``).
     """
     hist: np.ndarray
     stamp: np.ndarray

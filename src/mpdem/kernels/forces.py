@@ -63,15 +63,17 @@ def contact_forces(n_own, particles, near, slots, epoch, box, law, increment, sc
     near : Near
         The entries of the full neighbour lists within the near reach
         (``near.near_lists``; each row's sorted by partner id), each entry's
-        near slot ``link`` and the K_near entries the rows compute with their
-        slots ``cslot``; every pair in contact is among them.
+        place in the pair store ``link`` and the K_near entries the rows
+        compute with their slots ``cslot`` and places ``cpair``; every pair in
+        contact is among them.
     slots : Slots
         ``hist`` (K, 3) float64, in/out: Delta s [d] of each slot's pair (the
         computing row's view), read only if the pair was in contact at the
         previous evaluation; ``stamp`` (K,) uint32, in/out: set to ``epoch``
-        for the contacts of this evaluation; ``pair`` (>= K_near, 6) float64,
-        out, by near slot: the computing row's contact force [m g] and torque
-        [m g d] (zeros out of contact; the torque only with friction).
+        for the contacts of this evaluation; ``pair`` (places, 6) float64,
+        out, by place (``Near.cpair``): the computing row's contact force
+        [m g] and torque [m g d] (zeros out of contact; the torque only with
+        friction), valid after the pass only where no entry reused the place.
     epoch : int
         The number of this evaluation (the previous one is ``epoch - 1``).
     box : Box
@@ -123,7 +125,8 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
 
     ``room`` is the chunk's (found (W, 3) int32, sep (W, 4) float64, tangent
     (W, 9) float64) of ``Scratch``. Slots: e indexes ``near.cj``,
-    ``near.cslot`` and ``pair``; g = cslot[e] the history.
+    ``near.cslot`` and ``near.cpair``; g = cslot[e] the history, p = cpair[e]
+    the place in ``pair`` (``kernels.pairstore``).
 
     The rows go in blocks: as many consecutive rows as have their computed
     entries fit in the W places of ``room`` (at least one: W >= the longest
@@ -149,7 +152,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     arithmetic on the same operands as with one row at a time: the same bits.
     """
     x, v, omega, f, torque, fixed = particles
-    start, link, cstart, cj, cslot = near
+    start, link, cstart, cj, cslot, cpair = near
     hist, stamp, pair = slots
     L_x, L_y, hx, hy = box
     found, sep, tangent = room
@@ -166,10 +169,12 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     while b0 < row_hi:
         m = np.uint64(0)
         b = b0
+        e_first = np.uint64(cstart[b0])
         while b < row_hi:
             c0 = np.uint64(cstart[b])
             c1 = np.uint64(cstart[b + one])
-            if m + (c1 - c0) > room_w:
+            # the block's computed entries, not only its contacts, fit: the ring store relies on it
+            if c1 - e_first > room_w:
                 if b == b0:
                     # never with the engine's scratch (W >= a row's longest list); not an endless loop
                     raise ValueError("force scratch narrower than a row's computed entries")
@@ -193,14 +198,15 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                     sep[m, 2] = dz
                     sep[m, 3] = r2
                     m += np.uint64(on)
-                    # out of contact, the slot adds zeros (the law overwrites a contact's)
-                    pair[e, 0] = 0.0
-                    pair[e, 1] = 0.0
-                    pair[e, 2] = 0.0
+                    # out of contact, the place adds zeros (the law overwrites a contact's)
+                    p = np.uint64(cpair[e])
+                    pair[p, 0] = 0.0
+                    pair[p, 1] = 0.0
+                    pair[p, 2] = 0.0
                     if friction:
-                        pair[e, 3] = 0.0
-                        pair[e, 4] = 0.0
-                        pair[e, 5] = 0.0
+                        pair[p, 3] = 0.0
+                        pair[p, 4] = 0.0
+                        pair[p, 5] = 0.0
             b += one
         for q in range(np.uint64(0), m):
             e = np.uint64(found[q, 0])
@@ -241,10 +247,11 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 tangent[q, 8] = meff
             else:
                 stamp[np.uint64(cslot[e])] = now
+                p = np.uint64(cpair[e])
                 # the partner's view is the exact negative (n flips sign, fn is the same)
-                pair[e, 0] = fn * nx
-                pair[e, 1] = fn * ny
-                pair[e, 2] = fn * nz
+                pair[p, 0] = fn * nx
+                pair[p, 1] = fn * ny
+                pair[p, 2] = fn * nz
         if friction:
             for q in range(np.uint64(0), m):
                 e = np.uint64(found[q, 0])
@@ -264,14 +271,15 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 hist[g, 0] = sx + 0.0
                 hist[g, 1] = sy + 0.0
                 hist[g, 2] = sz + 0.0
+                p = np.uint64(cpair[e])
                 # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
-                pair[e, 0] = fn * nx + ftx
-                pair[e, 1] = fn * ny + fty
-                pair[e, 2] = fn * nz + ftz
+                pair[p, 0] = fn * nx + ftx
+                pair[p, 1] = fn * ny + fty
+                pair[p, 2] = fn * nz + ftz
                 # T_i += -R n x F_t (the same for both partners)
-                pair[e, 3] = -(R * (ny * ftz - nz * fty))
-                pair[e, 4] = -(R * (nz * ftx - nx * ftz))
-                pair[e, 5] = -(R * (nx * fty - ny * ftx))
+                pair[p, 3] = -(R * (ny * ftz - nz * fty))
+                pair[p, 4] = -(R * (nz * ftx - nx * ftz))
+                pair[p, 5] = -(R * (nx * fty - ny * ftx))
         for i in range(b0, b):
             if fixed[i]:
                 for a in range(3):
@@ -286,16 +294,16 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
             tz = 0.0
             for k in range(np.uint64(start[i]), np.uint64(start[i + one])):
                 lk = link[k]
-                e = np.uint64(slot_of(lk))
+                p = np.uint64(slot_of(lk))
                 # -1.0 * the force of a taken pair, without a branch (they come in no predictable order)
                 sign = 1.0 + 2.0 * (lk >> 31)
-                fx += sign * pair[e, 0]
-                fy += sign * pair[e, 1]
-                fz += sign * pair[e, 2]
+                fx += sign * pair[p, 0]
+                fy += sign * pair[p, 1]
+                fz += sign * pair[p, 2]
                 if friction:
-                    tx += pair[e, 3]
-                    ty += pair[e, 4]
-                    tz += pair[e, 5]
+                    tx += pair[p, 3]
+                    ty += pair[p, 4]
+                    tz += pair[p, 5]
             f[i, 0] = fx
             f[i, 1] = fy
             f[i, 2] = fz
