@@ -19,6 +19,7 @@ from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of, stamp_of
 from .particle import INV_I, R  # noqa: F401 (INV_I: its old home, kept importable)
+from .prefetch import prefetch_row
 
 MODEL_HOOKE = 0
 MODEL_HERTZ = 1
@@ -185,6 +186,11 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 zi = x[b, 2]
                 for e in range(c0, c1):
                     j = np.uint64(cj[e])
+                    # the law reads the partner's v and omega after the block's screening: ask for
+                    # them now, as the partners a layer of cells up are not cached on a large pile
+                    prefetch_row(v, j)
+                    if friction:
+                        prefetch_row(omega, j)
                     dx = min_image(xi - x[j, 0], L_x, hx)
                     dy = min_image(yi - x[j, 1], L_y, hy)
                     dz = zi - x[j, 2]
