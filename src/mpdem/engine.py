@@ -28,9 +28,9 @@ from .kernels.neighbours import build_neighbours, cell_axis, link_entries
 
 # the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells (about)
 SORT_COLUMN = 16
-# room in the pair slots, a fraction of the near entries: they drift up by a few between filterings,
-# and a new array's first touch stalls the force pass (some 2 ms of page faults on the 20k pile,
-# which the other ranks wait out)
+# room in the ring store, a fraction of its places: its far places drift up by a few between
+# filterings, and a new array's first touch stalls the force pass (page faults, which the other
+# ranks wait out)
 PAIR_ROOM = 0.01
 # the force pass's block of rows: room for this many computed entries (or a row's longest list), in
 # which the contact law runs over a whole block's contacts (116 kB a chunk; 256 and 1024 time alike)
@@ -353,7 +353,7 @@ class Engine:
         """Each near entry's place in the ring store (``kernels.pairstore``); the store grown if short."""
         n = self.state.n_own
         room = self._found.shape[1]
-        # every chunk's ring no longer than its entries need, at least 4 blocks long where shorter
+        # PAIR_RING places, or 4 blocks of the pass if more; never more than a chunk's entries
         most = max(int(self.near_cstart[(c + 1) * n // self.nchunk] - self.near_cstart[c * n // self.nchunk])
                    for c in range(self.nchunk))
         ring = 1 << max(PAIR_RING - 1, 4 * room - 1).bit_length()
