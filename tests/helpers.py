@@ -22,6 +22,22 @@ MPIEXEC = Path(sys.executable).parent / "mpiexec"
 CLUSTER_VARS = ("MPDEM_", "SLURM_", "PBS_")
 
 
+def tight_lattice(seed=3, a=0.997, m=9):
+    """A jittered m x m x m cubic lattice of spacing a, a little tighter than touching (some 3
+    contacts a sphere from the start), lifted 0.5 d, with random v and omega and its lowest layer
+    frozen (rows the force pass skips, partners of infinite mass).
+
+    Returns x, v, omega (n, 3), fixed (n,) uint8 and the box side L = a m [d].
+    """
+    g = np.random.default_rng(seed)
+    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    x += 0.004 * g.standard_normal(x.shape)
+    x[:, 2] += 0.5
+    v = 0.05 * g.standard_normal(x.shape)
+    omega = 0.1 * g.standard_normal(x.shape)
+    return x, v, omega, (x[:, 2] < a).astype(np.uint8), a * m
+
+
 def make_engine(x, v=None, omega=None, fixed=None, L=10.0, **phys):
     """An Engine over the given particles (ids 0..n-1) with set-up done."""
     k_n = phys.pop("k_n", 2e5)

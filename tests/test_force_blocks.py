@@ -3,7 +3,7 @@ blocks of a few rows and blocks of hundreds give the same trajectory, with and w
 import numpy as np
 import pytest
 
-from helpers import make_engine
+from helpers import make_engine, tight_lattice
 from mpdem import engine
 from mpdem.io.checkpoint import digest, gather_state
 from mpdem.kernels.bundles import Scratch
@@ -12,18 +12,8 @@ from mpdem.kernels.forces import contact_forces_serial
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_blocks_of_any_size_give_the_same_bits(mu, monkeypatch):
-    # a jittered cubic lattice a little tighter than touching: some 3 contacts a sphere from the start
-    g = np.random.default_rng(3)
-    a, m = 0.997, 9
-    L = a * m
-    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
-    x += 0.004 * g.standard_normal(x.shape)
-    x[:, 2] += 0.5
+    x, v, omega, fixed, L = tight_lattice(3)
     n = len(x)
-    v = 0.05 * g.standard_normal(x.shape)
-    omega = 0.1 * g.standard_normal(x.shape)
-    # the lowest layer frozen: rows the pass skips, and partners of infinite mass
-    fixed = (x[:, 2] < a).astype(np.uint8)
     runs = []
     for block in (1, engine.FORCE_BLOCK):
         monkeypatch.setattr(engine, "FORCE_BLOCK", block)
@@ -46,11 +36,8 @@ def test_blocks_of_any_size_give_the_same_bits(mu, monkeypatch):
 
 
 def test_scratch_narrower_than_a_row_is_an_error_not_an_endless_loop():
-    g = np.random.default_rng(4)
-    a, m = 0.997, 5
-    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
-    x += 0.004 * g.standard_normal(x.shape)
-    eng = make_engine(x, L=a * m, mu=0.5, gamma_t=10.0)
+    x, _, _, _, L = tight_lattice(4, m=5)
+    eng = make_engine(x, L=L, mu=0.5, gamma_t=10.0)
     eng.advance(2)
     longest = int(np.diff(eng.near_cstart[:eng.state.n_own + 1]).max())
     assert longest >= 2

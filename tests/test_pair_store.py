@@ -8,25 +8,15 @@ without friction, on one chunk and on three.
 import numpy as np
 import pytest
 
-from helpers import make_engine
+from helpers import make_engine, tight_lattice
 from mpdem import engine
 from mpdem.io.checkpoint import digest, gather_state
+from mpdem.kernels.bundles import Near
 from mpdem.kernels.pairstore import pair_places
 
 
-def _pile(seed=3, a=0.997, m=9):
-    # a jittered cubic lattice a little tighter than touching, its lowest layer frozen
-    g = np.random.default_rng(seed)
-    x = a * (np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
-    x += 0.004 * g.standard_normal(x.shape)
-    x[:, 2] += 0.5
-    v = 0.05 * g.standard_normal(x.shape)
-    omega = 0.1 * g.standard_normal(x.shape)
-    return x, v, omega, (x[:, 2] < a).astype(np.uint8), a * m
-
-
 def _run(mu, nchunk, keep, monkeypatch, ring=None):
-    x, v, omega, fixed, L = _pile()
+    x, v, omega, fixed, L = tight_lattice(3)
     if ring:
         monkeypatch.setattr(engine, "FORCE_BLOCK", 1)
         monkeypatch.setattr(engine, "PAIR_RING", ring)
@@ -80,7 +70,6 @@ def test_the_places_keep_every_entry_until_its_partner_reads_it():
         taken = [~int(cstart[j - back[j]] + which[j])] if takes[j] else []
         links += taken + own
         starts.append(len(links))
-    from mpdem.kernels.bundles import Near
     k_near = int(cstart[n])
     near = Near(np.array(starts, np.int64), np.array(links, np.int32), cstart, np.zeros(k_near, np.int32),
                 np.zeros(k_near, np.int32), np.zeros(k_near, np.int32))

@@ -38,8 +38,9 @@ def pair_places(n_own, near, width, ring, nchunk, cpair, plink):
     width : int
         The force pass's block scratch ``W`` (``Scratch.found.shape[1]``).
     ring : int
-        Places of each chunk's ring, a power of two (> width; a ring at least as long
-        as a chunk's entries gives every entry a place of its own).
+        Places of each chunk's ring, a power of two: longer than ``width`` (the engine
+        makes it at least 4 widths), or at least as long as every chunk's entries, which
+        then all keep their ring places.
     nchunk : int
         The chunks of the near lists' links.
     cpair : (>= K_near,) int32, out
