@@ -239,3 +239,22 @@ def test_a_reference_is_known_by_its_inputs_not_their_paths():
     assert key(paths[0]) != key(paths[1], "contact.mu=0.25")
     pile = [*PILE, "run.max_steps=10"]
     assert reference_key(config.load(None, pile)) != reference_key(config.load(None, pile + ["run.max_steps=7"]))
+
+
+def test_slabs_balanced_by_work_match_one_rank(comm, monkeypatch):
+    """Bounds moved by the measured work (``decomp.balance_by = work``), with rank 0's seconds
+    made three times what it measured so that they do move at every rebuild: the digest of one rank."""
+    cfg = config.load(None, PILE + ["run.max_steps=20000", "decomp.balance_by=work", "decomp.balance_tolerance=0.02"])
+    base = shared_dir(comm)
+    if comm.Get_size() > 1 and comm.Get_rank() == 0:
+        from mpdem.decomp import Domain
+        rebuild = Domain.rebuild
+        monkeypatch.setattr(Domain, "rebuild", lambda self, state, work=0.0: rebuild(self, state, 3.0 * work))
+    r, s = run(cfg, os.path.join(base, "w"), comm)
+    monkeypatch.undo()
+    ref = serial_digest(cfg, os.path.join(base, "ws"), comm)
+    if comm.Get_size() > 1:
+        assert r.domain.by_work
+        assert r.domain.n_rebalances >= 3
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref

@@ -122,3 +122,31 @@ def test_migration_carries_every_migrating_field(comm):
     for k in MOVE_FIELDS:
         assert after[k].dtype == before[k].dtype and after[k].tobytes() == before[k].tobytes(), k
     assert int(dom.sum_int(np.array([dom.n_migrated]))[0]) > 0 or comm.Get_size() == 1
+
+
+def test_work_balance_splits_the_measured_seconds(comm):
+    """Rank 0 reports twice the seconds of every other rank for the same number of particles:
+    with ``by_work`` and no damping, its slab shrinks until its particles, each carrying its
+    old rank's seconds over its particles, hold 1/P of the whole; the counts stay balanced while
+    a rank has measured nothing; every particle is still owned once."""
+    P, r = comm.Get_size(), comm.Get_rank()
+    whole = column()
+    mobile = int((whole["fixed"] == 0).sum())
+    dom = Domain(comm, r_list=1.2, tolerance=0.05, damping=1.0, by_work=True)
+    st = dom.scatter(whole, 5.0, 5.0)
+    counts = comm.allgather(int((st.fixed[:st.n_own] == 0).sum()))
+    # no rank measured anything yet: the counts decide, and they are balanced
+    dom.rebuild(st, 0.0)
+    assert dom.n_rebalances == 0
+    dom.rebuild(st, 2.0 if r == 0 else 1.0)
+    after = comm.allgather(int((st.fixed[:st.n_own] == 0).sum()))
+    assert sum(after) == mobile
+    if P == 1:
+        assert dom.n_rebalances == 0
+        return
+    assert dom.n_rebalances == 1
+    # rank 0's particles cost 2 / n0 each, the others' 1 / n_r: rank 0 keeps the k with 2 k / n0 = (P + 1) / P
+    want = counts[0] * (P + 1) / (2 * P)
+    assert abs(after[0] - want) <= 1.0
+    assert after[0] < counts[0]
+    assert len(gather_owned(comm, st)) == N

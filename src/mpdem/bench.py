@@ -269,8 +269,7 @@ def run_table_bench(args, net):
     # every rank reads the same table, so a bad table stops every rank alike
     whole, L_x, L_y = load_table(args.table, cfg, args.tile, say=lambda msg: say(f"bench: warning: {msg}"))
     n_atoms, n_mobile = len(whole["id"]), int((whole["fixed"] == 0).sum())
-    dom = Domain(net, r_list=1.0 + phys.skin, tolerance=cfg.decomp.balance_tolerance,
-                 damping=cfg.decomp.balance_damping)
+    dom = Domain.from_config(net, cfg)
     st = dom.scatter(whole, L_x, L_y)
     del whole
     eng = Engine(st, phys, dom)
@@ -289,8 +288,9 @@ def run_table_bench(args, net):
 def after_loop(eng, dom, st, baseline, phases):
     """Figures taken after the timed loop (collectives: every rank calls this).
 
-    Returns contacts (global, both partners counted), E_k [m g d], imbalance,
-    per_rank (each rank's seconds per phase, from ``phases`` = (before, after) clocks),
+    Returns contacts (global, both partners counted), E_k [m g d], imbalance (``Domain.imbalance``)
+    and what it is of (balanced: "work" or "owned"), per_rank (each rank's seconds per phase, from
+    ``phases`` = (before, after) clocks),
     grown (peak RSS - baseline summed over ranks [bytes]), peak (largest
     process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed), threads.
     """
@@ -298,7 +298,8 @@ def after_loop(eng, dom, st, baseline, phases):
     et, er = eng.kinetic()
     before, after = phases
     spent = {k: after[k] - before[k] for k in before}
-    return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st), per_rank=dom.allgather(spent),
+    return dict(contacts=eng.contacts(), ek=et + er, imbalance=dom.imbalance(st),
+                balanced="work" if dom.work_imbalance is not None else "owned", per_rank=dom.allgather(spent),
                 grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
                 engine_bytes=int(dom.sum_int(np.array([eng.memory_bytes()]))[0]),
                 threads=count())
@@ -317,7 +318,7 @@ def report_lines(fig):
         f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s), {fig['steps']} steps in "
         f"{fig['wall_max']:.2f} s (after {WARMUP_STEPS} untimed), {fig['rebuilds']} list rebuilds, contacts per "
         f"mobile particle {fig['contacts'] / n_mob:.2f}, E_k/N {fig['ek'] / n_mob:.2e}"
-        + (f", imbalance (max/mean owned) {fig['imbalance']:.2f}" if par else ""),
+        + (f", imbalance (max/mean {fig['balanced']}) {fig['imbalance']:.2f}" if par else ""),
         "bench: the loop by phase" + (" (rank 0's loop)" if par else "") + ":",
         *phase_lines(*fig["phases"], fig["wall"]),
         *(["bench: seconds per rank: " + "; ".join(

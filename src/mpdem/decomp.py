@@ -6,9 +6,13 @@ At neighbour-list rebuilds (``rebuild``):
 
 1. migrate: owned particles that left the slab go to their owner, with
    force, torque and contact slots;
-2. rebalance: when max/mean owned mobile particles exceeds
-   ``1 + tolerance``, the inner bounds move (damped) toward the quantiles of
-   all mobile z, and particles migrate again;
+2. rebalance: when max/mean over the ranks of the balanced measure exceeds
+   ``1 + tolerance``, the inner bounds move (damped) toward the heights that
+   split it equally, and particles migrate again. The measure is the owned
+   mobile particles, or with ``by_work`` each rank's compute seconds since
+   the last rebuild (the engine's, without communication): the bounds then
+   split all mobile heights into equal sums of each particle's share of its
+   rank's work (a rank's seconds over its particles);
 3. halo: every rank receives the particles within ``r_list`` of its slab
    from the ranks whose slabs reach that far (not only the next ones, so a
    slab thinner than the halo still gets its ghosts right); the plan is kept
@@ -49,14 +53,19 @@ class Domain:
     r_list : float
         Halo width: contact distance plus skin [d].
     tolerance, damping : float
-        Rebalance when max/mean owned > 1 + tolerance; move bounds by this
-        fraction of the way to the balanced ones.
+        Rebalance when max/mean of the measure > 1 + tolerance; move bounds by
+        this fraction of the way to the balanced ones.
+    by_work : bool
+        Balance the measured work (``rebuild``'s ``work``), not the counts.
     """
 
-    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5):
+    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False):
         self.net = channel(net)
         self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
+        self.by_work = by_work
+        # max/mean of the ranks' work at the last rebuild (None: not balancing work, or not measured)
+        self.work_imbalance = None
         self.bounds = np.array([-math.inf] + [math.inf] * self.size)
         self.n_migrated = 0
         self.n_rebalances = 0
@@ -98,13 +107,28 @@ class Domain:
         """Rank owning each height z (array of int)."""
         return np.searchsorted(self.bounds[1:-1], z, side="right")
 
-    def balanced_bounds(self, z_mobile_all):
-        """Inner bounds splitting the sorted mobile heights into equal counts."""
-        z = np.sort(z_mobile_all)
-        n, P = len(z), self.size
+    @classmethod
+    def from_config(cls, net, cfg):
+        """The Domain of a run's Config: halo 1 + ``integration.skin``, the ``decomp`` keys."""
+        d = cfg.decomp
+        return cls(net, r_list=1.0 + cfg.integration.skin, tolerance=d.balance_tolerance,
+                   damping=d.balance_damping, by_work=d.balance_by == "work")
+
+    def balanced_bounds(self, z_mobile_all, cost=None):
+        """Inner bounds splitting the mobile heights into equal counts, or equal sums of
+        ``cost`` (one positive value per height) if given."""
+        n, P = len(z_mobile_all), self.size
+        if cost is None:
+            z = np.sort(z_mobile_all)
+            below = [(r * n) // P for r in range(1, P)]
+        else:
+            order = np.argsort(z_mobile_all, kind="stable")
+            z = z_mobile_all[order]
+            total = np.cumsum(cost[order])
+            # the fewest lowest heights whose cost reaches r / P of the whole
+            below = [int(np.searchsorted(total, total[-1] * r / P)) + 1 if n else 0 for r in range(1, P)]
         inner = []
-        for r in range(1, P):
-            k = (r * n) // P
+        for k in below:
             if n == 0:
                 inner.append(0.0)
             elif k <= 0:
@@ -150,8 +174,12 @@ class Domain:
         return _local_state(a, np.arange(len(a["id"])), L_x, L_y)
 
     # -- particle movement --
-    def rebuild(self, state):
-        """Migrate, rebalance if uneven, then build the halo (ghost rows)."""
+    def rebuild(self, state, work=0.0):
+        """Migrate, rebalance if uneven, then build the halo (ghost rows).
+
+        ``work``: this rank's compute seconds since the last rebuild [s] (the measure
+        with ``by_work``; counts are balanced until every rank has measured some).
+        """
         state.n_rows = state.n_own
         if self._plan is not None:
             self._plan.free()
@@ -159,12 +187,26 @@ class Domain:
         if not self.parallel:
             return
         self._migrate(state)
-        counts = self._owned_counts(state)
-        mean = counts.sum() / self.size
-        if mean > 0 and counts.max() / mean > 1.0 + self.tolerance:
+        measure = self._owned_counts(state)
+        works = None
+        if self.by_work:
+            works = np.array(self.allgather(float(work)))
+            if np.all(works > 0.0) and np.all(np.isfinite(works)):
+                measure = works
+                self.work_imbalance = float(works.max() / works.mean())
+            else:
+                works = None
+                self.work_imbalance = None
+        mean = measure.sum() / self.size
+        if mean > 0 and measure.max() / mean > 1.0 + self.tolerance:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
-            z_all = np.concatenate(self.allgather(zs))
-            target = self.balanced_bounds(z_all)
+            parts = self.allgather(zs)
+            z_all = np.concatenate(parts)
+            cost = None
+            if works is not None:
+                # each particle carries its rank's seconds over its particles
+                cost = np.concatenate([np.full(len(p), w / max(len(p), 1)) for p, w in zip(parts, works)])
+            target = self.balanced_bounds(z_all, cost)
             self.bounds[1:-1] += self.damping * (target - self.bounds[1:-1])
             # keep the bounds ordered (damping of ordered targets keeps them so)
             self.bounds[1:-1] = np.maximum.accumulate(self.bounds[1:-1])
@@ -266,9 +308,13 @@ class Domain:
         return self.sum_int(np.eye(self.size, dtype=np.int64)[self.rank] * mob)
 
     def imbalance(self, state):
-        """max / mean owned mobile particles over ranks (1 on one rank)."""
+        """max / mean over ranks of what the slabs balance (1 on one rank): with ``by_work``
+        the compute seconds of the last interval between rebuilds once every rank measured
+        some, else the owned mobile particles (a collective)."""
         if not self.parallel:
             return 1.0
+        if self.work_imbalance is not None:
+            return self.work_imbalance
         counts = self._owned_counts(state)
         mean = counts.sum() / self.size
         return float(counts.max() / mean) if mean else 1.0

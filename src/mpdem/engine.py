@@ -172,6 +172,7 @@ class Engine:
         self.info = StepInfo()    # the newest step's (each step makes a new one)
         self.n_contacts = 0       # contacts of the whole pile at the last count (``contacts``)
         self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
+        self._work_mark = 0.0    # the sum of ``timers`` at the last rebuild
         self.last_overlap = 0.0  # this rank's largest overlap of the last force evaluation
         self._contacts = 0       # this rank's contacts of the last force evaluation
 
@@ -285,7 +286,10 @@ class Engine:
         self.hist = np.zeros((0, 3))
         if self.n_rebuilds % self.sort_every == 0:
             self._sort_rows()
-        self.domain.rebuild(s)
+        # the slabs may be balanced by the compute seconds since the last rebuild (``Domain.rebuild``)
+        spent = sum(self.timers.values())
+        self.domain.rebuild(s, spent - self._work_mark)
+        self._work_mark = spent
         if len(self.nbr_start) < s.n_own + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
         # a list buffer too short for a chunk's share is grown and the build run again

@@ -143,8 +143,7 @@ class Run:
     def __init__(self, cfg, out_dir, net=None, *, target=None, lammps_initial=None, quiet=False, walltime=None,
                  margin=None, t_start=None, signals=None):
         self.cfg, self.out = cfg, out_dir
-        self.domain = Domain(net, r_list=1.0 + cfg.integration.skin,
-                             tolerance=cfg.decomp.balance_tolerance, damping=cfg.decomp.balance_damping)
+        self.domain = Domain.from_config(net, cfg)
         self.rank = self.domain.rank
         if self.rank == 0:
             for d in (out_dir, os.path.join(out_dir, rundir.CKPT_DIR)):
