@@ -187,14 +187,16 @@ class Domain:
         if not self.parallel:
             return
         self._migrate(state)
+        measure = self._owned_counts(state)
         works = None
         if self.by_work:
             works = np.array(self.allgather(float(work)))
-            if not (np.all(works > 0.0) and np.all(np.isfinite(works))):
+            if np.all(works > 0.0) and np.all(np.isfinite(works)):
+                measure = works
+                self.work_imbalance = float(works.max() / works.mean())
+            else:
                 works = None
-            self.work_imbalance = None if works is None else float(works.max() / works.mean())
-        # every rank has the same works, so every rank takes the same branch (a collective)
-        measure = self._owned_counts(state) if works is None else works
+                self.work_imbalance = None
         mean = measure.sum() / self.size
         if mean > 0 and measure.max() / mean > 1.0 + self.tolerance:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
