@@ -1,7 +1,14 @@
-import pytest
+import os
 
-from helpers import make_engine
-from mpdem.kernels.calls import Bound
+# the GPU engine's tests run under numba's CUDA simulator unless MPDEM_REAL_GPU=1 (tools/gpu_check.sh);
+# set before anything imports numba, and inherited by the runs the tests start
+if os.environ.get("MPDEM_REAL_GPU") != "1":
+    os.environ["NUMBA_ENABLE_CUDASIM"] = "1"
+
+import pytest  # noqa: E402
+
+from helpers import make_engine  # noqa: E402
+from mpdem.kernels.calls import Bound  # noqa: E402
 
 # every 16th kernel call through an overload numba chose compares its argument types with the chosen ones
 Bound.check = 16

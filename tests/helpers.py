@@ -13,7 +13,8 @@ from mpdem.io import checkpoint
 from mpdem.analysis import bulk
 from mpdem.config import gamma_n_from_epsilon
 from mpdem.decomp import Domain
-from mpdem.engine import Engine, Physics
+from mpdem.engine.base import Physics
+from mpdem.engine.cpu import Engine
 from mpdem.state import State
 
 ROOT = Path(__file__).resolve().parents[1]

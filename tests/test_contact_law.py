@@ -43,7 +43,7 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
                 dt=1e-4, increment=True, model=0, limit_damping=False, rotate=False):
     """One call of the force kernel on two particles; returns f, torque, the
     contact flags (2,) and Delta s (2, 3) of the two views, and the kernel's result."""
-    from mpdem.kernels.forces import Law
+    from mpdem.kernels.law import Law
     x = np.array(x, float)
     v = np.array(v, float)
     omega = np.array(omega, float)
@@ -242,7 +242,7 @@ def test_same_bits_for_any_thread_and_chunk_count():
 
 def test_hertz_scales_spring_and_dashpot_by_sqrt_overlap():
     """docs/model.md 2.7: F = sqrt(delta/d) [k_n delta n - m_eff gamma_n v_n]."""
-    from mpdem.kernels.forces import MODEL_HERTZ
+    from mpdem.kernels.law import MODEL_HERTZ
     x = [[5.0, 5.0, 5.998], [5.0, 5.0, 5.0]]
     v = [[0, 0, -0.3], [0, 0, 0]]
     f_hooke = pair_kernel(x, v, np.zeros((2, 3)), None, mu=0.0, gamma_n=40.0)[0][0, 2]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from helpers import make_engine, tight_lattice
-from mpdem import engine
+from mpdem.engine import cpu as engine
 from mpdem.io.checkpoint import digest, gather_state
 from mpdem.kernels.bundles import Scratch
 from mpdem.kernels.forces import contact_forces_serial

@@ -231,8 +231,7 @@ def test_particle_constants_agree_with_each_other():
     assert particle.INV_I == 1.0 / particle.INERTIA and particle.HALF_I == 0.5 * particle.INERTIA
     assert particle.VOLUME == pytest.approx(4 / 3 * math.pi * particle.R ** 3, rel=1e-15)
     from mpdem.build import SPHERE_VOLUME
-    from mpdem.kernels.forces import INV_I, R                        # the old import paths
-    assert (INV_I, R, SPHERE_VOLUME) == (particle.INV_I, particle.R, particle.VOLUME)
+    assert SPHERE_VOLUME == particle.VOLUME
 
 
 def test_chunk_of_agrees_with_chunk_bounds():

@@ -7,7 +7,7 @@ import numpy as np
 
 from helpers import make_engine
 from mpdem.build import insert_random, rng
-from mpdem.engine import SORT_COLUMN
+from mpdem.engine.order import SORT_COLUMN
 from mpdem.io.checkpoint import digest, gather_state
 
 

@@ -87,6 +87,11 @@ def seconds(flag):
     return parse
 
 
+def device_items(args):
+    """``--device D`` as the --set item it stands for (engine.device=D); none without it."""
+    return [f"engine.device={args.device}"] if getattr(args, "device", None) else []
+
+
 def default_out():
     return os.path.join("runs", time.strftime("run-%Y%m%d-%H%M%S"))
 
@@ -95,7 +100,7 @@ def cmd_run(args, net):
     from . import api, config
     from .build import InputError
     try:
-        cfg = config.load_run_config(args.config, args.set)
+        cfg = config.load_run_config(args.config, args.set + device_items(args))
     except (config.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise config.AgreedError(str(e)) from None
     r = api.run(cfg, args.out or default_out(), threads=None, force=args.force, quiet=args.quiet,
@@ -108,7 +113,7 @@ def cmd_restart(args, net):
     from . import api
     r = api.restart(args.target, threads=None, quiet=args.quiet, walltime=args.walltime,
                     walltime_margin=args.walltime_margin, net=net, t_start=T_START, signals=SIGNALS,
-                    set_items=args.set)
+                    set_items=args.set + device_items(args))
     return r.exit_status
 
 
@@ -250,9 +255,11 @@ def parser():
     rs = sub.add_parser("restart", help="continue a run from its newest valid checkpoint or a state file")
     rs.add_argument("target", metavar="RUN_DIR|STATE_FILE")
     rs.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                    help="change run.max_steps, stop.*, checks.*, decomp.*, output.* or analysis.*")
+                    help="change run.max_steps, stop.*, checks.*, decomp.*, engine.*, output.* or analysis.*")
     rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
     for q in (r, rs):
+        q.add_argument("--device", choices=("cpu", "gpu"), default=None,
+                       help="what steps the particles (engine.device; default the config's, cpu)")
         q.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
                        help="numba threads per rank (default 1)")
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
@@ -277,6 +284,8 @@ def parser():
     b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
     b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",
                    help="numba threads per rank (default 1 with --table; numba's default otherwise)")
+    b.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="time the CPU engine (default) or the GPU engine (--table only)")
     b.add_argument("--tile", type=tile, default=(1, 1), metavar="NXxNY",
                    help="time NX x NY copies of the table side by side in x and y (e.g. 2x2)")
     b.add_argument("--N", type=int, default=20000, help="spheres of --io and --analysis (default 20000)")

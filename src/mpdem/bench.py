@@ -33,7 +33,9 @@ from .errors import InputError
 from .io import tables
 from .io import checkpoint
 from .decomp import Domain
-from .engine import Engine, Physics
+from .engine import make_engine
+from .engine.base import Physics
+from .engine.cpu import Engine
 from .parallel import channel
 from .state import FIELDS, INITIAL, PAIR, PARTICLE, State
 
@@ -114,7 +116,7 @@ def rss_peak():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-def warm_up_kernels(phys, L_x, L_y):
+def warm_up_kernels(phys, L_x, L_y, device="cpu"):
     """Compile (or load) the step's kernels on a tiny pile, so no timing or baseline includes it.
 
     A 3 x 3 bed with five mobile spheres resting on it, touching each other
@@ -126,7 +128,7 @@ def warm_up_kernels(phys, L_x, L_y):
     mob = np.array([[1.5, 1.5, 0.7], [2.5, 1.5, 0.7], [1.5, 2.495, 0.7], [2.5, 2.5, 0.7], [2.0, 2.0, 1.4]])
     x = np.concatenate([mob, bed])
     fixed = np.concatenate([np.zeros(len(mob), np.uint8), np.ones(len(bed), np.uint8)])
-    eng = Engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None))
+    eng = make_engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None), device)
     eng.start()
     eng.advance(WARMUP_STEPS)
     # a rebuild with contacts in the lists compiles the history's list-to-slot kernels too
@@ -263,7 +265,8 @@ def run_table_bench(args, net):
     rank = net.rank
     say = print if rank == 0 else (lambda msg: None)
     phys = Physics.from_config(cfg)
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y)
+    device = getattr(args, "device", "cpu")
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device)
     gc.collect()
     baseline = rss_now()
     # every rank reads the same table, so a bad table stops every rank alike
@@ -272,13 +275,13 @@ def run_table_bench(args, net):
     dom = Domain.from_config(net, cfg)
     st = dom.scatter(whole, L_x, L_y)
     del whole
-    eng = Engine(st, phys, dom)
+    eng = make_engine(st, phys, dom, device, cfg.engine.gpu_block)
     eng.start()
     eng.advance(WARMUP_STEPS)
     wall, rebuilds, before, after, steady = timed_loop(eng, dom, args.steps)
     fig = dict(table=args.table, tile=tuple(args.tile), n_atoms=n_atoms, n_mobile=n_mobile, L_x=L_x, L_y=L_y,
                cfg=cfg, ranks=dom.size, steps=args.steps, wall=wall, wall_max=dom.max(wall), rebuilds=rebuilds,
-               phases=(before, after), steadiness=dom.allgather(steady),
+               phases=(before, after), steadiness=dom.allgather(steady), device=getattr(eng, "device_name", "CPU"),
                **after_loop(eng, dom, st, baseline, (before, after)))
     for line in report_lines(fig):
         say(line)
@@ -315,7 +318,7 @@ def report_lines(fig):
         f"bench: case {os.path.basename(fig['table'])}{tiled}: {n} atoms = {fig['n_mobile']} mobile + "
         f"{n - fig['n_mobile']} bed, box {fig['L_x']:g} x {fig['L_y']:g}; {c.model} k_n = {c.k_n:g}, "
         f"gamma_t = {c.gamma_t:.6g}, mu = {c.mu:g}, dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}",
-        f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s), {fig['steps']} steps in "
+        f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s) on {fig['device']}, {fig['steps']} steps in "
         f"{fig['wall_max']:.2f} s (after {WARMUP_STEPS} untimed), {fig['rebuilds']} list rebuilds, contacts per "
         f"mobile particle {fig['contacts'] / n_mob:.2f}, E_k/N {fig['ek'] / n_mob:.2e}"
         + (f", imbalance (max/mean {fig['balanced']}) {fig['imbalance']:.2f}" if par else ""),

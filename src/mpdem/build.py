@@ -13,7 +13,8 @@ import numpy as np
 
 from .config import gamma_n_from_epsilon
 from .decomp import Domain
-from .engine import Engine, Physics
+from .engine.base import Physics
+from .engine.cpu import Engine
 from .errors import InputError
 from .kernels.bundles import make_box
 from .kernels.insert import rsa_insert

@@ -124,6 +124,13 @@ SCHEMA = (
        "stop with an error when an overlap exceeds this [d]", restart=True, physics=False),
     _k("checks", "escape_margin", 100.0,
        "warn when a particle rises this far above the insertion region [d]", restart=True, physics=False),
+    _k("engine", "device", "cpu",
+       "what steps the particles: 'cpu' (numba threads) or 'gpu' (one NVIDIA GPU per rank through numba-cuda; "
+       "`pip install .[gpu]`); the same bits either way, so a restart may change it", str, ("cpu", "gpu"),
+       restart=True, physics=False),
+    _k("engine", "gpu_block", 128,
+       "threads per block of the GPU engine's kernels (a power of two from 32 to 1024); no effect on results",
+       int, restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
@@ -471,6 +478,8 @@ def resolve(raw):
         if not ok:
             raise ConfigError(f"{key} = {vals[key]!r}: accepted {accepted}")
 
+    block = vals["engine.gpu_block"]
+    need("engine.gpu_block", 32 <= block <= 1024 and block & (block - 1) == 0, "a power of two from 32 to 1024")
     k_n = vals["contact.k_n"]
     need("contact.k_n", k_n > 0, "k_n > 0")
     if not 1e3 <= k_n <= 1e10:

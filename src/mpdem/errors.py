@@ -51,3 +51,7 @@ class AnalysisError(MpdemError, ValueError):
 
 class ThreadsError(MpdemError, ValueError):
     """A thread count that cannot be used."""
+
+
+class DeviceError(MpdemError, RuntimeError):
+    """The engine's device cannot be used: no GPU, no CUDA runtime, or numba-cuda missing."""

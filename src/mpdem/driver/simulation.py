@@ -28,7 +28,9 @@ from . import summary
 from ..io import rundir
 from ..config import collision_time
 from ..decomp import Domain
-from ..engine import Engine, Physics
+from ..engine import make_engine
+from ..engine import require as require_device
+from ..engine.base import Physics
 from ..errors import EXIT_RESTART
 from ..pairs import contact_pairs
 from .runstate import History, RunState  # noqa: F401 (simulation.History, the name of earlier versions)
@@ -143,6 +145,8 @@ class Run:
     def __init__(self, cfg, out_dir, net=None, *, target=None, lammps_initial=None, quiet=False, walltime=None,
                  margin=None, t_start=None, signals=None):
         self.cfg, self.out = cfg, out_dir
+        # a device that cannot run is one line before any work
+        require_device(cfg.engine.device)
         self.domain = Domain.from_config(net, cfg)
         self.rank = self.domain.rank
         if self.rank == 0:
@@ -170,7 +174,7 @@ class Run:
         self.snapshots.restore(rec.snapshots)
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
-        self.engine = Engine(self.state, self.physics, self.domain)
+        self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block)
         self.status = None          # "converged", "max_steps" or "interrupted"
         self.t0 = time.perf_counter()   # the loop's clock (started again when the loop starts)
         self.wall = 0.0             # the loop's wall time [s]

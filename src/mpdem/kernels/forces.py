@@ -9,42 +9,16 @@ history is read and written in place in the list slots (docs/computing.md,
 previous evaluation's is new and its Delta s starts from zero (docs/model.md
 2.4). Stored zeros are +0.0 (``x + 0.0``).
 """
-import math
-from typing import NamedTuple
-
 import numpy as np
 from numba import njit, prange
 
 from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of, stamp_of
-from .particle import INV_I, R  # noqa: F401 (INV_I: its old home, kept importable)
+from .law import (approach, contact_force, contact_torque, dot, floor_force, normal, normal_force, norm2, plane_slip,
+                  plane_torque, slip, spin, tangential)
+from .particle import R
 from .prefetch import prefetch_row
-
-MODEL_HOOKE = 0
-MODEL_HERTZ = 1
-# |F_t|^2 < SURE_STICK bound^2 implies sqrt(|F_t|^2) <= bound in floating point
-SURE_STICK = 1.0 - 1e-9
-
-
-class Law(NamedTuple):
-    """The contact law and step, as one record for the kernels (reduced units).
-
-    k_n, k_t : spring constants [m g / d]; gamma_n, gamma_t : damping rates
-    [sqrt(g/d)]; mu : Coulomb coefficient; gravity [g]; dt : time step [tau];
-    model : MODEL_HOOKE or MODEL_HERTZ; limit_damping, rescale_history : the
-    options of docs/model.md 2.2 and 2.4 (off in the reference model).
-    """
-    k_n: float
-    k_t: float
-    gamma_n: float
-    gamma_t: float
-    mu: float
-    gravity: float
-    dt: float
-    model: int
-    limit_damping: bool
-    rescale_history: bool
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -194,7 +168,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                     dx = min_image(xi - x[j, 0], L_x, hx)
                     dy = min_image(yi - x[j, 1], L_y, hy)
                     dz = zi - x[j, 2]
-                    r2 = dx * dx + dy * dy + dz * dz
+                    r2 = norm2(dx, dy, dz)
                     on = np.uint8(r2 < 1.0)
                     found[m, 0] = e
                     found[m, 1] = j
@@ -223,28 +197,18 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
             dx = sep[q, 0]
             dy = sep[q, 1]
             dz = sep[q, 2]
-            r = math.sqrt(sep[q, 3])
-            delta = 1.0 - r
+            delta, nx, ny, nz = approach(dx, dy, dz, sep[q, 3])
             if delta > max_overlap:
                 max_overlap = delta
-            rinv = 1.0 / r
-            nx = dx * rinv
-            ny = dy * rinv
-            nz = dz * rinv
             meff = 1.0 if fixed[j] else 0.5
             vrx = v[i, 0] - v[j, 0]
             vry = v[i, 1] - v[j, 1]
             vrz = v[i, 2] - v[j, 2]
-            vn = vrx * nx + vry * ny + vrz * nz
-            fn, scale = _normal(delta, vn, meff, law)
+            vn = dot(vrx, vry, vrz, nx, ny, nz)
+            fn, scale = normal(delta, vn, meff, law)
             if friction:
-                # R_i omega_i + R_j omega_j: a symmetric sum, the same in both views
-                wx = R * omega[i, 0] + R * omega[j, 0]
-                wy = R * omega[i, 1] + R * omega[j, 1]
-                wz = R * omega[i, 2] + R * omega[j, 2]
-                tangent[q, 0] = vrx - vn * nx - (wy * nz - wz * ny)
-                tangent[q, 1] = vry - vn * ny - (wz * nx - wx * nz)
-                tangent[q, 2] = vrz - vn * nz - (wx * ny - wy * nx)
+                wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
+                tangent[q, 0], tangent[q, 1], tangent[q, 2] = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
                 tangent[q, 3] = nx
                 tangent[q, 4] = ny
                 tangent[q, 5] = nz
@@ -255,9 +219,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 stamp[np.uint64(cslot[e])] = now
                 p = np.uint64(cpair[e])
                 # the partner's view is the exact negative (n flips sign, fn is the same)
-                pair[p, 0] = fn * nx
-                pair[p, 1] = fn * ny
-                pair[p, 2] = fn * nz
+                pair[p, 0], pair[p, 1], pair[p, 2] = normal_force(fn, nx, ny, nz)
         if friction:
             for q in range(np.uint64(0), m):
                 e = np.uint64(found[q, 0])
@@ -269,7 +231,7 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 ny = tangent[q, 4]
                 nz = tangent[q, 5]
                 fn = tangent[q, 6]
-                sx, sy, sz, ftx, fty, ftz = _tangential(
+                sx, sy, sz, ftx, fty, ftz = tangential(
                     (hist[g, 0] if was else 0.0, hist[g, 1] if was else 0.0, hist[g, 2] if was else 0.0),
                     (tangent[q, 0], tangent[q, 1], tangent[q, 2]), (nx, ny, nz), tangent[q, 7], tangent[q, 8],
                     abs(fn), law, increment)
@@ -279,13 +241,9 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                 hist[g, 2] = sz + 0.0
                 p = np.uint64(cpair[e])
                 # the partner's view is the exact negative (n and F_t flip sign, fn is the same)
-                pair[p, 0] = fn * nx + ftx
-                pair[p, 1] = fn * ny + fty
-                pair[p, 2] = fn * nz + ftz
+                pair[p, 0], pair[p, 1], pair[p, 2] = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
                 # T_i += -R n x F_t (the same for both partners)
-                pair[p, 3] = -(R * (ny * ftz - nz * fty))
-                pair[p, 4] = -(R * (nz * ftx - nx * ftz))
-                pair[p, 5] = -(R * (nx * fty - ny * ftx))
+                pair[p, 3], pair[p, 4], pair[p, 5] = contact_torque(nx, ny, nz, ftx, fty, ftz)
         for i in range(b0, b):
             if fixed[i]:
                 for a in range(3):
@@ -320,108 +278,6 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     return max_overlap, n_contacts
 
 
-@njit(cache=True, inline="always")
-def _normal(delta, vn, meff, law):
-    """Normal force of docs/model.md 2.2 (Hooke) or 2.7 (Hertz), and the Hertz scale sqrt(delta).
-
-    fn = k_n delta - m_eff gamma_n v_n, times sqrt(delta) for Hertz (1 for Hooke:
-    1.0 * y == y, so the multiplication is left out); clipped at 0 with ``limit_damping``.
-    """
-    scale = 1.0
-    fn = law.k_n * delta - meff * law.gamma_n * vn
-    if law.model == MODEL_HERTZ:
-        scale = math.sqrt(delta)
-        fn = scale * fn
-    if law.limit_damping and fn < 0.0:
-        fn = 0.0
-    return fn, scale
-
-
-@njit(cache=True, inline="always")
-def _tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
-    """History update, projection and Coulomb truncation of docs/model.md 2.4.
-
-    Parameters
-    ----------
-    ds : (3,) tuple of float
-        Delta s before this step [d] (zeros for a new contact).
-    vt : (3,) tuple of float
-        Tangential relative velocity at the contact point [sqrt(g d)].
-    nrm : (3,) tuple of float
-        Unit normal n.
-    scale : float
-        sqrt(delta) for Hertz (``_normal``); not read for Hooke.
-    meff : float
-        Effective mass [m].
-    fn_mag : float
-        |f_n| [m g], the Coulomb bound's normal force.
-    law : Law
-    increment : bool
-        False on the set-up evaluation (no history increment).
-
-    Returns the new Delta s (3) [d] and the tangential force on i (3) [m g].
-    """
-    sx, sy, sz = ds
-    vtx, vty, vtz = vt
-    nx, ny, nz = nrm
-    k_t, gamma_t, mu, dt = law.k_t, law.gamma_t, law.mu, law.dt
-    rescale_history = law.rescale_history
-    if increment:
-        sx += vtx * dt
-        sy += vty * dt
-        sz += vtz * dt
-    s_old = 0.0
-    if rescale_history:
-        # the length the projection must not change: that of the incremented history
-        s_old = math.sqrt(sx * sx + sy * sy + sz * sz)
-    sn = sx * nx + sy * ny + sz * nz
-    sx -= sn * nx
-    sy -= sn * ny
-    sz -= sn * nz
-    if rescale_history:
-        s_new = math.sqrt(sx * sx + sy * sy + sz * sz)
-        if s_new > 0.0 and s_old > 0.0:
-            q = s_old / s_new
-            sx *= q
-            sy *= q
-            sz *= q
-    if law.model == MODEL_HERTZ:
-        ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
-        fty = -scale * (k_t * sy + meff * gamma_t * vty)
-        ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
-    else:
-        # Hooke's scale is 1: -1.0 * y == -y
-        ftx = -(k_t * sx + meff * gamma_t * vtx)
-        fty = -(k_t * sy + meff * gamma_t * vty)
-        ftz = -(k_t * sz + meff * gamma_t * vtz)
-    ft2 = ftx * ftx + fty * fty + ftz * ftz
-    bound = mu * fn_mag
-    # |F_t|^2 well below bound^2 means sticking; only near or past the bound is the exact
-    # test sqrt(ft2) > bound needed (the margin covers the rounding of both sides, ~1e-16)
-    if ft2 >= SURE_STICK * (bound * bound) and math.sqrt(ft2) > bound:
-        ft_mag = math.sqrt(ft2)
-        if sx == 0.0 and sy == 0.0 and sz == 0.0:
-            ftx = 0.0
-            fty = 0.0
-            ftz = 0.0
-        else:
-            s = bound / ft_mag
-            ftx *= s
-            fty *= s
-            ftz *= s
-            if k_t > 0.0:
-                # history that reproduces the truncated force exactly
-                cg = meff * gamma_t / k_t
-                sx = s * (sx + cg * vtx) - cg * vtx
-                sy = s * (sy + cg * vty) - cg * vty
-                sz = s * (sz + cg * vtz) - cg * vtz
-            else:
-                sx *= s
-                sy *= s
-                sz *= s
-    return sx, sy, sz, ftx, fty, ftz
-
-
 @njit(cache=True)
 def floor_forces(n_own, particles, k_n, gamma_n):
     """Add a flat frictionless floor at z = 0 (only for building the bed).
@@ -436,7 +292,7 @@ def floor_forces(n_own, particles, k_n, gamma_n):
             continue
         delta = R - x[i, 2]
         if delta > 0.0:
-            f[i, 2] += k_n * delta - gamma_n * v[i, 2]
+            f[i, 2] += floor_force(delta, v[i, 2], k_n, gamma_n)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -483,14 +339,13 @@ def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
                 wall_ds[i, 2] = 0.0
                 continue
             deepest = max(deepest, delta)
-            fn, scale = _normal(delta, v[i, 2], 1.0, law)
+            fn, scale = normal(delta, v[i, 2], 1.0, law)
             fz = fn
             if law.mu > 0.0:
                 # the contact point moves with v + R omega x (-n); n = (0, 0, 1)
-                vtx = v[i, 0] - R * omega[i, 1]
-                vty = v[i, 1] + R * omega[i, 0]
+                vtx, vty = plane_slip(v[i, 0], v[i, 1], omega[i, 0], omega[i, 1])
                 vtz = 0.0
-                sx, sy, sz, ftx, fty, ftz = _tangential(
+                sx, sy, sz, ftx, fty, ftz = tangential(
                     (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2]), (vtx, vty, vtz), (0.0, 0.0, 1.0),
                     scale, 1.0, abs(fn), law, increment)
                 wall_ds[i, 0] = sx + 0.0
@@ -500,8 +355,9 @@ def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
                 f[i, 1] += fty
                 fz += ftz
                 # T = -R n x F_t with n = (0, 0, 1)
-                torque[i, 0] += R * fty
-                torque[i, 1] += -(R * ftx)
+                tx, ty = plane_torque(ftx, fty)
+                torque[i, 0] += tx
+                torque[i, 1] += ty
             f[i, 2] += fz
         chunk_max[c] = deepest
     deepest = 0.0

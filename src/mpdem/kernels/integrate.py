@@ -7,15 +7,17 @@ from numba import njit, prange
 from .chunks import chunk_bounds
 from .exactsum import NLIMBS, add_exact
 from .geometry import min_image
-from .particle import HALF_I, INV_I
+from .law import drift, kicks, norm2
+from .particle import HALF_I
 
 
 @njit(cache=True, inline="always")
 def _half_kick(i, v, omega, f, torque, h):
     """v += h F / m and omega += h T / I for row i (m = 1, I = ``particle.INERTIA``); h [tau]."""
     for a in range(3):
-        v[i, a] += h * f[i, a]
-        omega[i, a] += h * INV_I * torque[i, a]
+        fa, ta = kicks(f[i, a], torque[i, a], h)
+        v[i, a] += fa
+        omega[i, a] += ta
 
 
 @njit(cache=True, parallel=True)
@@ -103,8 +105,7 @@ def _kick_drift_rows(lo, hi, particles, x_ref, dt, box, pending):
             continue
         # in registers: v, f and x are distinct arrays, which the compiler cannot know
         for a in range(3):
-            fa = h * f[i, a]
-            ta = h * INV_I * torque[i, a]
+            fa, ta = kicks(f[i, a], torque[i, a], h)
             va = v[i, a]
             wa = omega[i, a]
             if pending:
@@ -114,7 +115,7 @@ def _kick_drift_rows(lo, hi, particles, x_ref, dt, box, pending):
             wa += ta
             v[i, a] = va
             omega[i, a] = wa
-            x[i, a] += dt * va
+            x[i, a] = drift(x[i, a], va, dt)
         # one correction suffices: nothing moves a box length in one step
         if x[i, 0] >= L_x:
             x[i, 0] -= L_x
@@ -138,7 +139,7 @@ def _kick_drift_rows(lo, hi, particles, x_ref, dt, box, pending):
         dx = min_image(x[i, 0] - x_ref[i, 0], L_x, hx)
         dy = min_image(x[i, 1] - x_ref[i, 1], L_y, hy)
         dz = z - x_ref[i, 2]
-        d2 = dx * dx + dy * dy + dz * dz
+        d2 = norm2(dx, dy, dz)
         if d2 > max_d2:
             max_d2 = d2
     if bad:

@@ -1,4 +1,5 @@
-"""One velocity-Verlet time step over a rank's particles (ARCHITECTURE.md).
+"""The CPU engine: one velocity-Verlet time step over a rank's particles with numba's
+njit kernels and threads (ARCHITECTURE.md; the interface in ``engine/__init__.py``).
 
 The engine is arrays and kernels only: no files, no logging, no stop rules
 (those are in ``simulation``). It is used for the pile, for the bed-making
@@ -8,26 +9,24 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
-from .kernels import history
-from .kernels.balance import force_balance
-from .kernels.bundles import Lists, Near, Particles, Scratch, Slots, make_box
-from .kernels.calls import Bound
-from .kernels.exactsum import new_accumulator, to_float
-from .kernels.forces import (MODEL_HERTZ, MODEL_HOOKE, Law, contact_forces, contact_forces_serial, floor_forces,
-                             wall_forces)
-from .kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
-from .kernels.near import near_lists
-from .kernels.pairstore import pair_places
-from .kernels.neighbours import build_neighbours, cell_axis, link_entries
+from ..kernels import history
+from ..kernels.balance import force_balance
+from ..kernels.bundles import Lists, Near, Particles, Scratch, Slots, make_box
+from ..kernels.calls import Bound
+from ..kernels.exactsum import new_accumulator, to_float
+from ..kernels.forces import contact_forces, contact_forces_serial, floor_forces, wall_forces
+from ..kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
+from ..kernels.law import law_of
+from ..kernels.near import near_lists
+from ..kernels.pairstore import pair_places
+from ..kernels.neighbours import build_neighbours, link_entries
+from .base import NO_FLAGS, StepInfo
+from .order import sort_rows
 
 
-# the width of the columns of cells the rows are ordered by (``Engine._sort_rows``), in cells (about)
-SORT_COLUMN = 16
 # room in the ring store, a fraction of its places: its far places drift up by a few between
 # filterings, and a new array's first touch stalls the force pass (page faults, which the other
 # ranks wait out)
@@ -38,64 +37,6 @@ FORCE_BLOCK = 1024
 # places of each chunk's ring in the pair store (kernels/pairstore.py; 384 kB, within a core's L2),
 # raised to a power of two of at least 4 blocks of the force pass
 PAIR_RING = 8192
-
-
-@dataclass(frozen=True)
-class Physics:
-    """Scalars of the force law and integrator (reduced units)."""
-    k_n: float
-    k_t: float
-    gamma_n: float
-    gamma_t: float
-    mu: float
-    dt: float
-    skin: float = 0.2
-    near_skin: float = 0.03
-    gravity: float = 1.0
-    model: str = "hooke"
-    limit_damping: bool = False
-    rescale_history: bool = False
-    floor: bool = False         # temporary frictionless floor at z = 0 (bed making)
-    wall: bool = False          # the wall plane z = 0 under the bed (bed.wall)
-
-    @classmethod
-    def from_config(cls, cfg):
-        c = cfg.contact
-        return cls(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
-                   dt=cfg.integration.dt, skin=cfg.integration.skin, near_skin=cfg.integration.near_skin,
-                   gravity=cfg.box.gravity,
-                   model=c.model, limit_damping=c.limit_damping,
-                   rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
-
-
-class NoFlags(NamedTuple):
-    """The flags of a step that no driver watches (bed making, benchmarks, tests): none."""
-
-
-NO_FLAGS = NoFlags()
-
-
-class StepInfo(NamedTuple):
-    """What one step reports to the monitors, already reduced over ranks; a new record every step.
-
-    Attributes
-    ----------
-    max_overlap : float
-        Largest overlap of the previous force evaluation [d].
-    n_contacts : int
-        Contacts of the whole pile (counted from both partners) as of the last ``Engine.contacts()``.
-    z_min, z_max : float
-        Height range of the owned mobile rows after the drift [d]; z_min is NaN when a
-        position became NaN or infinite.
-    flags : NamedTuple of float
-        The driver's flags given to ``Engine.step``, each the max over ranks, as a record of the
-        same type (``simulation.StepFlags`` in a run; ``NoFlags`` without a driver).
-    """
-    max_overlap: float = 0.0
-    n_contacts: int = 0
-    z_min: float = math.inf
-    z_max: float = -math.inf
-    flags: tuple = NO_FLAGS
 
 
 class Engine:
@@ -120,14 +61,11 @@ class Engine:
     """
 
     def __init__(self, state, physics, domain):
-        from . import memory, threads
+        from .. import memory, threads
         memory.return_freed_memory()
         self.state, self.phys, self.domain = state, physics, domain
         state.wall = physics.wall
-        p = physics
-        self.law = Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu),
-                       float(p.gravity), float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE,
-                       bool(p.limit_damping), bool(p.rescale_history))
+        self.law = law_of(physics)
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
@@ -376,34 +314,8 @@ class Engine:
         self.link = np.zeros(size, np.int32)
 
     def _sort_rows(self):
-        """Order owned rows by cell so neighbours are near in memory: columns of about
-        ``SORT_COLUMN`` x ``SORT_COLUMN`` cells (the list build's), one after the
-        other, z-major inside each.
-
-        Sums run in partner-id order, so row order changes no result bit
-        (docs/computing.md, "The force sum: two passes per row").
-        """
-        s = self.state
-        n = s.n_own
-        if n < 2:
-            return
-        c = self.r_list
-        x = s.x[:n]
-        # the cells of the list build (neighbours._bin): nx x ny across the box, c tall
-        nx, ny = cell_axis(s.L_x, c), cell_axis(s.L_y, c)
-        ix = np.minimum(np.floor(x[:, 0] * (nx / s.L_x)), nx - 1).astype(np.int64)
-        iy = np.minimum(np.floor(x[:, 1] * (ny / s.L_y)), ny - 1).astype(np.int64)
-        iz = np.floor((x[:, 2] - x[:, 2].min()) / c).astype(np.int64)
-        # columns of about SORT_COLUMN x SORT_COLUMN cells (as many along an axis as fit, all
-        # about as wide: a thin column's rows would have their partners far away), each z-major
-        # inside: a row's partners stay within a few hundred rows of it however wide the pile
-        # (z-major over the whole layer put them a layer of cells away)
-        cx = max(int(round(nx / SORT_COLUMN)), 1)
-        cy = max(int(round(ny / SORT_COLUMN)), 1)
-        column = (iy * cy // ny) * cx + ix * cx // nx
-        nz = int(iz.max()) + 1
-        key = ((column * nz + iz) * ny + iy) * nx + ix
-        s.permute(np.argsort(key, kind="stable"))
+        """Order owned rows by cell (``order.sort_rows``): neighbours near in memory, no bit changed."""
+        sort_rows(self.state, self.r_list)
 
     # -- forces --
     def forces(self, increment=True, keep_pairs=False):

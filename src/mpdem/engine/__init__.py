@@ -1,0 +1,48 @@
+"""The engines that step a rank's particles, behind one interface (design.md, "Two engines, one result").
+
+Every engine is built as ``Engine(state, physics, domain)`` and offers:
+
+- ``start()`` / ``start_from_file(max_overlap, n_rebuilds)``: lists and the set-up evaluation
+  (from a state file: its forces kept), returning the first ``StepInfo``;
+- ``step(flags, defer_kick, keep_pairs)`` -> ``StepInfo``, ``advance(n)``, ``complete()``;
+- ``rebuild()``; ``kinetic()`` -> exact (translational, rotational) sums; ``contacts()``;
+  ``force_ratio()``; ``sync_state()`` (the state's rows and compact contact slots current for a reader,
+  attached as ``State.sync``); ``memory_bytes()``;
+- ``info``, ``last_overlap``, ``n_rebuilds``, ``timers`` ("forces", "lists", "integration").
+
+Two implementations: ``cpu.Engine`` (numba njit kernels and threads) and ``gpu.Engine`` (numba-cuda
+kernels on one GPU per rank). Both give the same bits (docs/computing.md, "One law, two targets"),
+so the driver, its schedules, the state files and the analysis do not know which one runs, and a
+run may change device at a restart (``engine.device``).
+"""
+from __future__ import annotations
+
+DEVICES = ("cpu", "gpu")
+
+
+def engine_class(device):
+    """The engine class of ``device`` ("cpu" or "gpu"); the GPU's imports numba-cuda, which
+    raises ``errors.DeviceError`` naming what is missing when no GPU or CUDA runtime is found."""
+    if device == "cpu":
+        from .cpu import Engine
+        return Engine
+    if device == "gpu":
+        from .gpu import Engine
+        return Engine
+    raise ValueError(f"engine.device = {device!r}: expected one of {', '.join(DEVICES)}")
+
+
+def require(device):
+    """Raise ``errors.DeviceError`` (one line) unless an engine of ``device`` can run here: called
+    before a run does any work."""
+    if device == "gpu":
+        from .gpu import require as gpu_require
+        gpu_require()
+
+
+def make_engine(state, physics, domain, device="cpu", gpu_block=128):
+    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``: the GPU
+    engine's threads per block (``engine.gpu_block``; no effect on results)."""
+    if device == "gpu":
+        return engine_class(device)(state, physics, domain, block=gpu_block)
+    return engine_class(device)(state, physics, domain)

@@ -1,0 +1,367 @@
+"""The GPU engine: one velocity-Verlet step over a rank's particles on one NVIDIA GPU (numba-cuda).
+
+The interface and its promises are ``engine/__init__.py``'s; the CPU engine's
+bits, because the step's arithmetic is the law's own source, explicitly
+rounded (``kernels/gpu``; docs/computing.md, "One law, two targets").
+
+Where the data lives. Between list rebuilds the rows (x, v, omega, f,
+torque, and the wall's Delta s), the neighbour lists and each entry's
+contact history are on the GPU, and a step copies one small record back
+(the reductions that steer the run). A rebuild brings the rows and the
+history to the host ``State``, where the domain migrates, balances and
+makes the ghosts as for the CPU engine, and the lists are built and sorted
+by partner id; then all of it goes back. With several ranks the ghost
+refresh of a step goes through the host the same way. A reader of the state
+(a checkpoint, a snapshot, a sample) has ``sync_state`` copy the rows and
+pack the history first, as ``State.sync``.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import DeviceError
+from ..kernels import history
+from ..kernels.balance import force_balance
+from ..kernels.bundles import Lists, Near, Particles, Slots, make_box
+from ..kernels.exactsum import new_accumulator, to_float
+from ..kernels.integrate import kinetic_energy
+from ..kernels.law import law_of
+from ..kernels.neighbours import build_neighbours
+from .base import NO_FLAGS, StepInfo
+from .order import sort_rows
+
+
+def require():
+    """Raise ``errors.DeviceError`` (one line: what is missing) unless a GPU engine can run here."""
+    _kernels()
+
+
+def _kernels():
+    """The GPU kernels (``kernels.gpu.step``), after checking that a GPU can be used."""
+    try:
+        from ..kernels.gpu import runtime
+    except ImportError as e:
+        raise DeviceError(f"engine.device = 'gpu' needs numba-cuda (pip install 'mpdem[gpu]'): {e}") from None
+    why = runtime.unavailable()
+    if why:
+        raise DeviceError(f"engine.device = 'gpu': {why}")
+    from ..kernels.gpu import step
+    return runtime.cuda, step
+
+
+def _device_name(cuda):
+    """The GPU's name ("NVIDIA H100 80GB HBM3"), or that of numba's simulator."""
+    from ..kernels.gpu.runtime import SIMULATOR
+    if SIMULATOR:
+        return "numba's CUDA simulator"
+    name = cuda.get_current_device().name
+    return name.decode() if isinstance(name, bytes) else str(name)
+
+
+class Engine:
+    """Advance a State with a Physics over a Domain on one GPU (the interface of ``engine``).
+
+    Parameters
+    ----------
+    state : State
+    physics : Physics
+    domain : Domain
+    block : int
+        Threads per block of the kernels (a power of two up to 1024; ``engine.gpu_block`` asks
+        for 32 at least); no effect on results.
+    blocks : int or None
+        Blocks a launch at most (each thread then takes several rows); None for one row a thread.
+        The tests under numba's simulator use a few threads: it runs each as a Python thread.
+
+    Attributes
+    ----------
+    timers : dict of float
+        Seconds in "forces", "lists" (rebuilds, with their copies between host and GPU) and
+        "integration" (with the step's copy of its reductions); communication is
+        ``domain.comm_seconds``.
+    """
+
+    def __init__(self, state, physics, domain, block=128, blocks=None):
+        self.cuda, self.k = _kernels()
+        if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
+            raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
+        from ..kernels.gpu.runtime import SIMULATOR
+        if SIMULATOR and blocks is None:
+            # numba's simulator runs every thread as a Python thread: a few threads, each many rows
+            block, blocks = 2, 2
+        # at most this many blocks a launch (None: one row a thread); the kernels take any grid
+        self.blocks = blocks
+        self.state, self.phys, self.domain = state, physics, domain
+        self.device_name = _device_name(self.cuda)
+        self.block = int(block)
+        state.wall = physics.wall
+        self.law = law_of(physics)
+        self.r_list = 1.0 + physics.skin
+        self.nbr_start = np.zeros(1, np.int64)
+        self.nbr_list = np.zeros(0, np.int32)
+        self._link = np.zeros(0, np.int32)
+        self.has_lists = False
+        self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
+        self._kick_due = False
+        self._pairs_kept = False
+        self._dev = {}            # the GPU's arrays by name (``_upload``)
+        self._red = self.cuda.to_device(np.zeros(4))
+        self._count = self.cuda.to_device(np.zeros(2, np.int64))
+        self.n_rebuilds = 0
+        self.info = StepInfo()
+        self.n_contacts = 0
+        self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
+        self._work_mark = 0.0
+        self.last_overlap = 0.0
+        self._contacts = 0
+        state.sync = self.sync_state
+
+    # -- between host and GPU --
+    def _grid(self, rows):
+        blocks = (max(rows, 1) + self.block - 1) // self.block
+        return (blocks if self.blocks is None else min(blocks, self.blocks)), self.block
+
+    def _rows_of(self):
+        """The row fields the GPU steps (names of ``State`` attributes)."""
+        return ("x", "v", "omega", "f", "torque") + (("wall_ds",) if self.phys.wall else ())
+
+    def _upload(self):
+        """Every row, the lists and the history to the GPU (after a rebuild)."""
+        s, d, cuda = self.state, self._dev, self.cuda
+        m = s.n_rows
+        for name in self._rows_of() + ("fixed",):
+            d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
+        d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
+        d["start"] = cuda.to_device(self.nbr_start[:s.n_own + 1])
+        k = max(len(self.nbr_list), 1)
+        d["nbr"] = cuda.to_device(self.nbr_list[:k] if len(self.nbr_list) else np.zeros(1, np.int32))
+        d["hist"] = cuda.to_device(self._hist[:k] if len(self._hist) else np.zeros((1, 3)))
+        d["stamp"] = cuda.to_device(self._stamp[:k] if len(self._stamp) else np.zeros(1, np.uint32))
+        d["pair"] = cuda.device_array((1, 6))
+        if "wall_ds" not in d:
+            d["wall_ds"] = cuda.device_array((1, 3))
+        self._pairs_kept = False
+
+    def _download_rows(self, names, rows):
+        """Copy the GPU's ``names`` rows 0..rows-1 into the host State."""
+        s, d = self.state, self._dev
+        for name in names:
+            if rows:
+                d[name][:rows].copy_to_host(getattr(s, name)[:rows])
+
+    def _download_history(self):
+        """Each list entry's Delta s and stamp from the GPU (host arrays)."""
+        k = len(self._link)
+        hist = self._dev["hist"].copy_to_host()[:k]
+        stamp = self._dev["stamp"].copy_to_host()[:k]
+        return hist, stamp
+
+    def _lists(self):
+        # every entry is computed by its own row: entry k is slot k (``kernels.history``'s link)
+        return Lists(self.nbr_start, self.nbr_list, self._link, self.nbr_start)
+
+    def sync_state(self):
+        """Bring the host State current for a reader (``State.sync``): the deferred half-kick, the
+        rows, and the contact history packed into the compact slots."""
+        self.complete()
+        s = self.state
+        if not self.has_lists or s.slots_current:
+            return
+        self._download_rows(self._rows_of(), s.n_own)
+        hist, stamp = self._download_history()
+        slots = Slots(hist, stamp, np.zeros((0, 6)))
+        n = s.n_own
+        total = history.count_contacts(n, self._lists(), slots, self._epoch, s.count, 1)
+        start = s.slot_offsets()
+        s.alloc_slots(total)
+        history.entries_to_slots(n, s.id, self._lists(), slots, self._epoch, start, s.partner, s.ds, 1)
+        s.slots_current = True
+        # the kept pair forces belong to the packed evaluation's scratch (as the CPU engine's)
+        self._pairs_kept = False
+
+    # -- neighbour lists --
+    def rebuild(self):
+        """Rows and history to the host; migrate/halo (domain); lists sorted by partner id; all back."""
+        t = time.perf_counter()
+        c0 = self.domain.comm_seconds
+        s = self.state
+        if self.has_lists:
+            self.sync_state()
+        sort_rows(s, self.r_list)
+        spent = sum(self.timers.values())
+        self.domain.rebuild(s, spent - self._work_mark)
+        self._work_mark = spent
+        n = s.n_own
+        if len(self.nbr_start) < n + 1:
+            self.nbr_start = np.zeros(s.capacity + 1, np.int64)
+        if not len(self.nbr_list):
+            self.nbr_list = np.zeros(max(16 * n, 64), np.int32)
+        box = make_box(s.L_x, s.L_y)
+        while True:
+            need = build_neighbours(s.x, s.n_rows, n, s.fixed, s.id, box, self.r_list, self.nbr_start,
+                                    self.nbr_list, 1)
+            if need <= len(self.nbr_list):
+                break
+            self.nbr_list = np.zeros(int(need * 1.1) + 64, np.int32)
+        k = int(self.nbr_start[n])
+        self.nbr_list = self.nbr_list[:k].copy() if k else np.zeros(0, np.int32)
+        self._link = np.arange(k, dtype=np.int32)
+        self._hist = np.empty((k, 3))
+        self._stamp = np.empty(k, np.uint32)
+        history.slots_to_entries(n, s.id, self._lists(), s.slot_offsets(), s.partner, s.ds,
+                                 Slots(self._hist, self._stamp, np.zeros((0, 6))), self._epoch, 1)
+        if self.law.mu == 0.0:
+            # frictionless: Delta s is 0 (docs/model.md 2.6), whatever an initial file held
+            self._hist[:] = 0.0
+        s.drop_slots()
+        self._upload()
+        # room for the next build: the lists grow a little as a pile settles
+        self.nbr_list = np.concatenate([self.nbr_list, np.zeros(k // 10 + 64, np.int32)])
+        self.has_lists = True
+        self.n_rebuilds += 1
+        self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
+
+    def _refresh(self):
+        """The ghost rows' x, v and omega from their owners, through the host (several ranks)."""
+        s = self.state
+        if not self.domain.parallel:
+            return
+        self._download_rows(("x", "v", "omega"), s.n_own)
+        self.domain.refresh(s)
+        d = self._dev
+        for name in ("x", "v", "omega"):
+            if s.n_rows > s.n_own:
+                d[name][s.n_own:s.n_rows].copy_to_device(np.ascontiguousarray(getattr(s, name)[s.n_own:s.n_rows]))
+
+    # -- forces --
+    def forces(self, increment=True, keep_pairs=False):
+        """Contact forces on the owned rows, history updated in place; returns (max overlap, contacts).
+
+        With ``keep_pairs`` every entry's force stays on the GPU for ``force_ratio``."""
+        t = time.perf_counter()
+        s, d, k, p = self.state, self._dev, self.k, self.phys
+        if keep_pairs and d["pair"].shape[0] < max(len(self._link), 1):
+            d["pair"] = self.cuda.device_array((max(len(self._link), 1), 6))
+        self._pairs_kept = keep_pairs
+        self._epoch += 1
+        k.reset_reductions[1, 1](self._red, self._count)
+        k.forces[self._grid(s.n_own)](s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
+                                      d["start"], d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs,
+                                      d["wall_ds"], p.wall, p.floor, self._epoch, *make_box(s.L_x, s.L_y),
+                                      self.law, increment, self._red, self._count)
+        red, count = self._red.copy_to_host(), self._count.copy_to_host()
+        s.slots_current = False
+        self.timers["forces"] += time.perf_counter() - t
+        return float(red[k.RED_OVERLAP]), int(count[k.COUNT_CONTACTS])
+
+    def start(self):
+        """Neighbour lists and the set-up force evaluation (no history increment)."""
+        self.rebuild()
+        self.last_overlap, self._contacts = self.forces(increment=False)
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
+        return self.info
+
+    def start_from_file(self, max_overlap=0.0, n_rebuilds=0):
+        """Set-up for a state read from a state file: lists only (its forces, torques and slots
+        are the step's), as the CPU engine's."""
+        s = self.state
+        self._contacts = int(s.count[:s.n_own][s.fixed[:s.n_own] == 0].sum())
+        self.rebuild()
+        self.n_rebuilds = n_rebuilds
+        self.last_overlap = max_overlap
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
+        return self.info
+
+    def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
+        """One velocity-Verlet step; returns a new StepInfo (reduced over ranks). As the CPU
+        engine's ``step``: the same decisions from the same exact reductions."""
+        s, p, dom, d, k = self.state, self.phys, self.domain, self._dev, self.k
+        t = time.perf_counter()
+        k.reset_reductions[1, 1](self._red, self._count)
+        box = make_box(s.L_x, s.L_y)
+        k.kick_drift[self._grid(s.n_own)](s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
+                                          d["x_ref"], p.dt, *box, self._kick_due, self._red, self._count)
+        red, count = self._red.copy_to_host(), self._count.copy_to_host()
+        self._kick_due = False
+        s.slots_current = False
+        n2 = math.nan if count[k.COUNT_BAD] else float(red[k.RED_D2])
+        self.timers["integration"] += time.perf_counter() - t
+        reduce = [n2, self.last_overlap, -float(red[k.RED_ZMIN]), float(red[k.RED_ZMAX])] + list(flags)
+        n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(np.array(reduce)).tolist()
+        if not math.sqrt(n2) < 0.5 * p.skin:
+            self.rebuild()
+        else:
+            self._refresh()
+        self.last_overlap, self._contacts = self.forces(increment=True, keep_pairs=keep_pairs)
+        self._kick_due = True
+        if not defer_kick:
+            self.complete()
+        s.step += 1
+        s.time = s.step * p.dt
+        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
+                             flags._make(agreed))
+        return self.info
+
+    def complete(self):
+        """Apply the second half-kick that ``step(defer_kick=True)`` left (nothing if none)."""
+        if self._kick_due:
+            t = time.perf_counter()
+            s, d = self.state, self._dev
+            self.k.kick[self._grid(s.n_own)](s.n_own, d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
+                                             self.phys.dt)
+            self._kick_due = False
+            self.state.slots_current = False
+            self.timers["integration"] += time.perf_counter() - t
+
+    def contacts(self):
+        """Global number of contacts (counted from both partners) of the last evaluation."""
+        n = self.n_contacts = int(self.domain.sum_int(np.array([self._contacts]))[0])
+        self.info = self.info._replace(n_contacts=n)
+        return n
+
+    def advance(self, n):
+        """Advance n steps (no monitors); returns the last StepInfo."""
+        info = self.info
+        for _ in range(n):
+            info = self.step(defer_kick=True)
+        self.complete()
+        return info
+
+    def _host_particles(self):
+        s = self.state
+        return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
+
+    def kinetic(self):
+        """Global (translational, rotational) kinetic energy sums [m g d], exact (on the host)."""
+        self.complete()
+        s = self.state
+        if self.has_lists:
+            self._download_rows(("v", "omega"), s.n_own)
+        acc = new_accumulator(2)
+        kinetic_energy(s.n_own, self._host_particles(), acc, 1)
+        acc = self.domain.sum_int(acc)
+        return to_float(acc[0]), to_float(acc[1])
+
+    def force_ratio(self):
+        """(ratio, in flight) of the last evaluation, exact on any number of ranks, as the CPU
+        engine's (``kernels.balance``); (nan, -1) unless that evaluation kept its pairs' forces."""
+        if self._epoch == 0 or not self._pairs_kept:
+            return math.nan, -1
+        s = self.state
+        k = len(self._link)
+        self._download_rows(("f",), s.n_own)
+        pair = self._dev["pair"].copy_to_host()[:k]
+        stamp = self._dev["stamp"].copy_to_host()[:k]
+        near = Near(self.nbr_start, self._link, self.nbr_start, self.nbr_list, self._link, self._link)
+        acc = self.domain.sum_int(force_balance(s.n_own, self._host_particles(), near,
+                                                Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1))
+        res, con, n_c, free = (to_float(a) for a in acc)
+        n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
+        return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)
+
+    def memory_bytes(self):
+        """Bytes of the GPU's arrays (rows, lists, history)."""
+        return sum(a.nbytes for a in self._dev.values()) + self._red.nbytes + self._count.nbytes

@@ -1,0 +1,41 @@
+"""numba's CUDA target, imported once: the real one on a GPU, numba's simulator under
+``NUMBA_ENABLE_CUDASIM=1`` (the tests without a GPU).
+
+numba-cuda 0.30 reads ``numpy.row_stack``, which numpy 2.5 removed: the alias is put back before
+the import (``np.vstack`` is what it was).
+"""
+import numpy as np
+
+if not hasattr(np, "row_stack"):
+    np.row_stack = np.vstack
+
+from numba import config  # noqa: E402
+from numba import cuda  # noqa: E402
+
+SIMULATOR = bool(config.ENABLE_CUDASIM)
+if SIMULATOR:
+    import sys
+    # the simulator's launching thread polls the threads it runs the kernel's threads in, holding the
+    # interpreter for a switch interval (5 ms) at a time: short intervals let them run (4-6x faster)
+    sys.setswitchinterval(1e-5)
+
+
+def device(fn):
+    """A device function of the kernels: ``cuda.jit(device=True)`` on a GPU; under the simulator
+    the plain function, which the simulated kernels call as Python (the simulator's own device
+    functions swap module globals at every call, a hundred times slower)."""
+    return fn if SIMULATOR else cuda.jit(device=True)(fn)
+
+
+def unavailable():
+    """Why no GPU can be used, in one line, or None when one can."""
+    if SIMULATOR:
+        return None
+    try:
+        if not cuda.is_available():
+            return ("no CUDA GPU or CUDA driver found (numba.cuda.is_available() is false; "
+                    "`nvidia-smi` should list the GPU)")
+        cuda.get_current_device()
+    except Exception as e:   # the driver or runtime libraries: their own message says which
+        return f"the CUDA runtime cannot be used: {e}"
+    return None

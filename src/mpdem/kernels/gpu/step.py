@@ -1,0 +1,333 @@
+"""The GPU engine's step: half-kick and drift, contact forces, half-kick (numba-cuda kernels).
+
+One thread a row. Each row computes every entry of its full neighbour list
+itself, in partner-id order, and sums as it goes: the pair's law from i's
+side is the exact negative of the law from j's side (``kernels/law.py``:
+mirror-exact separations, symmetric sums), so the row's sum is the CPU
+engine's sum of the same values in the same order, to the bit. Each entry
+keeps its own contact history (``hist``, ``stamp``), the mirror of its
+partner's. The float arithmetic is the law's rounded twins
+(``rounded.py``) and the sums' explicitly rounded adds.
+
+The numbers that steer the run (largest displacement, height range, the
+largest overlap, the contact count) are reduced in each block, then once
+per block with an atomic max, min or integer add: exact and independent of
+the order the blocks run in.
+
+Kernels take arrays and scalars only (``law`` is the ``law.Law`` record).
+``BLOCK_MAX`` threads per block at most, a power of two.
+"""
+import math
+
+import numpy as np
+
+from .runtime import cuda, device
+from .rounded import (add, approach, contact_force, contact_torque, dot, drift, floor_force, kicks, min_image,
+                      normal, normal_force, norm2, plane_slip, plane_torque, slip, spin, tangential)
+from ..particle import R
+
+BLOCK_MAX = 1024
+# the slots of the step's reduction buffer ``red`` (float64) and ``count`` (int64)
+RED_D2, RED_ZMIN, RED_ZMAX, RED_OVERLAP = 0, 1, 2, 3
+COUNT_BAD, COUNT_CONTACTS = 0, 1
+
+
+@device
+def _block_max(value, room):
+    """The max of ``value`` over the block's threads, in thread 0 (others: undefined); every thread
+    of the block must call it. ``room`` (BLOCK_MAX,) float64 shared."""
+    t = cuda.threadIdx.x
+    room[t] = value
+    cuda.syncthreads()
+    s = cuda.blockDim.x // 2
+    while s > 0:
+        if t < s and room[t + s] > room[t]:
+            room[t] = room[t + s]
+        cuda.syncthreads()
+        s //= 2
+    out = room[0]
+    cuda.syncthreads()
+    return out
+
+
+@device
+def _block_sum(value, room):
+    """The sum of the int64 ``value`` over the block's threads, in thread 0; as ``_block_max``."""
+    t = cuda.threadIdx.x
+    room[t] = value
+    cuda.syncthreads()
+    s = cuda.blockDim.x // 2
+    while s > 0:
+        if t < s:
+            room[t] += room[t + s]
+        cuda.syncthreads()
+        s //= 2
+    out = room[0]
+    cuda.syncthreads()
+    return out
+
+
+@device
+def max_into(red, k, value, room):
+    """red[k] = max(red[k], the block's ``value``s) (every thread of the block calls it)."""
+    value = _block_max(value, room)
+    if cuda.threadIdx.x == 0:
+        cuda.atomic.max(red, k, value)
+
+
+@device
+def min_into(red, k, value, room):
+    """red[k] = min(red[k], the block's ``value``s)."""
+    value = -_block_max(-value, room)
+    if cuda.threadIdx.x == 0:
+        cuda.atomic.min(red, k, value)
+
+
+@device
+def sum_into(count, k, value, room):
+    """count[k] += the sum of the block's int64 ``value``s."""
+    value = _block_sum(value, room)
+    if cuda.threadIdx.x == 0:
+        cuda.atomic.add(count, k, value)
+
+
+@cuda.jit
+def reset_reductions(red, count):
+    """The step's reductions at their neutral values (one thread)."""
+    red[RED_D2] = 0.0
+    red[RED_ZMIN] = math.inf
+    red[RED_ZMAX] = -math.inf
+    red[RED_OVERLAP] = 0.0
+    count[COUNT_BAD] = 0
+    count[COUNT_CONTACTS] = 0
+
+
+@device
+def _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending):
+    """Row i of ``kick_drift``; returns (d^2 since x_ref [d^2], z [d], 1 if x is not finite else 0)."""
+    h = 0.5 * dt
+    for a in range(3):
+        fa, ta = kicks(f[i, a], torque[i, a], h)
+        va = v[i, a]
+        wa = omega[i, a]
+        if pending:
+            va = add(va, fa)
+            wa = add(wa, ta)
+        va = add(va, fa)
+        wa = add(wa, ta)
+        v[i, a] = va
+        omega[i, a] = wa
+        x[i, a] = drift(x[i, a], va, dt)
+    # one correction suffices: nothing moves a box length in one step
+    if x[i, 0] >= L_x:
+        x[i, 0] -= L_x
+    elif x[i, 0] < 0.0:
+        x[i, 0] += L_x
+        if x[i, 0] >= L_x:  # -tiny + L rounds to L
+            x[i, 0] = 0.0
+    if x[i, 1] >= L_y:
+        x[i, 1] -= L_y
+    elif x[i, 1] < 0.0:
+        x[i, 1] += L_y
+        if x[i, 1] >= L_y:
+            x[i, 1] = 0.0
+    z = x[i, 2]
+    if not (math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(z)):
+        return 0.0, z, 1
+    dx = min_image(x[i, 0] - x_ref[i, 0], L_x, hx)
+    dy = min_image(x[i, 1] - x_ref[i, 1], L_y, hy)
+    return norm2(dx, dy, z - x_ref[i, 2]), z, 0
+
+
+@cuda.jit
+def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, count):
+    """First half-kick (after the previous step's second, with ``pending``) and drift of the owned
+    mobile rows, x and y wrapped; as ``kernels.integrate.kick_drift``.
+
+    Reduces into ``red`` the largest squared displacement since ``x_ref`` [d^2] (RED_D2), the mobile
+    rows' lowest and highest z [d] (RED_ZMIN, RED_ZMAX), and counts the rows whose position is not
+    finite in ``count[COUNT_BAD]``. Any grid: each thread takes rows i, i + threads, ...
+    """
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    d2 = 0.0
+    z_lo = math.inf
+    z_hi = -math.inf
+    bad = 0
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if fixed[i]:
+            continue
+        di, z, b = _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending)
+        if b:
+            bad += 1
+        else:
+            d2 = max(d2, di)
+            z_lo = min(z_lo, z)
+            z_hi = max(z_hi, z)
+    max_into(red, RED_D2, d2, room)
+    max_into(red, RED_ZMAX, z_hi, room)
+    min_into(red, RED_ZMIN, z_lo, room)
+    if bad:
+        cuda.atomic.add(count, COUNT_BAD, bad)
+
+
+@cuda.jit
+def kick(n_own, v, omega, f, torque, fixed, dt):
+    """Second half-kick of the owned mobile rows (``kernels.integrate.kick``); any grid."""
+    h = 0.5 * dt
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if not fixed[i]:
+            for a in range(3):
+                fa, ta = kicks(f[i, a], torque[i, a], h)
+                v[i, a] = add(v[i, a], fa)
+                omega[i, a] = add(omega[i, a], ta)
+
+
+@device
+def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+               now, before, L_x, L_y, hx, hy, law, increment):
+    """Row i (mobile) of ``forces``; returns (its largest overlap [d], its contacts)."""
+    deepest = 0.0
+    contacts = 0
+    friction = law.mu > 0.0
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
+    fx = 0.0
+    fy = 0.0
+    fz = -law.gravity
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    for e in range(start[i], start[i + 1]):
+        j = nbr[e]
+        dx = min_image(xi - x[j, 0], L_x, hx)
+        dy = min_image(yi - x[j, 1], L_y, hy)
+        dz = zi - x[j, 2]
+        r2 = norm2(dx, dy, dz)
+        if not r2 < 1.0:
+            if keep:
+                for a in range(6):
+                    pair[e, a] = 0.0
+            continue
+        contacts += 1
+        delta, nx, ny, nz = approach(dx, dy, dz, r2)
+        if delta > deepest:
+            deepest = delta
+        meff = 1.0 if fixed[j] else 0.5
+        vrx = v[i, 0] - v[j, 0]
+        vry = v[i, 1] - v[j, 1]
+        vrz = v[i, 2] - v[j, 2]
+        vn = dot(vrx, vry, vrz, nx, ny, nz)
+        fn, scale = normal(delta, vn, meff, law)
+        if friction:
+            wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
+            vtx, vty, vtz = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
+            was = stamp[e] == before
+            sx, sy, sz, ftx, fty, ftz = tangential(
+                (hist[e, 0] if was else 0.0, hist[e, 1] if was else 0.0, hist[e, 2] if was else 0.0),
+                (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
+            # + 0.0 stores a zero as +0.0 whichever way it was reached
+            hist[e, 0] = sx + 0.0
+            hist[e, 1] = sy + 0.0
+            hist[e, 2] = sz + 0.0
+            cfx, cfy, cfz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
+            ctx, cty, ctz = contact_torque(nx, ny, nz, ftx, fty, ftz)
+            tx = add(tx, ctx)
+            ty = add(ty, cty)
+            tz = add(tz, ctz)
+        else:
+            cfx, cfy, cfz = normal_force(fn, nx, ny, nz)
+            ctx = 0.0
+            cty = 0.0
+            ctz = 0.0
+        stamp[e] = now
+        fx = add(fx, cfx)
+        fy = add(fy, cfy)
+        fz = add(fz, cfz)
+        if keep:
+            pair[e, 0] = cfx
+            pair[e, 1] = cfy
+            pair[e, 2] = cfz
+            pair[e, 3] = ctx
+            pair[e, 4] = cty
+            pair[e, 5] = ctz
+    if floor:
+        delta = R - zi
+        if delta > 0.0:
+            fz = add(fz, floor_force(delta, v[i, 2], law.k_n, law.gamma_n))
+    if wall:
+        delta = R - zi
+        if not delta > 0.0:
+            wall_ds[i, 0] = 0.0
+            wall_ds[i, 1] = 0.0
+            wall_ds[i, 2] = 0.0
+        else:
+            if delta > deepest:
+                deepest = delta
+            fn, scale = normal(delta, v[i, 2], 1.0, law)
+            wz = fn
+            if friction:
+                vtx, vty = plane_slip(v[i, 0], v[i, 1], omega[i, 0], omega[i, 1])
+                sx, sy, sz, ftx, fty, ftz = tangential(
+                    (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2]), (vtx, vty, 0.0), (0.0, 0.0, 1.0),
+                    scale, 1.0, abs(fn), law, increment)
+                wall_ds[i, 0] = sx + 0.0
+                wall_ds[i, 1] = sy + 0.0
+                wall_ds[i, 2] = sz + 0.0
+                fx = add(fx, ftx)
+                fy = add(fy, fty)
+                wz = add(wz, ftz)
+                wtx, wty = plane_torque(ftx, fty)
+                tx = add(tx, wtx)
+                ty = add(ty, wty)
+            fz = add(fz, wz)
+    f[i, 0] = fx
+    f[i, 1] = fy
+    f[i, 2] = fz
+    torque[i, 0] = tx
+    torque[i, 1] = ty
+    torque[i, 2] = tz
+    return deepest, contacts
+
+
+@cuda.jit
+def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+           epoch, L_x, L_y, hx, hy, law, increment, red, count):
+    """Forces (gravity included) and torques on the owned rows, the contact history in place.
+
+    As ``kernels.forces.contact_forces``, then ``floor_forces`` when ``floor`` (bed making) and
+    ``wall_forces`` when ``wall``, each row in one thread (any grid: a thread takes rows i,
+    i + threads, ...).
+
+    Parameters
+    ----------
+    start : (n_own + 1,) int64, nbr : (K,) int32
+        Full neighbour lists, each row's sorted by partner id (ghost and bed partners included).
+    hist : (K, 3) float64, stamp : (K,) uint32
+        Each entry's Delta s [d] (the row's view) and the evaluation it was last in contact
+        (mod 2**32); a contact whose stamp is not ``epoch - 1`` starts from zero.
+    pair : (K, 6) float64, out when ``keep``
+        Each entry's contact force on the row [m g] and torque [m g d] (zeros out of contact).
+    wall_ds : (n_own, 3) float64
+        Each row's Delta s with the wall plane z = 0 [d] (read and written only with ``wall``).
+    red, count : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts
+        of the owned mobile rows (COUNT_CONTACTS).
+    """
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    now = np.uint32(epoch & 0xFFFFFFFF)
+    before = np.uint32((epoch - 1) & 0xFFFFFFFF)
+    deepest = 0.0
+    contacts = 0
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if fixed[i]:
+            for a in range(3):
+                f[i, a] = 0.0
+                torque[i, a] = 0.0
+            continue
+        d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall,
+                          floor, now, before, L_x, L_y, hx, hy, law, increment)
+        deepest = max(deepest, d)
+        contacts += c
+    max_into(red, RED_OVERLAP, deepest, room)
+    sum_into(count, COUNT_CONTACTS, contacts, iroom)

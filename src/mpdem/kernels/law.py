@@ -1,0 +1,250 @@
+"""The contact law and the integrator's updates, written once for both engines (docs/model.md 2, 4.1).
+
+Each function here is the arithmetic of one part of the model on scalars: the
+overlap and normal of a pair, its relative velocities, the normal force
+(Hooke or Hertz), the tangential history and the Coulomb cap, a plane's slip,
+the force and torque a contact applies, and the half-kick and drift of
+velocity Verlet. The CPU kernels (``forces``, ``integrate``) call them as
+numba functions inlined where they are called; the GPU kernels
+(``kernels/gpu``) call twins made from the same source with every float64
+add, multiply, divide and square root an explicitly rounded operation
+(``gpu/rounded.py``), so that the GPU compilers cannot fuse a multiply and
+an add into one FMA and both engines give the same bits
+(docs/computing.md, "One law, two targets").
+
+Rules for this file: scalars and tuples of scalars in and out, no arrays,
+no loops; a function may call the functions above it; float arithmetic
+only through the operators ``+ - * /``, ``math.sqrt``, ``abs`` and unary
+minus (the twins translate those and nothing else: an integer operation
+would be translated too, so none appears here).
+"""
+import math
+from typing import NamedTuple
+
+from numba import njit
+
+from .particle import INV_I, R
+
+MODEL_HOOKE = 0
+MODEL_HERTZ = 1
+# |F_t|^2 < SURE_STICK bound^2 implies sqrt(|F_t|^2) <= bound in floating point
+SURE_STICK = 1.0 - 1e-9
+
+
+class Law(NamedTuple):
+    """The contact law and step, as one record for the kernels (reduced units).
+
+    k_n, k_t : spring constants [m g / d]; gamma_n, gamma_t : damping rates
+    [sqrt(g/d)]; mu : Coulomb coefficient; gravity [g]; dt : time step [tau];
+    model : MODEL_HOOKE or MODEL_HERTZ; limit_damping, rescale_history : the
+    options of docs/model.md 2.2 and 2.4 (off in the reference model).
+    """
+    k_n: float
+    k_t: float
+    gamma_n: float
+    gamma_t: float
+    mu: float
+    gravity: float
+    dt: float
+    model: int
+    limit_damping: bool
+    rescale_history: bool
+
+
+def law_of(physics):
+    """The kernels' ``Law`` of an ``engine.base.Physics``."""
+    p = physics
+    return Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu), float(p.gravity),
+               float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE, bool(p.limit_damping),
+               bool(p.rescale_history))
+
+
+@njit(cache=True, inline="always")
+def norm2(dx, dy, dz):
+    """dx^2 + dy^2 + dz^2, summed left to right."""
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, inline="always")
+def dot(ax, ay, az, bx, by, bz):
+    """a . b, summed left to right."""
+    return ax * bx + ay * by + az * bz
+
+
+@njit(cache=True, inline="always")
+def approach(dx, dy, dz, r2):
+    """Overlap and unit normal of a pair in contact from its separation.
+
+    (dx, dy, dz) = x_i - x_j [d] (minimum image), r2 its squared length [d^2];
+    returns delta = 1 - r [d] and n = (x_i - x_j) / r.
+    """
+    r = math.sqrt(r2)
+    delta = 1.0 - r
+    rinv = 1.0 / r
+    return delta, dx * rinv, dy * rinv, dz * rinv
+
+
+@njit(cache=True, inline="always")
+def spin(oix, oiy, oiz, ojx, ojy, ojz):
+    """R omega_i + R omega_j [sqrt(g d)]: a symmetric sum, the same bits in both partners' views."""
+    return R * oix + R * ojx, R * oiy + R * ojy, R * oiz + R * ojz
+
+
+@njit(cache=True, inline="always")
+def slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz):
+    """Tangential relative velocity at the contact point [sqrt(g d)]: v_r - v_n n - w x n,
+    with v_r = v_i - v_j, v_n = v_r . n and w = ``spin``."""
+    return (vrx - vn * nx - (wy * nz - wz * ny),
+            vry - vn * ny - (wz * nx - wx * nz),
+            vrz - vn * nz - (wx * ny - wy * nx))
+
+
+@njit(cache=True, inline="always")
+def normal(delta, vn, meff, law):
+    """Normal force of docs/model.md 2.2 (Hooke) or 2.7 (Hertz), and the Hertz scale sqrt(delta).
+
+    fn = k_n delta - m_eff gamma_n v_n, times sqrt(delta) for Hertz (1 for Hooke:
+    1.0 * y == y, so the multiplication is left out); clipped at 0 with ``limit_damping``.
+    """
+    scale = 1.0
+    fn = law.k_n * delta - meff * law.gamma_n * vn
+    if law.model == MODEL_HERTZ:
+        scale = math.sqrt(delta)
+        fn = scale * fn
+    if law.limit_damping and fn < 0.0:
+        fn = 0.0
+    return fn, scale
+
+
+@njit(cache=True, inline="always")
+def tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
+    """History update, projection and Coulomb truncation of docs/model.md 2.4.
+
+    Parameters
+    ----------
+    ds : (3,) tuple of float
+        Delta s before this step [d] (zeros for a new contact).
+    vt : (3,) tuple of float
+        Tangential relative velocity at the contact point [sqrt(g d)].
+    nrm : (3,) tuple of float
+        Unit normal n.
+    scale : float
+        sqrt(delta) for Hertz (``normal``); not read for Hooke.
+    meff : float
+        Effective mass [m].
+    fn_mag : float
+        |f_n| [m g], the Coulomb bound's normal force.
+    law : Law
+    increment : bool
+        False on the set-up evaluation (no history increment).
+
+    Returns the new Delta s (3) [d] and the tangential force on i (3) [m g].
+    """
+    sx, sy, sz = ds
+    vtx, vty, vtz = vt
+    nx, ny, nz = nrm
+    k_t, gamma_t, mu, dt = law.k_t, law.gamma_t, law.mu, law.dt
+    rescale_history = law.rescale_history
+    if increment:
+        sx += vtx * dt
+        sy += vty * dt
+        sz += vtz * dt
+    s_old = 0.0
+    if rescale_history:
+        # the length the projection must not change: that of the incremented history
+        s_old = math.sqrt(sx * sx + sy * sy + sz * sz)
+    sn = sx * nx + sy * ny + sz * nz
+    sx -= sn * nx
+    sy -= sn * ny
+    sz -= sn * nz
+    if rescale_history:
+        s_new = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if s_new > 0.0 and s_old > 0.0:
+            q = s_old / s_new
+            sx *= q
+            sy *= q
+            sz *= q
+    if law.model == MODEL_HERTZ:
+        ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
+        fty = -scale * (k_t * sy + meff * gamma_t * vty)
+        ftz = -scale * (k_t * sz + meff * gamma_t * vtz)
+    else:
+        # Hooke's scale is 1: -1.0 * y == -y
+        ftx = -(k_t * sx + meff * gamma_t * vtx)
+        fty = -(k_t * sy + meff * gamma_t * vty)
+        ftz = -(k_t * sz + meff * gamma_t * vtz)
+    ft2 = ftx * ftx + fty * fty + ftz * ftz
+    bound = mu * fn_mag
+    # |F_t|^2 well below bound^2 means sticking; only near or past the bound is the exact
+    # test sqrt(ft2) > bound needed (the margin covers the rounding of both sides, ~1e-16)
+    if ft2 >= SURE_STICK * (bound * bound) and math.sqrt(ft2) > bound:
+        ft_mag = math.sqrt(ft2)
+        if sx == 0.0 and sy == 0.0 and sz == 0.0:
+            ftx = 0.0
+            fty = 0.0
+            ftz = 0.0
+        else:
+            s = bound / ft_mag
+            ftx *= s
+            fty *= s
+            ftz *= s
+            if k_t > 0.0:
+                # history that reproduces the truncated force exactly
+                cg = meff * gamma_t / k_t
+                sx = s * (sx + cg * vtx) - cg * vtx
+                sy = s * (sy + cg * vty) - cg * vty
+                sz = s * (sz + cg * vtz) - cg * vtz
+            else:
+                sx *= s
+                sy *= s
+                sz *= s
+    return sx, sy, sz, ftx, fty, ftz
+
+
+@njit(cache=True, inline="always")
+def normal_force(fn, nx, ny, nz):
+    """The force of a frictionless contact on i [m g]: fn n (the partner's is its exact negative)."""
+    return fn * nx, fn * ny, fn * nz
+
+
+@njit(cache=True, inline="always")
+def contact_force(fn, nx, ny, nz, ftx, fty, ftz):
+    """The force of a frictional contact on i [m g]: fn n + F_t (the partner's is its exact negative)."""
+    return fn * nx + ftx, fn * ny + fty, fn * nz + ftz
+
+
+@njit(cache=True, inline="always")
+def contact_torque(nx, ny, nz, ftx, fty, ftz):
+    """The torque of a contact on i [m g d]: -R n x F_t (the same for both partners)."""
+    return -(R * (ny * ftz - nz * fty)), -(R * (nz * ftx - nx * ftz)), -(R * (nx * fty - ny * ftx))
+
+
+@njit(cache=True, inline="always")
+def plane_slip(vx, vy, ox, oy):
+    """The tangential velocity of a sphere's contact with the plane z = 0 (n = +z) [sqrt(g d)]:
+    v + R omega x (-n), whose z part is 0."""
+    return vx - R * oy, vy + R * ox
+
+
+@njit(cache=True, inline="always")
+def plane_torque(ftx, fty):
+    """The torque -R n x F_t of a contact with the plane z = 0 (n = +z) [m g d]: (x, y) parts."""
+    return R * fty, -(R * ftx)
+
+
+@njit(cache=True, inline="always")
+def floor_force(delta, vz, k_n, gamma_n):
+    """The bed-making floor's frictionless force k_n delta - gamma_n v_z [m g] (m_eff = m)."""
+    return k_n * delta - gamma_n * vz
+
+
+@njit(cache=True, inline="always")
+def kicks(f, t, h):
+    """The half-kicks of one axis: h F / m [sqrt(g d)] and h T / I [sqrt(g/d)] (m = 1); h [tau]."""
+    return h * f, h * INV_I * t
+
+
+@njit(cache=True, inline="always")
+def drift(x, v, dt):
+    """x + dt v [d]."""
+    return x + dt * v

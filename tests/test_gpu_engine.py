@@ -1,0 +1,172 @@
+"""The GPU engine gives the CPU engine's bits (design.md, "Two engines, one result").
+
+Without a GPU these run under numba's CUDA simulator (conftest.py sets
+``NUMBA_ENABLE_CUDASIM=1`` unless ``MPDEM_REAL_GPU=1``): the kernels' logic,
+their grids, block reductions and atomics, the history between the GPU's
+entries and the host's slots, on small piles. On a GPU (``tools/gpu_check.sh``
+runs this file with ``MPDEM_REAL_GPU=1``) the same tests check the compiled
+kernels, whose float arithmetic is explicitly rounded.
+"""
+import ast
+
+import numpy as np
+import pytest
+
+from helpers import mpdem, tight_lattice
+from mpdem.config import gamma_n_from_epsilon
+from mpdem.decomp import Domain
+from mpdem.engine import cpu, gpu
+from mpdem.engine.base import Physics
+from mpdem.errors import DeviceError
+from mpdem.io import checkpoint
+from mpdem.kernels.gpu import rounded, runtime
+from mpdem.state import State
+
+# launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
+# grid on a GPU. The kernels take any grid: every row is one thread's, whichever.
+GRIDS = [dict(block=2, blocks=2), dict(block=4, blocks=3)] if runtime.SIMULATOR else [dict(block=128),
+                                                                                      dict(block=32)]
+
+
+def physics(mu=0.5, model="hooke", **kw):
+    k_n = 2e5
+    base = dict(k_n=k_n, k_t=2 * k_n / 7, gamma_n=gamma_n_from_epsilon(0.88, k_n), gamma_t=0.0, mu=mu, dt=1e-4,
+                gravity=1.0, model=model, skin=0.006)
+    base.update(kw)
+    return Physics(**base)
+
+
+def stepped(engine, phys, steps, grid=None):
+    """A tight lattice (125 spheres, its lowest layer frozen) with fast random motion, stepped by
+    ``engine`` (the step before the last keeping its pairs); returns the engine and its state."""
+    x, v, omega, fixed, L = tight_lattice(m=5)
+    st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
+    eng = engine(st, phys, Domain(None), **(grid or {}))
+    eng.start()
+    eng.advance(steps - 1)
+    eng.step(keep_pairs=True)
+    return eng, st
+
+
+CASES = {
+    "mu0": physics(mu=0.0),
+    "mu0.5-gamma_t": physics(mu=0.5, gamma_t=20.0),
+    "hertz-wall": physics(mu=0.5, model="hertz", gamma_t=10.0, wall=True),
+    "rotate-limit": physics(mu=1.0, rescale_history=True, limit_damping=True),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_gpu_engine_steps_the_cpu_engines_bits(case):
+    """Every stored field (rows, contact slots, the wall's history) after 30 steps with list rebuilds
+    (the history carried through them), the exact sums and the force ratio are the CPU's."""
+    phys = CASES[case]
+    grid = GRIDS[sorted(CASES).index(case) % len(GRIDS)]
+    want, st_c = stepped(cpu.Engine, phys, 30)
+    got, st_g = stepped(gpu.Engine, phys, 30, grid)
+    assert got.n_rebuilds >= 3 and want.n_rebuilds >= 3, "the history must pass through rebuilds"
+    a, b = checkpoint.gather_state(st_c), checkpoint.gather_state(st_g)
+    assert int(b["count"].sum()) > 100, "a pile in contact"
+    for name in a:
+        assert np.array_equal(a[name], b[name]), name
+    assert checkpoint.digest(a) == checkpoint.digest(b)
+    assert got.kinetic() == want.kinetic()
+    assert got.contacts() == want.contacts()
+    assert got.force_ratio() == want.force_ratio()
+    assert got.last_overlap == want.last_overlap > 0
+
+
+def test_any_grid_gives_the_same_bits():
+    """The launch's shape (threads per block, blocks, rows a thread) changes no bit."""
+    phys = CASES["mu0.5-gamma_t"]
+    digests = {checkpoint.digest(checkpoint.gather_state(stepped(gpu.Engine, phys, 12, g)[1])) for g in GRIDS}
+    assert len(digests) == 1
+
+
+def test_a_restart_into_the_gpu_engine_goes_on_bit_for_bit():
+    """Rows, forces and slots taken from the CPU engine mid-run (as a state file holds them) and
+    stepped on by the GPU engine give the straight CPU run's bits, and the other way round."""
+    phys = CASES["mu0.5-gamma_t"]
+    straight = checkpoint.gather_state(stepped(cpu.Engine, phys, 24)[1])
+    for first, second in ((cpu.Engine, gpu.Engine), (gpu.Engine, cpu.Engine)):
+        eng, st = stepped(first, phys, 12, GRIDS[0] if first is gpu.Engine else None)
+        eng.complete()
+        half = State.from_arrays(checkpoint.gather_state(st), st.L_x, st.L_y)
+        half.step = st.step
+        kw = GRIDS[0] if second is gpu.Engine else {}
+        nxt = second(half, phys, Domain(None), **kw)
+        nxt.start_from_file()
+        nxt.advance(11)
+        nxt.step(keep_pairs=True)
+        assert checkpoint.digest(checkpoint.gather_state(half)) == checkpoint.digest(straight)
+
+
+def test_every_operation_of_a_twin_is_explicitly_rounded():
+    """The GPU twins of the law hold no bare + - * / (each would let the compilers fuse a multiply
+    and an add) and no math call but the rounded square root."""
+    for name in rounded.LAW_FUNCTIONS:
+        tree = ast.parse(rounded.rounded_source(getattr(rounded.law, name)))
+        ops = [n for n in ast.walk(tree) if isinstance(n, (ast.BinOp, ast.AugAssign))]
+        assert not ops, f"{name}: {ast.unparse(ops[0])}"
+        calls = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+        assert calls <= set(rounded.OPS) | set(rounded.LAW_FUNCTIONS) | {"abs"}, (name, calls)
+    with pytest.raises(ValueError, match="no rounded twin"):
+        rounded._Rounded().visit(ast.parse("def f(a, b):\n    return a ** b"))
+
+
+def test_no_gpu_is_one_clear_error(monkeypatch):
+    monkeypatch.setattr(runtime, "SIMULATOR", False)
+    monkeypatch.setattr(runtime.cuda, "is_available", lambda: False)
+    with pytest.raises(DeviceError, match="engine.device = 'gpu': no CUDA GPU"):
+        gpu.Engine(State(np.arange(1), np.zeros((1, 3))), physics(), Domain(None))
+
+
+def test_gpu_block_is_checked_before_any_work(tmp_path):
+    r = mpdem("run", "--set", "engine.gpu_block=48", "--set", "run.max_steps=10", "--out", tmp_path / "r", check=1)
+    assert "engine.gpu_block = 48: accepted a power of two from 32 to 1024" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+# a soft, fast pour: some 0.6 contacts a sphere after 200 steps, 20 list rebuilds, friction mobilised
+POUR = ["box.L_x=4", "box.L_y=4", "pour.N=30", "pour.phi_i=0.3", "pour.K0=5", "contact.k_n=2e3", "run.seed=5",
+        "output.progress_every=100", "integration.skin=0.1"]
+
+
+def pour(out, *extra, n=1, check=3, env=None):
+    args = [a for kv in POUR + list(extra) for a in ("--set", kv)]
+    return mpdem("run", *args, "--out", out, "--quiet", n=n, check=check, env=env)
+
+
+def summary_digest(run):
+    import json
+    return json.loads((run / "summary.json").read_text())["digest"]
+
+
+@pytest.fixture(scope="module")
+def cpu_pour(tmp_path_factory):
+    run = tmp_path_factory.mktemp("pour") / "cpu"
+    pour(run, "run.max_steps=200", "contact.mu=0.5")
+    return summary_digest(run)
+
+
+def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
+    """``mpdem run --device gpu``, a pour with a checkpoint restarted on the CPU, and the same pour
+    on two ranks each with the GPU engine: every one the one-rank CPU run's digest."""
+    pour(tmp_path / "gpu", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu")
+    assert summary_digest(tmp_path / "gpu") == cpu_pour
+    # the first half on the GPU (its checkpoint written from the GPU's rows and history), the rest on the CPU
+    half = tmp_path / "half"
+    pour(half, "run.max_steps=100", "contact.mu=0.5", "engine.device=gpu", "output.checkpoint_every=100")
+    mpdem("restart", half, "--set", "run.max_steps=200", "--device", "cpu", "--quiet", check=3)
+    assert summary_digest(half) == cpu_pour
+    pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", n=2)
+    assert summary_digest(tmp_path / "two") == cpu_pour
+
+
+def test_no_gpu_ends_a_run_in_one_line(tmp_path):
+    """Without a usable GPU (none visible), ``--device gpu`` is one line and exit status 1."""
+    env = {"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""}
+    r = pour(tmp_path / "r", "run.max_steps=10", "engine.device=gpu", check=1, env=env)
+    assert "engine.device = 'gpu'" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
+    # refused before any work: no bed was made, no state file written
+    assert not list(tmp_path.glob("r/*.h5")) and not (tmp_path / "r" / "bed.txt").exists()
