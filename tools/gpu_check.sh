@@ -1,0 +1,113 @@
+#!/usr/bin/env bash
+# The GPU engine on a real GPU, in one go (docs/gpu.md): the engine tests compiled for the GPU, the
+# digests of the GPU engine against the CPU engine's on three piles (the example at mu = 0.5 and 0,
+# the LAMMPS equivalence pile with Hooke and with Hertz), a restart that switches device, the GPU run
+# to run, then the timings (bench on the 20k table and its 7 x 7 tiles, a paper-size pour's first
+# steps). For a bare machine with a GPU and no network: needs python3 with numpy, numba, numba-cuda,
+# scipy, h5py and mpi4py (an MPI library only for RANKS > 1); writes its logs and a summary to $OUT
+# (default ./gpu_check_out) and prints the summary table last. About 5 minutes on an H100.
+#   bash tools/gpu_check.sh [TABLE]        TABLE: the bench's landed20k.txt.gz (no timings of it without)
+# SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+PY=${PY:-python3}
+OUT=${OUT:-$PWD/gpu_check_out}
+TABLE=${1:-}
+SIZE=${SIZE:-full}
+mkdir -p "$OUT"
+export PYTHONPATH=$PWD/src${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1 OMPI_MCA_rmaps_base_oversubscribe=1
+SUM=$OUT/summary.txt
+: > "$SUM"
+say() { echo "$*" | tee -a "$SUM"; }
+w=$OUT/work
+rm -rf "$w"; mkdir -p "$w"
+if [ "$SIZE" = small ]; then
+    EX=(--set pour.N=40 --set box.L_x=4 --set box.L_y=4 --set pour.K0=5 --set contact.k_n=2e3); EXSTEPS=200
+    LSTEPS=100; BSTEPS=20; TSTEPS=5; TILE=1x1; POUR=(--set pour.N=60 --set box.L_x=4 --set box.L_y=4); PSTEPS=100
+else
+    EX=(); EXSTEPS=30000; LSTEPS=2000; BSTEPS=2000; TSTEPS=200; TILE=7x7
+    POUR=(--set pour.N=20000 --set box.L_x=20 --set box.L_y=20); PSTEPS=20000
+fi
+
+say "gpu_check $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
+say "gpu: $(nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null || echo none)"
+say "python: $($PY -c 'import sys, numpy, numba; print(sys.version.split()[0], "numpy", numpy.__version__, "numba", numba.__version__)')"
+$PY -c 'import importlib.metadata as m; print("numba-cuda", m.version("numba-cuda"))' 2>/dev/null | tee -a "$SUM"
+
+t0=$SECONDS
+# 1. the engine tests with the kernels compiled for the GPU (the pour and no-GPU tests need MPI and none)
+MPDEM_REAL_GPU=1 $PY -m pytest -q -p no:cacheprovider tests/test_gpu_engine.py -k "not pour and not no_gpu" \
+    > "$OUT/pytest.log" 2>&1
+say "pytest tests/test_gpu_engine.py on the GPU: $(tail -1 "$OUT/pytest.log") ($((SECONDS - t0)) s)"
+
+run() {  # name device steps sets...: a run; prints its digest and seconds
+    local name=$1 dev=$2 steps=$3; shift 3
+    local t=$SECONDS
+    $PY -m mpdem run --out "$w/$name" --force --quiet --device "$dev" --set run.max_steps="$steps" \
+        --set output.progress_every=100000 "$@" > "$w/$name.log" 2>&1
+    local rc=$?
+    local dg
+    dg=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/$name/summary.json" 2>/dev/null \
+         || echo "failed(rc=$rc)")
+    echo "$dg $((SECONDS - t))"
+}
+compare() {  # label sets...: the same run on the CPU and on the GPU
+    local label=$1 steps=$2; shift 2
+    read -r dc sc < <(run "$label-cpu" cpu "$steps" "$@")
+    read -r dg sg < <(run "$label-gpu" gpu "$steps" "$@")
+    local v=DIFFER; [ "$dc" = "$dg" ] && v=equal
+    say "digest $label ($steps steps): cpu ${dc:0:16} (${sc} s) gpu ${dg:0:16} (${sg} s): $v"
+}
+# 2. the digests, CPU against GPU
+compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
+compare example-mu0 $EXSTEPS "${EX[@]}" --set contact.mu=0
+LMP=(--set 'run.initial_file="tests/data/lammps_sphere.data"' --set 'run.fixed_types=[2]' --set contact.gamma_t=20)
+compare lammps-hooke $LSTEPS "${LMP[@]}" --set contact.mu=0.5
+compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
+# 3. a restart that switches device: the first half on the CPU, the rest on the GPU
+half=$((EXSTEPS / 2))
+$PY -m mpdem run --out "$w/switch" --force --quiet --device cpu --set run.max_steps=$half \
+    --set output.checkpoint_every=$half "${EX[@]}" --set contact.mu=0.5 > "$w/switch.log" 2>&1
+$PY -m mpdem restart "$w/switch" --device gpu --set run.max_steps=$EXSTEPS --quiet >> "$w/switch.log" 2>&1
+ds=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/switch/summary.json" 2>/dev/null)
+ref=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/example-mu0.5-cpu/summary.json" 2>/dev/null)
+v=DIFFER; [ -n "$ds" ] && [ "$ds" = "$ref" ] && v=equal
+say "digest restart cpu -> gpu at step $half: ${ds:0:16} against the straight cpu ${ref:0:16}: $v"
+# 4. run to run on the GPU
+read -r d2 s2 < <(run example-mu0.5-gpu2 gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5)
+d1=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/example-mu0.5-gpu/summary.json" 2>/dev/null)
+v=DIFFER; [ "$d1" = "$d2" ] && v=equal
+say "digest gpu run to run: ${d1:0:16} ${d2:0:16}: $v"
+# 5. two ranks, each with the GPU engine (here both on the one GPU), against one CPU rank
+if command -v mpiexec > /dev/null; then
+    mpiexec -n 2 $PY -m mpdem run --out "$w/two" --force --quiet --device gpu --set run.max_steps=$EXSTEPS \
+        "${EX[@]}" --set contact.mu=0.5 > "$w/two.log" 2>&1
+    dt=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/two/summary.json" 2>/dev/null)
+    v=DIFFER; [ -n "$dt" ] && [ "$dt" = "$ref" ] && v=equal
+    say "digest 2 ranks on the gpu: ${dt:0:16} against 1 cpu rank ${ref:0:16}: $v"
+else
+    say "digest 2 ranks on the gpu: no mpiexec here"
+fi
+say "checks done in $((SECONDS - t0)) s"
+
+# 6. timings
+if [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
+    for dev in gpu cpu cpu16; do
+        opt=(--device ${dev%16}); [ $dev = cpu16 ] && opt+=(--threads 16)
+        $PY -m mpdem bench --table "$TABLE" "${opt[@]}" --steps $BSTEPS > "$OUT/bench-$dev.log" 2>&1
+        say "bench 20k $dev: $(grep -h 'rank(s)' "$OUT/bench-$dev.log" | head -1 | cut -c1-160)"
+        say "    $(tail -1 "$OUT/bench-$dev.log")"
+    done
+    grep -h "bench: " "$OUT/bench-gpu.log" | sed -n '3,9p' | tee -a "$SUM"
+    $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
+    say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
+else
+    say "bench: no table at $TABLE"
+fi
+t=$SECONDS
+$PY -m mpdem run --out "$w/pour" --force --quiet --device gpu --set run.max_steps=$PSTEPS "${POUR[@]}" \
+    --set contact.mu=0.5 --set output.progress_every=100000 > "$w/pour.log" 2>&1
+say "paper-size pour on the gpu: $PSTEPS steps in $((SECONDS - t)) s (bed making and set-up included); thermo's last step,rebuilds,loop seconds: $(tail -1 "$w/pour/thermo.csv" | cut -d, -f1,10,11)"
+say "gpu_check done in $((SECONDS - t0)) s"
+echo "---- summary ($SUM)"
+cat "$SUM"
