@@ -108,8 +108,10 @@ class Engine:
         self._kick_due = False
         self._pairs_kept = False
         self._dev = {}            # the GPU's arrays by name (``_upload``)
-        self._red = self.cuda.to_device(np.zeros(4))
-        self._count = self.cuda.to_device(np.zeros(2, np.int64))
+        # the step's reductions (``kernels.gpu.step``), and a pinned host copy the step reads
+        self._red = self.cuda.to_device(np.array(self.k.NEUTRAL))
+        self._red_host = self.cuda.pinned_array(len(self.k.NEUTRAL))
+        self._launchers = {}
         self.n_rebuilds = 0
         self.info = StepInfo()
         self.n_contacts = 0
@@ -123,6 +125,21 @@ class Engine:
     def _grid(self, rows):
         blocks = (max(rows, 1) + self.block - 1) // self.block
         return (blocks if self.blocks is None else min(blocks, self.blocks)), self.block
+
+    def _launch(self, name, *args):
+        """Launch kernel ``name`` of ``kernels.gpu.step`` over its first argument's rows (n_own).
+
+        The first launch specializes the kernel for its argument types (which the engine keeps
+        the same: arrays are reallocated with their dtype and layout), so later launches skip
+        numba's typing of some twenty arguments (``Dispatcher.specialize``)."""
+        kernel = self._launchers.get(name)
+        if kernel is None:
+            kernel = getattr(self.k, name)
+            specialize = getattr(kernel, "specialize", None)   # not in numba's simulator
+            if specialize is not None:
+                kernel = specialize(*args)
+            self._launchers[name] = kernel
+        kernel[self._grid(args[0])](*args)
 
     def _rows_of(self):
         """The row fields the GPU steps (names of ``State`` attributes)."""
@@ -247,15 +264,13 @@ class Engine:
             d["pair"] = self.cuda.device_array((max(len(self._link), 1), 6))
         self._pairs_kept = keep_pairs
         self._epoch += 1
-        k.reset_reductions[1, 1](self._red, self._count)
-        k.forces[self._grid(s.n_own)](s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
-                                      d["start"], d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs,
-                                      d["wall_ds"], p.wall, p.floor, self._epoch, *make_box(s.L_x, s.L_y),
-                                      self.law, increment, self._red, self._count)
-        red, count = self._red.copy_to_host(), self._count.copy_to_host()
+        self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
+                     d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs, d["wall_ds"], p.wall, p.floor,
+                     self._epoch, *make_box(s.L_x, s.L_y), self.law, increment, self._red)
+        red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
-        return float(red[k.RED_OVERLAP]), int(count[k.COUNT_CONTACTS])
+        return float(red[k.RED_OVERLAP]), int(red[k.RED_CONTACTS])
 
     def start(self):
         """Neighbour lists and the set-up force evaluation (no history increment)."""
@@ -280,14 +295,12 @@ class Engine:
         engine's ``step``: the same decisions from the same exact reductions."""
         s, p, dom, d, k = self.state, self.phys, self.domain, self._dev, self.k
         t = time.perf_counter()
-        k.reset_reductions[1, 1](self._red, self._count)
-        box = make_box(s.L_x, s.L_y)
-        k.kick_drift[self._grid(s.n_own)](s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
-                                          d["x_ref"], p.dt, *box, self._kick_due, self._red, self._count)
-        red, count = self._red.copy_to_host(), self._count.copy_to_host()
+        self._launch("kick_drift", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"],
+                     p.dt, *make_box(s.L_x, s.L_y), self._kick_due, self._red)
+        red = self._red.copy_to_host(self._red_host)
         self._kick_due = False
         s.slots_current = False
-        n2 = math.nan if count[k.COUNT_BAD] else float(red[k.RED_D2])
+        n2 = math.nan if red[k.RED_BAD] else float(red[k.RED_D2])
         self.timers["integration"] += time.perf_counter() - t
         reduce = [n2, self.last_overlap, -float(red[k.RED_ZMIN]), float(red[k.RED_ZMAX])] + list(flags)
         n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(np.array(reduce)).tolist()
@@ -310,8 +323,7 @@ class Engine:
         if self._kick_due:
             t = time.perf_counter()
             s, d = self.state, self._dev
-            self.k.kick[self._grid(s.n_own)](s.n_own, d["v"], d["omega"], d["f"], d["torque"], d["fixed"],
-                                             self.phys.dt)
+            self._launch("kick", s.n_own, d["v"], d["omega"], d["f"], d["torque"], d["fixed"], self.phys.dt)
             self._kick_due = False
             self.state.slots_current = False
             self.timers["integration"] += time.perf_counter() - t
@@ -364,4 +376,4 @@ class Engine:
 
     def memory_bytes(self):
         """Bytes of the GPU's arrays (rows, lists, history)."""
-        return sum(a.nbytes for a in self._dev.values()) + self._red.nbytes + self._count.nbytes
+        return sum(a.nbytes for a in self._dev.values()) + self._red.nbytes

@@ -27,9 +27,11 @@ from .rounded import (add, approach, contact_force, contact_torque, dot, drift, 
 from ..particle import R
 
 BLOCK_MAX = 1024
-# the slots of the step's reduction buffer ``red`` (float64) and ``count`` (int64)
-RED_D2, RED_ZMIN, RED_ZMAX, RED_OVERLAP = 0, 1, 2, 3
-COUNT_BAD, COUNT_CONTACTS = 0, 1
+# the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
+# their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
+RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
+# their values before any row adds to them; each kernel sets the other's back to these for its next launch
+NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
 
 
 @device
@@ -84,22 +86,11 @@ def min_into(red, k, value, room):
 
 
 @device
-def sum_into(count, k, value, room):
-    """count[k] += the sum of the block's int64 ``value``s."""
+def sum_into(red, k, value, room):
+    """red[k] += the sum of the block's int64 ``value``s (as float64: exact below 2**53)."""
     value = _block_sum(value, room)
-    if cuda.threadIdx.x == 0:
-        cuda.atomic.add(count, k, value)
-
-
-@cuda.jit
-def reset_reductions(red, count):
-    """The step's reductions at their neutral values (one thread)."""
-    red[RED_D2] = 0.0
-    red[RED_ZMIN] = math.inf
-    red[RED_ZMAX] = -math.inf
-    red[RED_OVERLAP] = 0.0
-    count[COUNT_BAD] = 0
-    count[COUNT_CONTACTS] = 0
+    if cuda.threadIdx.x == 0 and value != 0:
+        cuda.atomic.add(red, k, np.float64(value))
 
 
 @device
@@ -140,15 +131,19 @@ def _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pend
 
 
 @cuda.jit
-def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, count):
+def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red):
     """First half-kick (after the previous step's second, with ``pending``) and drift of the owned
     mobile rows, x and y wrapped; as ``kernels.integrate.kick_drift``.
 
     Reduces into ``red`` the largest squared displacement since ``x_ref`` [d^2] (RED_D2), the mobile
     rows' lowest and highest z [d] (RED_ZMIN, RED_ZMAX), and counts the rows whose position is not
-    finite in ``count[COUNT_BAD]``. Any grid: each thread takes rows i, i + threads, ...
+    finite (RED_BAD); sets the slots of ``forces`` to ``NEUTRAL``. Any grid: each thread takes rows
+    i, i + threads, ...
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
+    if cuda.grid(1) == 0:
+        red[RED_OVERLAP] = NEUTRAL[RED_OVERLAP]
+        red[RED_CONTACTS] = NEUTRAL[RED_CONTACTS]
     d2 = 0.0
     z_lo = math.inf
     z_hi = -math.inf
@@ -167,7 +162,7 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy
     max_into(red, RED_ZMAX, z_hi, room)
     min_into(red, RED_ZMIN, z_lo, room)
     if bad:
-        cuda.atomic.add(count, COUNT_BAD, bad)
+        cuda.atomic.add(red, RED_BAD, np.float64(bad))
 
 
 @cuda.jit
@@ -292,7 +287,7 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
 
 @cuda.jit
 def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
-           epoch, L_x, L_y, hx, hy, law, increment, red, count):
+           epoch, L_x, L_y, hx, hy, law, increment, red):
     """Forces (gravity included) and torques on the owned rows, the contact history in place.
 
     As ``kernels.forces.contact_forces``, then ``floor_forces`` when ``floor`` (bed making) and
@@ -310,11 +305,16 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         Each entry's contact force on the row [m g] and torque [m g d] (zeros out of contact).
     wall_ds : (n_own, 3) float64
         Each row's Delta s with the wall plane z = 0 [d] (read and written only with ``wall``).
-    red, count : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts
-        of the owned mobile rows (COUNT_CONTACTS).
+    red : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
+        owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    if cuda.grid(1) == 0:
+        red[RED_D2] = NEUTRAL[RED_D2]
+        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
+        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
+        red[RED_BAD] = NEUTRAL[RED_BAD]
     now = np.uint32(epoch & 0xFFFFFFFF)
     before = np.uint32((epoch - 1) & 0xFFFFFFFF)
     deepest = 0.0
@@ -330,4 +330,4 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         deepest = max(deepest, d)
         contacts += c
     max_into(red, RED_OVERLAP, deepest, room)
-    sum_into(count, COUNT_CONTACTS, contacts, iroom)
+    sum_into(red, RED_CONTACTS, contacts, iroom)
