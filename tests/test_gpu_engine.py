@@ -76,6 +76,27 @@ def test_gpu_engine_steps_the_cpu_engines_bits(case):
     assert got.last_overlap == want.last_overlap > 0
 
 
+@pytest.mark.parametrize("case", ["mu0", "hertz-wall"])
+def test_steps_in_one_launch_give_the_steps_bits(case):
+    """``run_quiet`` (the steps in cooperative launches, each ending at a step that needs a rebuild,
+    which the host finishes) gives the bits and the step records of the CPU engine's steps."""
+    phys = CASES[case]
+    want, st_c = stepped(cpu.Engine, phys, 30)
+    x, v, omega, fixed, L = tight_lattice(m=5)
+    st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
+    eng = gpu.Engine(st, phys, Domain(None), **GRIDS[0])
+    eng.start()
+    infos = eng.run_quiet(29)
+    assert len(infos) == 29 and st.step == 29 and eng.n_rebuilds >= 3
+    # as the CPU engine's steps report them
+    ref = stepped(cpu.Engine, phys, 1)[0]
+    assert infos[0].max_overlap == ref.info.max_overlap and infos[0].z_min == ref.info.z_min
+    eng.step(keep_pairs=True)
+    assert checkpoint.digest(checkpoint.gather_state(st)) == checkpoint.digest(checkpoint.gather_state(st_c))
+    assert eng.kinetic() == want.kinetic() and eng.force_ratio() == want.force_ratio()
+    assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
+
+
 def test_any_grid_gives_the_same_bits():
     """The launch's shape (threads per block, blocks, rows a thread) changes no bit."""
     phys = CASES["mu0.5-gamma_t"]

@@ -41,6 +41,8 @@ from ..state import State
 # the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
 # ("not finished, restart me", EX_TEMPFAIL)
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+# steps an engine may run in one go between the driver's looks at signals and the wall clock (``run_quiet``)
+QUIET_MOST = 2000
 
 
 class StepFlags(NamedTuple):
@@ -226,7 +228,14 @@ class Run:
                                 N, st.step, self.t0)
             handlers = {s: signal.signal(s, lambda signum, frame: self.signals.append(int(signum)))
                         for s in STOP_SIGNALS}
+            quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
+                if quiet_runs:
+                    # the steps before the next that something reads after, in one go (the GPU engine)
+                    s0 = st.step
+                    quiet = self._quiet_steps(s0, max_steps, progress)
+                    for k, q in enumerate(eng.run_quiet(quiet, self._flags_now())):
+                        self.checks(q, s0 + k + 1)
                 # the step's second half-kick joins the next step's first pass; whatever reads the
                 # rows below (the stop sample, a state file) has the engine apply it first
                 # a stop sample after the step reads every pair's force of its evaluation
@@ -269,6 +278,18 @@ class Run:
         if self.from_file:
             return self.engine.start_from_file(self.history.max_overlap, self.history.n_rebuilds)
         return self.engine.start()
+
+    def _quiet_steps(self, step, max_steps, progress, most=QUIET_MOST):
+        """Steps after ``step`` that no schedule reads after (no stop sample, progress line,
+        snapshot, step checkpoint; short of ``max_steps``), up to ``most``: the engine may run them
+        without stopping (``run_quiet``). Their flags are those of the first of them."""
+        n = 0
+        s = step + 1
+        while n < most and s < max_steps and not (self.stop.due(s) or progress.due(s) or
+                                                   self.snapshots.due(s) or self.checkpoints.due(s, False)):
+            n += 1
+            s += 1
+        return n
 
     def _flags_now(self):
         """This rank's StepFlags for the step's allreduce."""

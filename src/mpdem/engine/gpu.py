@@ -33,6 +33,10 @@ from ..kernels.neighbours import build_neighbours
 from .base import NO_FLAGS, StepInfo
 from .order import sort_rows
 
+# steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
+# launches; a 20k pile runs some thousands of steps a second)
+BATCH = 1000
+
 
 def require():
     """Raise ``errors.DeviceError`` (one line: what is missing) unless a GPU engine can run here."""
@@ -112,6 +116,10 @@ class Engine:
         self._red = self.cuda.to_device(np.array(self.k.NEUTRAL))
         self._red_host = self.cuda.pinned_array(len(self.k.NEUTRAL))
         self._launchers = {}
+        # the per-step reductions of ``run_quiet``'s launches, and their pinned host copy
+        self._rec = self.cuda.device_array((BATCH, len(self.k.NEUTRAL)))
+        self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
+        self._coop_blocks = None
         self.n_rebuilds = 0
         self.info = StepInfo()
         self.n_contacts = 0
@@ -126,7 +134,7 @@ class Engine:
         blocks = (max(rows, 1) + self.block - 1) // self.block
         return (blocks if self.blocks is None else min(blocks, self.blocks)), self.block
 
-    def _launch(self, name, *args):
+    def _launch(self, name, *args, grid=None):
         """Launch kernel ``name`` of ``kernels.gpu.step`` over its first argument's rows (n_own).
 
         The first launch specializes the kernel for its argument types (which the engine keeps
@@ -139,7 +147,7 @@ class Engine:
             if specialize is not None:
                 kernel = specialize(*args)
             self._launchers[name] = kernel
-        kernel[self._grid(args[0])](*args)
+        kernel[grid or self._grid(args[0])](*args)
 
     def _rows_of(self):
         """The row fields the GPU steps (names of ``State`` attributes)."""
@@ -293,17 +301,24 @@ class Engine:
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks). As the CPU
         engine's ``step``: the same decisions from the same exact reductions."""
-        s, p, dom, d, k = self.state, self.phys, self.domain, self._dev, self.k
+        s, p, d = self.state, self.phys, self._dev
         t = time.perf_counter()
         self._launch("kick_drift", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"],
                      p.dt, *make_box(s.L_x, s.L_y), self._kick_due, self._red)
         red = self._red.copy_to_host(self._red_host)
         self._kick_due = False
         s.slots_current = False
-        n2 = math.nan if red[k.RED_BAD] else float(red[k.RED_D2])
         self.timers["integration"] += time.perf_counter() - t
-        reduce = [n2, self.last_overlap, -float(red[k.RED_ZMIN]), float(red[k.RED_ZMAX])] + list(flags)
-        n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(np.array(reduce)).tolist()
+        return self._finish_step(red, self.last_overlap, flags, defer_kick, keep_pairs)
+
+    def _finish_step(self, red, overlap, flags, defer_kick=True, keep_pairs=False):
+        """The rest of a step whose drift is done, with ``red`` its reductions (``kernels.gpu.step``) and
+        ``overlap`` the previous evaluation's: the one allreduce, a rebuild or the ghosts' refresh, the
+        forces; returns its StepInfo."""
+        s, p, k = self.state, self.phys, self.k
+        n2 = math.nan if red[k.RED_BAD] else float(red[k.RED_D2])
+        reduce = [n2, overlap, -float(red[k.RED_ZMIN]), float(red[k.RED_ZMAX])] + list(flags)
+        n2, overlap, neg_z_min, z_max, *agreed = self.domain.max_many(np.array(reduce)).tolist()
         if not math.sqrt(n2) < 0.5 * p.skin:
             self.rebuild()
         else:
@@ -317,6 +332,66 @@ class Engine:
         self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
                              flags._make(agreed))
         return self.info
+
+    def run_quiet(self, n, flags=NO_FLAGS):
+        """``n`` steps that nothing reads between (no sample, no file, no progress line), each as
+        ``step(flags, defer_kick=True)``; returns their StepInfos, with ``flags`` for all.
+
+        On one rank the steps run in launches of up to ``BATCH`` steps (``kernels.gpu.step.advance``,
+        a cooperative grid), so that a step costs no launch or copy of its own. A launch ends early at
+        a step that needs a list rebuild (or has a position that is not finite), which the host
+        finishes as ``step`` would. The same arithmetic, so the same bits. With several ranks (the
+        ghosts are refreshed through the host every step) they are steps one by one."""
+        if self.domain.parallel or self.state.n_own == 0:
+            return [self.step(flags, defer_kick=True) for _ in range(n)]
+        s, p, d, k = self.state, self.phys, self._dev, self.k
+        infos = []
+        while len(infos) < n:
+            m = min(n - len(infos), BATCH)
+            t = time.perf_counter()
+            args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
+                    d["nbr"], d["hist"], d["stamp"], d["pair"], d["wall_ds"], p.wall, p.floor, self._epoch,
+                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
+            self._launch("advance", *args, grid=self._cooperative_grid(args))
+            rec = self._rec[:m].copy_to_host(self._rec_host[:m])
+            self._kick_due = False
+            s.slots_current = False
+            overlap = self.last_overlap
+            whole = 0
+            for r in rec:
+                if r[k.RED_BAD] or not math.sqrt(r[k.RED_D2]) < 0.5 * p.skin:
+                    break
+                infos.append(StepInfo(overlap, self.n_contacts, float(r[k.RED_ZMIN]), float(r[k.RED_ZMAX]), flags))
+                overlap = float(r[k.RED_OVERLAP])
+                whole += 1
+            if whole:
+                self._epoch += whole
+                s.step += whole
+                s.time = s.step * p.dt
+                self.last_overlap, self._contacts = overlap, int(rec[whole - 1][k.RED_CONTACTS])
+                self.info = infos[-1]
+            # the last whole step's second half-kick is due, unless the launch went on to drift the next
+            # step (which applied it)
+            self._kick_due = whole == m
+            self.timers["forces"] += time.perf_counter() - t
+            if whole < m:
+                # the step the launch ended at has drifted: its rebuild and forces on the host's path
+                infos.append(self._finish_step(rec[whole], self.last_overlap, flags))
+        return infos
+
+    def _cooperative_grid(self, args):
+        """The grid of ``advance``: one row a thread if every block fits on the GPU at once (a
+        cooperative launch needs that), else as many blocks as fit, each thread taking several rows."""
+        if self._coop_blocks is None:
+            from ..kernels.gpu.runtime import SIMULATOR
+            if SIMULATOR:     # numba's simulator runs a cooperative grid of one block only
+                self._coop_blocks = 1
+            else:
+                spec = self._launchers.setdefault("advance", self.k.advance.specialize(*args))
+                overload = next(iter(spec.overloads.values()))
+                self._coop_blocks = max(int(overload.max_cooperative_grid_blocks(self.block)), 1)
+        blocks, block = self._grid(args[0])
+        return min(blocks, self._coop_blocks), block
 
     def complete(self):
         """Apply the second half-kick that ``step(defer_kick=True)`` left (nothing if none)."""

@@ -130,4 +130,4 @@ normal, tangential, normal_force = _space["normal"], _space["tangential"], _spac
 contact_force, contact_torque = _space["contact_force"], _space["contact_torque"]
 plane_slip, plane_torque, floor_force = _space["plane_slip"], _space["plane_torque"], _space["floor_force"]
 kicks, drift = _space["kicks"], _space["drift"]
-add, sub, mul = _add, _sub, _mul
+add, sub, mul, sqrt = _add, _sub, _mul, _sqrt

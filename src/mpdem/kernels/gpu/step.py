@@ -23,7 +23,7 @@ import numpy as np
 
 from .runtime import cuda, device
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, floor_force, kicks, min_image,
-                      normal, normal_force, norm2, plane_slip, plane_torque, slip, spin, tangential)
+                      normal, normal_force, norm2, plane_slip, plane_torque, slip, spin, sqrt, tangential)
 from ..particle import R
 
 BLOCK_MAX = 1024
@@ -331,3 +331,89 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         contacts += c
     max_into(red, RED_OVERLAP, deepest, room)
     sum_into(red, RED_CONTACTS, contacts, iroom)
+
+
+@device
+def _go_on(red, half_skin, room):
+    """Whether every row of ``red``'s step moved less than ``half_skin`` [d] since ``x_ref`` with a
+    finite position; the same answer in every thread. The block's first thread reads the step's
+    reductions through atomics (from the GPU's L2 cache, where the blocks' atomics left them) and
+    hands them on through ``room``."""
+    t = cuda.threadIdx.x
+    if t == 0:
+        room[0] = cuda.atomic.add(red, RED_BAD, 0.0)
+        room[1] = cuda.atomic.max(red, RED_D2, 0.0)
+    cuda.syncthreads()
+    go = room[0] == 0.0 and sqrt(room[1]) < half_skin
+    cuda.syncthreads()
+    return go
+
+
+@cuda.jit
+def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, wall, floor,
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec):
+    """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
+    phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
+
+    Step s: the half-kicks and drift (the previous step's second half-kick first, from the
+    second step on, or with ``pending``), the step's reductions into ``rec[s]`` (the slots of
+    ``NEUTRAL``); then, unless a row moved ``half_skin`` [d] or more since ``x_ref`` (the lists
+    must be rebuilt first) or a position is not finite, the forces of evaluation ``epoch + s + 1``.
+    A step that needs a rebuild ends the launch after its drift: the rows of steps 0..s-1 are
+    whole, step s has drifted, and its ``rec[s]`` says why (the caller finishes it). ``rec`` is
+    (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. The same arithmetic as the
+    step's two kernels, so the same bits.
+    """
+    grid = cuda.cg.this_grid()
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    first = cuda.grid(1)
+    stride = cuda.gridsize(1)
+    if first == 0:
+        for a in range(6):
+            rec[0, a] = NEUTRAL[a]
+    grid.sync()
+    for s in range(n_steps):
+        d2 = 0.0
+        z_lo = math.inf
+        z_hi = -math.inf
+        bad = 0
+        for i in range(first, n_own, stride):
+            if fixed[i]:
+                continue
+            di, z, b = _kick_drift_row(i, x, v, omega, f, torque, x_ref, law.dt, L_x, L_y, hx, hy,
+                                       pending or s > 0)
+            if b:
+                bad += 1
+            else:
+                d2 = max(d2, di)
+                z_lo = min(z_lo, z)
+                z_hi = max(z_hi, z)
+        max_into(rec[s], RED_D2, d2, room)
+        max_into(rec[s], RED_ZMAX, z_hi, room)
+        min_into(rec[s], RED_ZMIN, z_lo, room)
+        if bad:
+            cuda.atomic.add(rec[s], RED_BAD, np.float64(bad))
+        if first == 0 and s + 1 < n_steps:
+            for a in range(6):
+                rec[s + 1, a] = NEUTRAL[a]
+        grid.sync()
+        if not _go_on(rec[s], half_skin, room):
+            break
+        now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
+        before = np.uint32((epoch + s) & 0xFFFFFFFF)
+        deepest = 0.0
+        contacts = 0
+        for i in range(first, n_own, stride):
+            if fixed[i]:
+                for a in range(3):
+                    f[i, a] = 0.0
+                    torque[i, a] = 0.0
+                continue
+            d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds,
+                              wall, floor, now, before, L_x, L_y, hx, hy, law, True)
+            deepest = max(deepest, d)
+            contacts += c
+        max_into(rec[s], RED_OVERLAP, deepest, room)
+        sum_into(rec[s], RED_CONTACTS, contacts, iroom)
+        grid.sync()
