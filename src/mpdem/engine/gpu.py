@@ -388,8 +388,12 @@ class Engine:
                 self._coop_blocks = 1
             else:
                 spec = self._launchers.setdefault("advance", self.k.advance.specialize(*args))
-                overload = next(iter(spec.overloads.values()))
-                self._coop_blocks = max(int(overload.max_cooperative_grid_blocks(self.block)), 1)
+                try:
+                    overload = next(iter(spec.overloads.values()))
+                    self._coop_blocks = max(int(overload.max_cooperative_grid_blocks(self.block)), 1)
+                except (AttributeError, StopIteration):
+                    # one block a multiprocessor is resident whatever the kernel's resources
+                    self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
         blocks, block = self._grid(args[0])
         return min(blocks, self._coop_blocks), block
 
