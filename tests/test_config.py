@@ -124,9 +124,10 @@ def _section(*names):
 
 
 def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
-    # a restart may change the step cap, the stop rule, the checks, the decomposition, the output
-    # and the analysis settings: none of them alters a step's arithmetic
-    assert set(config.RESTART_KEYS) == {"run.max_steps"} | _section("stop", "checks", "decomp", "output", "analysis")
+    # a restart may change the step cap, the stop rule, the checks, the decomposition, the engine, the
+    # output and the analysis settings: none of them alters a step's arithmetic
+    assert set(config.RESTART_KEYS) == {"run.max_steps"} | _section("stop", "checks", "decomp", "engine", "output",
+                                                                    "analysis")
     # physics: the box, the pour, the contact law, the bed, dt and the stop rule; not the seed, the step
     # cap, the input files, the skin and slots (they leave a run's result alone), nor the settings
     assert set(config.PHYSICS_KEYS) == _section("box", "pour", "contact", "bed", "stop") | {"integration.dt"}
@@ -134,7 +135,8 @@ def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
     cols = sorted(k.param for k in config.SCHEMA if k.param)
     assert cols == list(range(1, len(config.PARAM_KEYS) + 1))
     assert "run.seed" in config.PARAM_KEYS and set(config.PARAM_KEYS) - {"run.seed"} <= set(config.PHYSICS_KEYS)
-    assert config.key_summary(config.RESTART_KEYS) == "run.max_steps, stop.*, checks.*, decomp.*, output.*, analysis.*"
+    assert (config.key_summary(config.RESTART_KEYS)
+            == "run.max_steps, stop.*, checks.*, engine.*, decomp.*, output.*, analysis.*")
 
 
 @pytest.mark.parametrize("item,allowed", [
