@@ -44,7 +44,8 @@ def require():
 
 
 def _kernels():
-    """The GPU kernels (``kernels.gpu.step``), after checking that a GPU can be used."""
+    """numba's CUDA target and the GPU kernels (``kernels.gpu.step``), after checking that a GPU can
+    be used."""
     try:
         from ..kernels.gpu import runtime
     except ImportError as e:
@@ -90,6 +91,8 @@ class Engine:
 
     def __init__(self, state, physics, domain, block=128, blocks=None):
         self.cuda, self.k = _kernels()
+        from ..kernels.gpu.runtime import launch
+        self._run = launch
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
         from ..kernels.gpu.runtime import SIMULATOR
@@ -147,7 +150,7 @@ class Engine:
             if specialize is not None:
                 kernel = specialize(*args)
             self._launchers[name] = kernel
-        kernel[grid or self._grid(args[0])](*args)
+        self._run(kernel, grid or self._grid(args[0]), args)
 
     def _rows_of(self):
         """The row fields the GPU steps (names of ``State`` attributes)."""

@@ -13,11 +13,24 @@ from numba import config  # noqa: E402
 from numba import cuda  # noqa: E402
 
 SIMULATOR = bool(config.ENABLE_CUDASIM)
-if SIMULATOR:
+# the interpreter's switch interval while the simulator runs a kernel: its launching thread polls the
+# threads it runs the kernel's threads in, holding the interpreter a switch interval (5 ms) at a time;
+# short intervals let them run (4-6 x faster). ``launch`` sets it for the launch alone.
+SIMULATOR_SWITCH = 1e-5
+
+
+def launch(kernel, grid, args):
+    """``kernel[grid](*args)``; under the simulator with a short switch interval for its duration."""
+    if not SIMULATOR:
+        kernel[grid](*args)
+        return
     import sys
-    # the simulator's launching thread polls the threads it runs the kernel's threads in, holding the
-    # interpreter for a switch interval (5 ms) at a time: short intervals let them run (4-6x faster)
-    sys.setswitchinterval(1e-5)
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(SIMULATOR_SWITCH)
+    try:
+        kernel[grid](*args)
+    finally:
+        sys.setswitchinterval(old)
 
 
 def device(fn):
