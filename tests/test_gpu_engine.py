@@ -97,6 +97,40 @@ def test_steps_in_one_launch_give_the_steps_bits(case):
     assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
 
 
+def test_lists_built_on_the_gpu_are_the_cpu_build():
+    """A rebuild on the GPU (``kernels.gpu.lists``) gives every row the partners of the host's
+    ``build_neighbours``, sorted by id, and carries each entry's history and stamp."""
+    from mpdem.kernels.bundles import make_box
+    from mpdem.kernels.neighbours import build_neighbours
+    eng, st = stepped(gpu.Engine, CASES["mu0.5-gamma_t"], 8, GRIDS[1])
+    assert 0 < eng.n_rebuilds % gpu.SORT_EVERY, "the last rebuild was one on the GPU"
+    eng.sync_state()    # the host's rows current
+    hist, stamp = eng._download_history()
+    old = eng._lists()
+    before = {(i, int(old.nbr_list[e])): e
+              for i in range(st.n_own) for e in range(old.nbr_start[i], old.nbr_start[i + 1])}
+    eng.rebuild()       # on the GPU again, from the positions the host's lists are built from
+    assert not eng._host_lists
+    lists = eng._lists()
+    n = st.n_own
+    start, nbr = np.zeros(n + 1, np.int64), np.zeros(40 * n, np.int32)
+    k = build_neighbours(st.x, st.n_rows, n, st.fixed, st.id, make_box(st.L_x, st.L_y), eng.r_list, start, nbr, 1)
+    assert k == eng._k > 0
+    assert np.array_equal(lists.nbr_start[:n + 1], start) and np.array_equal(lists.nbr_list[:k], nbr[:k])
+    hist2, stamp2 = eng._download_history()
+    stale = np.uint32(eng._epoch - 1)
+    kept = 0
+    for i in range(n):
+        for e in range(start[i], start[i + 1]):
+            was = before.get((i, int(nbr[e])))
+            if was is None:
+                assert stamp2[e] == stale and not hist2[e].any()
+            else:
+                assert stamp2[e] == stamp[was] and np.array_equal(hist2[e], hist[was])
+                kept += stamp[was] == np.uint32(eng._epoch)
+    assert kept > 50, "contacts among the carried entries"
+
+
 def test_any_grid_gives_the_same_bits():
     """The launch's shape (threads per block, blocks, rows a thread) changes no bit."""
     phys = CASES["mu0.5-gamma_t"]

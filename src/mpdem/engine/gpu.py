@@ -29,13 +29,16 @@ from ..kernels.bundles import Lists, Near, Particles, Slots, make_box
 from ..kernels.exactsum import new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
 from ..kernels.law import law_of
-from ..kernels.neighbours import build_neighbours
+from ..kernels.neighbours import build_neighbours, cell_axis
 from .base import NO_FLAGS, StepInfo
 from .order import sort_rows
 
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
 # launches; a 20k pile runs some thousands of steps a second)
 BATCH = 1000
+# every this many list rebuilds on one rank go through the host, which orders the rows by cell
+# (neighbours near in memory); the others are built on the GPU
+SORT_EVERY = 20
 
 
 def require():
@@ -91,8 +94,10 @@ class Engine:
 
     def __init__(self, state, physics, domain, block=128, blocks=None):
         self.cuda, self.k = _kernels()
+        from ..kernels.gpu import lists
         from ..kernels.gpu.runtime import launch
-        self._run = launch
+        self.kl, self._run = lists, launch
+        self._zr = self.cuda.to_device(np.zeros(2))
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
         from ..kernels.gpu.runtime import SIMULATOR
@@ -110,6 +115,9 @@ class Engine:
         self.nbr_start = np.zeros(1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
         self._link = np.zeros(0, np.int32)
+        self._k = 0               # list entries
+        self._host_lists = True   # the host's copy of the lists is current (``_lists``)
+        self._buffers = {}        # the GPU list build's scratch (``_buffer``)
         self.has_lists = False
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self._kick_due = False
@@ -160,7 +168,7 @@ class Engine:
         """Every row, the lists and the history to the GPU (after a rebuild)."""
         s, d, cuda = self.state, self._dev, self.cuda
         m = s.n_rows
-        for name in self._rows_of() + ("fixed",):
+        for name in self._rows_of() + ("fixed", "id"):
             d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
         d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
         d["start"] = cuda.to_device(self.nbr_start[:s.n_own + 1])
@@ -182,12 +190,19 @@ class Engine:
 
     def _download_history(self):
         """Each list entry's Delta s and stamp from the GPU (host arrays)."""
-        k = len(self._link)
-        hist = self._dev["hist"].copy_to_host()[:k]
-        stamp = self._dev["stamp"].copy_to_host()[:k]
+        k = self._k
+        hist = self._dev["hist"][:max(k, 1)].copy_to_host()[:k]
+        stamp = self._dev["stamp"][:max(k, 1)].copy_to_host()[:k]
         return hist, stamp
 
     def _lists(self):
+        """The lists as the host's history kernels read them (copied from the GPU if it built them)."""
+        if not self._host_lists:
+            n, k = self.state.n_own, self._k
+            self.nbr_start[:n + 1] = self._dev["start"][:n + 1].copy_to_host()
+            self.nbr_list = self._dev["nbr"][:max(k, 1)].copy_to_host()[:k]
+            self._link = np.arange(k, dtype=np.int32)
+            self._host_lists = True
         # every entry is computed by its own row: entry k is slot k (``kernels.history``'s link)
         return Lists(self.nbr_start, self.nbr_list, self._link, self.nbr_start)
 
@@ -212,8 +227,16 @@ class Engine:
 
     # -- neighbour lists --
     def rebuild(self):
-        """Rows and history to the host; migrate/halo (domain); lists sorted by partner id; all back."""
+        """New lists, the contact history carried. On one rank, where the rows keep their places,
+        on the GPU (``kernels.gpu.lists``) but every ``SORT_EVERY``-th time; otherwise through the
+        host: rows and history down, migration and ghosts (domain), the rows ordered by cell, the
+        lists built, all up."""
         t = time.perf_counter()
+        if self.has_lists and not self.domain.parallel and self.n_rebuilds % SORT_EVERY:
+            self._rebuild_on_gpu()
+            self.n_rebuilds += 1
+            self.timers["lists"] += time.perf_counter() - t
+            return
         c0 = self.domain.comm_seconds
         s = self.state
         if self.has_lists:
@@ -234,9 +257,10 @@ class Engine:
             if need <= len(self.nbr_list):
                 break
             self.nbr_list = np.zeros(int(need * 1.1) + 64, np.int32)
-        k = int(self.nbr_start[n])
+        k = self._k = int(self.nbr_start[n])
         self.nbr_list = self.nbr_list[:k].copy() if k else np.zeros(0, np.int32)
         self._link = np.arange(k, dtype=np.int32)
+        self._host_lists = True
         self._hist = np.empty((k, 3))
         self._stamp = np.empty(k, np.uint32)
         history.slots_to_entries(n, s.id, self._lists(), s.slot_offsets(), s.partner, s.ds,
@@ -251,6 +275,56 @@ class Engine:
         self.has_lists = True
         self.n_rebuilds += 1
         self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
+
+    def _rebuild_on_gpu(self):
+        """The lists built on the GPU from the rows where they are, the history carried entry by
+        entry (``kernels.gpu.lists``); x_ref = x. One rank only (no ghosts, no migration)."""
+        s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
+        n = s.n_own
+        grid, one = self._grid(n), (1, self.block)
+        z = self._zr
+        z.copy_to_device(np.array([math.inf, -math.inf]))
+        self._run(L.z_range, grid, (n, d["x"], z))
+        zmin, zmax = (float(v) for v in z.copy_to_host())
+        nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
+        # z cells hashed above a bound of the grid, as the CPU's build (memory O(rows) whatever flies)
+        nz = min(int((zmax - zmin) / self.r_list) + 1, max(3, 4 * (n // (nx * ny)) + 8))
+        ncell = nx * ny * nz
+        count = self._buffer("cells", ncell + 1, np.int32)
+        fill = self._buffer("fill", ncell + 1, np.int32)
+        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
+        self._run(L.zero, self._grid(ncell + 1), (ncell + 1, count))
+        self._run(L.bin_rows, grid, (n, d["x"], nx, ny, nz, s.L_x / nx, s.L_y / ny, zmin, self.r_list, cell, count))
+        self._run(L.scan, one, (count, ncell))
+        fill[:ncell + 1].copy_to_device(count[:ncell + 1])
+        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        box = make_box(s.L_x, s.L_y)
+        r2 = self.r_list * self.r_list
+        cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, nz, *box, r2)
+        start = cuda.device_array(n + 1, np.int64)
+        self._run(L.count_partners, grid, (n, *cells, start))
+        self._run(L.scan, one, (start, n))
+        k = int(start[n:n + 1].copy_to_host()[0])
+        nbr = cuda.device_array(max(k, 1), np.int32)
+        hist = cuda.device_array((max(k, 1), 3))
+        stamp = cuda.device_array(max(k, 1), np.uint32)
+        self._run(L.write_partners, grid, (n, *cells, start, nbr))
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        self._run(L.carry_history, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], start, nbr, hist,
+                                          stamp, stale))
+        d["start"], d["nbr"], d["hist"], d["stamp"] = start, nbr, hist, stamp
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
+        self._k = k
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+
+    def _buffer(self, name, size, dtype):
+        """A device array of at least ``size`` elements kept between rebuilds (grown by a quarter)."""
+        a = self._buffers.get(name)
+        if a is None or a.shape[0] < size:
+            a = self._buffers[name] = self.cuda.device_array(int(size * 1.25) + 64, dtype)
+        return a
 
     def _refresh(self):
         """The ghost rows' x, v and omega from their owners, through the host (several ranks)."""
@@ -271,8 +345,8 @@ class Engine:
         With ``keep_pairs`` every entry's force stays on the GPU for ``force_ratio``."""
         t = time.perf_counter()
         s, d, k, p = self.state, self._dev, self.k, self.phys
-        if keep_pairs and d["pair"].shape[0] < max(len(self._link), 1):
-            d["pair"] = self.cuda.device_array((max(len(self._link), 1), 6))
+        if keep_pairs and d["pair"].shape[0] < max(self._k, 1):
+            d["pair"] = self.cuda.device_array((max(self._k, 1), 6))
         self._pairs_kept = keep_pairs
         self._epoch += 1
         self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
@@ -445,7 +519,8 @@ class Engine:
         if self._epoch == 0 or not self._pairs_kept:
             return math.nan, -1
         s = self.state
-        k = len(self._link)
+        k = self._k
+        self._lists()
         self._download_rows(("f",), s.n_own)
         pair = self._dev["pair"].copy_to_host()[:k]
         stamp = self._dev["stamp"].copy_to_host()[:k]

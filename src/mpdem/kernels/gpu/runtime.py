@@ -34,10 +34,30 @@ def launch(kernel, grid, args):
 
 
 def device(fn):
-    """A device function of the kernels: ``cuda.jit(device=True)`` on a GPU; under the simulator
-    the plain function, which the simulated kernels call as Python (the simulator's own device
-    functions swap module globals at every call, a hundred times slower)."""
+    """A device function of the kernels that reads nothing of ``cuda``: ``cuda.jit(device=True)`` on
+    a GPU; under the simulator the plain function, which the simulated kernels call as Python (the
+    simulator's own device functions swap module globals at every call, a hundred times slower).
+    One that reads ``cuda`` is ``device_cuda``."""
     return fn if SIMULATOR else cuda.jit(device=True)(fn)
+
+
+def device_cuda(fn):
+    """A device function that reads ``cuda`` (thread indices, barriers, atomics): on a GPU
+    ``cuda.jit(device=True)``; under the simulator a function that runs ``fn``'s code with ``cuda``
+    the simulated kernel's (the simulator's own device functions swap it in the module's globals,
+    which threads in one module undo for each other)."""
+    if not SIMULATOR:
+        return cuda.jit(device=True)(fn)
+    import functools
+    import types
+    from numba.cuda.simulator.kernel import _get_kernel_context
+
+    @functools.wraps(fn)
+    def call(*args):
+        space = dict(fn.__globals__)
+        space["cuda"] = _get_kernel_context()
+        return types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__, fn.__closure__)(*args)
+    return call
 
 
 def unavailable():

@@ -15,82 +15,23 @@ per block with an atomic max, min or integer add: exact and independent of
 the order the blocks run in.
 
 Kernels take arrays and scalars only (``law`` is the ``law.Law`` record).
-``BLOCK_MAX`` threads per block at most, a power of two.
+``reduce.BLOCK_MAX`` threads per block at most, a power of two.
 """
 import math
 
 import numpy as np
 
-from .runtime import cuda, device
+from .reduce import BLOCK_MAX, max_into, min_into, sum_into
+from .runtime import cuda, device, device_cuda
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, floor_force, kicks, min_image,
                       normal, normal_force, norm2, plane_slip, plane_torque, slip, spin, sqrt, tangential)
 from ..particle import R
 
-BLOCK_MAX = 1024
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
 RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
 # their values before any row adds to them; each kernel sets the other's back to these for its next launch
 NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
-
-
-@device
-def _block_max(value, room):
-    """The max of ``value`` over the block's threads, in thread 0 (others: undefined); every thread
-    of the block must call it. ``room`` (BLOCK_MAX,) float64 shared."""
-    t = cuda.threadIdx.x
-    room[t] = value
-    cuda.syncthreads()
-    s = cuda.blockDim.x // 2
-    while s > 0:
-        if t < s and room[t + s] > room[t]:
-            room[t] = room[t + s]
-        cuda.syncthreads()
-        s //= 2
-    out = room[0]
-    cuda.syncthreads()
-    return out
-
-
-@device
-def _block_sum(value, room):
-    """The sum of the int64 ``value`` over the block's threads, in thread 0; as ``_block_max``."""
-    t = cuda.threadIdx.x
-    room[t] = value
-    cuda.syncthreads()
-    s = cuda.blockDim.x // 2
-    while s > 0:
-        if t < s:
-            room[t] += room[t + s]
-        cuda.syncthreads()
-        s //= 2
-    out = room[0]
-    cuda.syncthreads()
-    return out
-
-
-@device
-def max_into(red, k, value, room):
-    """red[k] = max(red[k], the block's ``value``s) (every thread of the block calls it)."""
-    value = _block_max(value, room)
-    if cuda.threadIdx.x == 0:
-        cuda.atomic.max(red, k, value)
-
-
-@device
-def min_into(red, k, value, room):
-    """red[k] = min(red[k], the block's ``value``s)."""
-    value = -_block_max(-value, room)
-    if cuda.threadIdx.x == 0:
-        cuda.atomic.min(red, k, value)
-
-
-@device
-def sum_into(red, k, value, room):
-    """red[k] += the sum of the block's int64 ``value``s (as float64: exact below 2**53)."""
-    value = _block_sum(value, room)
-    if cuda.threadIdx.x == 0 and value != 0:
-        cuda.atomic.add(red, k, np.float64(value))
 
 
 @device
@@ -333,7 +274,7 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     sum_into(red, RED_CONTACTS, contacts, iroom)
 
 
-@device
+@device_cuda
 def _go_on(red, half_skin, room):
     """Whether every row of ``red``'s step moved less than ``half_skin`` [d] since ``x_ref`` with a
     finite position; the same answer in every thread. The block's first thread reads the step's

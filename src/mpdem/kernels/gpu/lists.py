@@ -1,0 +1,200 @@
+"""Neighbour lists built on the GPU, the contact history carried from the old lists to the new.
+
+The lists are those of ``kernels.neighbours.build_neighbours``: for each owned mobile row, every
+row within ``r_list`` (bed rows included), sorted by partner id. The cells are at least
+``r_list`` wide across the periodic box and ``r_list`` tall, z hashed modulo ``nz`` above a
+bound on the grid (as the CPU's). A cell's rows land in it in whatever order the atomics give,
+which changes nothing: each row's partners are sorted by id before they are used.
+
+The build, each step a launch:
+
+1. ``z_range``: the lowest and highest centre of all rows;
+2. ``bin_rows``: each row's cell, and the cells' counts;
+3. ``scan``: counts to offsets (one block);
+4. ``fill_cells``: the rows by cell;
+5. ``count_partners``, ``scan``: each row's list length, then the lists' offsets;
+6. ``write_partners``: each row's partners, sorted by id in place;
+7. ``carry_history``: each new entry takes the history and stamp of the old entry with the same
+   partner (both lists sorted by id: one merge a row), a new pair a stale stamp.
+
+Only while the rows keep their places (one rank, no migration, no reordering): the old and the new
+lists name partners by the same row indices.
+"""
+import math
+
+import numpy as np
+
+from .reduce import BLOCK_MAX, max_into, min_into
+from .rounded import min_image, norm2
+from .runtime import cuda, device
+
+
+@cuda.jit
+def z_range(n_rows, x, out):
+    """out[0] = min(out[0], the rows' z), out[1] = max(out[1], the rows' z) [d]; out starts at
+    (inf, -inf)."""
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    lo = math.inf
+    hi = -math.inf
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        z = x[i, 2]
+        lo = min(lo, z)
+        hi = max(hi, z)
+    min_into(out, 0, lo, room)
+    max_into(out, 1, hi, room)
+
+
+@cuda.jit
+def bin_rows(n_rows, x, nx, ny, nz, cx, cy, zmin, r_list, cell, count):
+    """cell[i]: the cell of row i; count[c + 1] += 1 for each row of cell c (count zeroed before)."""
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        ix = min(int(x[i, 0] / cx), nx - 1)
+        iy = min(int(x[i, 1] / cy), ny - 1)
+        iz = int((x[i, 2] - zmin) / r_list) % nz
+        c = (iz * ny + iy) * nx + ix
+        cell[i] = c
+        cuda.atomic.add(count, c + 1, 1)
+
+
+@cuda.jit
+def scan(a, n):
+    """a[1..n] counts -> a[0..n] offsets in place (a[0] = 0; a[k] = the sum of the counts before k):
+    one block, each thread a stretch of the array."""
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    t = cuda.threadIdx.x
+    threads = cuda.blockDim.x
+    stretch = (n + threads - 1) // threads
+    lo = 1 + t * stretch
+    hi = min(lo + stretch, n + 1)
+    total = 0
+    for k in range(lo, hi):
+        total += a[k]
+    part[t] = total
+    cuda.syncthreads()
+    if t == 0:
+        run = 0
+        for u in range(threads):
+            here = part[u]
+            part[u] = run
+            run += here
+    cuda.syncthreads()
+    run = part[t]
+    for k in range(lo, hi):
+        run += a[k]
+        a[k] = run
+    if t == 0:
+        a[0] = 0
+
+
+@cuda.jit
+def fill_cells(n_rows, cell, fill, order):
+    """order[fill[c]...]: the rows of cell c (``fill`` a copy of the cells' offsets, consumed)."""
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        at = cuda.atomic.add(fill, cell[i], 1)
+        order[at] = i
+
+
+@device
+def _around(i, a, n):
+    """The a-th of the cells i - 1, i, i + 1 along a periodic axis of n cells (all n cells if n < 3)."""
+    if n < 3:
+        return a
+    j = i + a - 1
+    if j < 0:
+        return j + n
+    if j >= n:
+        return j - n
+    return j
+
+
+@device
+def _partners(i, x, ids, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, out, first, write):
+    """Row i's partners within sqrt(r2) [d] in the 27 cells around its own (fewer where an axis has
+    fewer than 3 cells); written from out[first] and sorted by id when ``write``. Returns how many."""
+    c = cell[i]
+    ix = c % nx
+    iy = (c // nx) % ny
+    iz = c // (nx * ny)
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
+    m = 0
+    for a in range(min(nz, 3)):
+        jz = _around(iz, a, nz)
+        for b in range(min(ny, 3)):
+            jy = _around(iy, b, ny)
+            for e in range(min(nx, 3)):
+                jc = (jz * ny + jy) * nx + _around(ix, e, nx)
+                for k in range(start[jc], start[jc + 1]):
+                    j = order[k]
+                    if j == i:
+                        continue
+                    dx = min_image(xi - x[j, 0], L_x, hx)
+                    dy = min_image(yi - x[j, 1], L_y, hy)
+                    if norm2(dx, dy, zi - x[j, 2]) < r2:
+                        if write:
+                            # insertion by partner id
+                            p = first + m
+                            jid = ids[j]
+                            while p > first and ids[out[p - 1]] > jid:
+                                out[p] = out[p - 1]
+                                p -= 1
+                            out[p] = j
+                        m += 1
+    return m
+
+
+@cuda.jit
+def count_partners(n_own, x, ids, fixed, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, counts):
+    """counts[i + 1] = row i's partners (0 for a bed row)."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        m = 0
+        if not fixed[i]:
+            m = _partners(i, x, ids, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, counts, 0, False)
+        counts[i + 1] = m
+
+
+@cuda.jit
+def write_partners(n_own, x, ids, fixed, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, nbr_start, nbr):
+    """nbr[nbr_start[i]...nbr_start[i + 1]]: row i's partners, sorted by id."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if not fixed[i]:
+            _partners(i, x, ids, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, nbr, nbr_start[i], True)
+
+
+@cuda.jit
+def carry_history(n_own, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp,
+                  stale):
+    """Each new entry's Delta s and stamp: the old entry's with the same partner, else zeros and
+    ``stale`` (a stamp that says: not in contact at the last evaluation)."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        p = old_start[i]
+        pe = old_start[i + 1]
+        for k in range(new_start[i], new_start[i + 1]):
+            j = new_nbr[k]
+            jid = ids[j]
+            while p < pe and ids[old_nbr[p]] < jid:
+                p += 1
+            if p < pe and old_nbr[p] == j:
+                for a in range(3):
+                    new_hist[k, a] = old_hist[p, a]
+                new_stamp[k] = old_stamp[p]
+            else:
+                for a in range(3):
+                    new_hist[k, a] = 0.0
+                new_stamp[k] = stale
+
+
+@cuda.jit
+def copy_rows(n, src, dst):
+    """dst[:n] = src[:n] for (n, 3) arrays."""
+    for i in range(cuda.grid(1), n, cuda.gridsize(1)):
+        for a in range(3):
+            dst[i, a] = src[i, a]
+
+
+@cuda.jit
+def zero(n, a):
+    """a[:n] = 0 (a 1-d integer array)."""
+    for i in range(cuda.grid(1), n, cuda.gridsize(1)):
+        a[i] = 0
