@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
 
-.PHONY: setup run test test-fast lint test-serial test-mpi test-validation bench reproduce collect-dev reproduce-paper collect-paper clean
+.PHONY: setup run test test-fast lint test-serial test-mpi test-validation test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
 
 setup:
 	@bash tools/setup.sh
@@ -16,13 +16,19 @@ run: setup
 	$(PY) -m mpdem analyze runs/example
 
 # Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
-test: setup lint test-serial test-mpi test-validation
+test: setup lint test-serial test-mpi test-gpu-compile test-validation
 
 test-fast: setup lint test-serial test-mpi
 
 # pyflakes and pycodestyle errors (pyproject.toml [tool.ruff])
 lint:
 	$(VENV)/bin/ruff check src tests mpi_tests tools
+
+# the GPU engine's kernels compiled by numba-cuda for an H100 (sm_90) without a GPU, and their PTX free of
+# fused float64 multiply-adds (tools/gpu_compile.py; .venv-cuda made by tools/setup_cuda.sh, idempotent)
+test-gpu-compile:
+	@bash tools/setup_cuda.sh
+	.venv-cuda/bin/python tools/gpu_compile.py
 
 # the default selection: pyproject.toml's addopts deselect -m validation
 test-serial:
