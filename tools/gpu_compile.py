@@ -73,6 +73,7 @@ def cases():
         "lists.carry_history": (lists.carry_history, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
                                                       np.uint32(3))),
         "lists.copy_rows": (lists.copy_rows, (n, x, x)),
+        "lists.gather_rows": (lists.gather_rows, (ids, x, x, x, np.zeros((3, n, 3)))),
     }
 
 

@@ -302,6 +302,15 @@ class Domain:
             raise RuntimeError("Domain.refresh before the first rebuild")
         self._plan.run((state.x, state.v, state.omega))
 
+    def ghost_sources(self):
+        """The owned rows the ghost refresh sends to other ranks, ascending, (m,) intp (none on one
+        rank): an engine that keeps the rows elsewhere (the GPU) brings these current before
+        ``refresh``."""
+        if self._plan is None:
+            return np.zeros(0, np.intp)
+        rows = [r for r, _ in self._plan.sends]
+        return np.unique(np.concatenate(rows)) if rows else np.zeros(0, np.intp)
+
     def _owned_counts(self, state):
         """Owned mobile particles of every rank, (P,) int64 (a collective)."""
         mob = int(np.count_nonzero(state.fixed[:state.n_own] == 0))

@@ -177,6 +177,12 @@ class Engine:
         d["hist"] = cuda.to_device(self._hist[:k] if len(self._hist) else np.zeros((1, 3)))
         d["stamp"] = cuda.to_device(self._stamp[:k] if len(self._stamp) else np.zeros(1, np.uint32))
         d["pair"] = cuda.device_array((1, 6))
+        # the owned rows the ghost refresh sends (several ranks), and room to gather them
+        self._sources = self.domain.ghost_sources()
+        m = max(len(self._sources), 1)
+        d["sources"] = cuda.to_device(np.ascontiguousarray(self._sources[:m] if len(self._sources) else [0], np.intp))
+        d["sent"] = cuda.device_array((3, m, 3))
+        self._sent_host = cuda.pinned_array((3, m, 3))
         if "wall_ds" not in d:
             d["wall_ds"] = cuda.device_array((1, 3))
         self._pairs_kept = False
@@ -327,13 +333,18 @@ class Engine:
         return a
 
     def _refresh(self):
-        """The ghost rows' x, v and omega from their owners, through the host (several ranks)."""
-        s = self.state
+        """The ghost rows' x, v and omega from their owners, through the host (several ranks): the
+        rows the refresh sends are gathered on the GPU and copied down, the ghosts copied up."""
+        s, d = self.state, self._dev
         if not self.domain.parallel:
             return
-        self._download_rows(("x", "v", "omega"), s.n_own)
+        rows = self._sources
+        m = len(rows)
+        if m:
+            self._run(self.kl.gather_rows, self._grid(m), (d["sources"], d["x"], d["v"], d["omega"], d["sent"]))
+            sent = d["sent"][:, :m].copy_to_host(self._sent_host[:, :m])
+            s.x[rows], s.v[rows], s.omega[rows] = sent[0], sent[1], sent[2]
         self.domain.refresh(s)
-        d = self._dev
         for name in ("x", "v", "omega"):
             if s.n_rows > s.n_own:
                 d[name][s.n_own:s.n_rows].copy_to_device(np.ascontiguousarray(getattr(s, name)[s.n_own:s.n_rows]))

@@ -198,3 +198,14 @@ def zero(n, a):
     """a[:n] = 0 (a 1-d integer array)."""
     for i in range(cuda.grid(1), n, cuda.gridsize(1)):
         a[i] = 0
+
+
+@cuda.jit
+def gather_rows(rows, x, v, omega, out):
+    """out[0, k], out[1, k], out[2, k] = x, v, omega of row rows[k] (the ghost refresh's sources)."""
+    for k in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[k]
+        for a in range(3):
+            out[0, k, a] = x[i, a]
+            out[1, k, a] = v[i, a]
+            out[2, k, a] = omega[i, a]
