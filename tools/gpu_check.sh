@@ -7,6 +7,7 @@
 # scipy, h5py and mpi4py (an MPI library only for RANKS > 1); writes its logs and a summary to $OUT
 # (default ./gpu_check_out) and prints the summary table last. About 5 minutes on an H100.
 #   bash tools/gpu_check.sh [TABLE]        TABLE: the bench's landed20k.txt.gz (no timings of it without)
+#   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -110,6 +111,15 @@ t=$SECONDS
 $PY -m mpdem run --out "$w/pour" --force --quiet --device gpu --set run.max_steps=$PSTEPS "${POUR[@]}" \
     --set contact.mu=0.5 --set output.progress_every=100000 > "$w/pour.log" 2>&1
 say "paper-size pour on the gpu: $PSTEPS steps in $((SECONDS - t)) s (bed making and set-up included); thermo's last step,rebuilds,loop seconds: $(tail -1 "$w/pour/thermo.csv" | cut -d, -f1,10,11)"
+# POUR_MINUTES=M: the paper-size pour from its start to the stop rule, or M minutes of it (the issue's target: 5)
+if [ "${POUR_MINUTES:-0}" -gt 0 ]; then
+    t=$SECONDS
+    $PY -m mpdem run --out "$w/whole" --force --quiet --device gpu --set run.max_steps=10000000 "${POUR[@]}" \
+        --set contact.mu=0.5 --set output.progress_every=1000000 --walltime "00:$(printf %02d "$POUR_MINUTES"):00" \
+        > "$w/whole.log" 2>&1
+    rc=$?
+    say "paper-size pour to the stop rule on the gpu: exit status $rc (0 converged, 75 the time ran out) after $((SECONDS - t)) s; thermo's last step,E_k,rebuilds,loop seconds: $(tail -1 "$w/whole/thermo.csv" | cut -d, -f1,3,10,11)"
+fi
 say "gpu_check done in $((SECONDS - t0)) s"
 echo "---- summary ($SUM)"
 cat "$SUM"
