@@ -58,7 +58,7 @@ def pair_kernel(x, v, omega, ds_old, fixed=(0, 1), mu=0.5, k_n=2e5, gamma_n=0.0,
         stamp[0] = 0
     f = np.zeros((2, 3))
     t = np.zeros((2, 3))
-    law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, dt, model, limit_damping, rotate)
+    law = Law(k_n, 2 * k_n / 7, gamma_n, gamma_t, mu, 0.0, 0.0, 0.0, dt, model, limit_damping, rotate)
     # one chunk per row, so each row computes its view in full: each entry its own slot
     # (link k, hist[k] is entry k's, and so is place k of the pair store), both entries computed (cj = nbr)
     slot = np.arange(2, dtype=np.int32)

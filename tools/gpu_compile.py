@@ -48,7 +48,7 @@ def _control(a, b, c, out):
 def cases():
     """Each kernel with arguments of the types the GPU engine passes (values do not matter)."""
     n = 8
-    law = Law(2e5, 4e5 / 7, 40.0, 10.0, 0.5, 1.0, 1e-4, MODEL_HERTZ, False, True)
+    law = Law(2e5, 4e5 / 7, 40.0, 10.0, 0.5, 0.0, 0.0, -1.0, 1e-4, MODEL_HERTZ, False, True)
     x, fixed, ids = np.zeros((n, 3)), np.zeros(n, np.uint8), np.zeros(n, np.int64)
     start, nbr = np.zeros(n + 1, np.int64), np.zeros(4, np.int32)
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))

@@ -61,6 +61,9 @@ SCHEMA = (
     _k("box", "L_x", 20.0, "periodic box length in x [d]", param=12),
     _k("box", "L_y", 20.0, "periodic box length in y [d]", param=13),
     _k("box", "gravity", 1.0, "gravitational acceleration [g]; 1 in reduced units, 0 only for verification runs"),
+    _k("box", "incline", 0.0,
+       "tilt of the pile about the y axis [degrees]: gravity g (sin theta, 0, -cos theta), x downslope; the bed "
+       "and bed.wall stay at z = 0 (a chute in its own frame)"),
     _k("pour", "N", 20000, "number of mobile spheres", int, param=9),
     _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)", param=8),
     _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest", param=10),
@@ -523,7 +526,8 @@ def resolve(raw):
     need("pour.K0", vals["pour.K0"] >= 0, "K0 >= 0")
     need("run.max_steps", vals["run.max_steps"] > 0, "max_steps > 0")
     need("run.seed", vals["run.seed"] >= 0, "seed >= 0")
-    need("box.gravity", vals["box.gravity"] >= 0, "gravity >= 0 (it points along -z)")
+    need("box.gravity", vals["box.gravity"] >= 0, "gravity >= 0 (it points along -z, tilted by box.incline)")
+    need("box.incline", 0 <= vals["box.incline"] < 90, "0 <= incline < 90 degrees")
 
     skin = vals["integration.skin"]
     need("integration.skin", 0 < skin <= 1, "0 < skin <= 1 d")

@@ -18,6 +18,7 @@ class Physics:
     skin: float = 0.2
     near_skin: float = 0.03
     gravity: float = 1.0
+    incline: float = 0.0        # tilt about y [degrees]: gravity along (sin, 0, -cos)
     model: str = "hooke"
     limit_damping: bool = False
     rescale_history: bool = False
@@ -29,7 +30,7 @@ class Physics:
         c = cfg.contact
         return cls(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
                    dt=cfg.integration.dt, skin=cfg.integration.skin, near_skin=cfg.integration.near_skin,
-                   gravity=cfg.box.gravity,
+                   gravity=cfg.box.gravity, incline=cfg.box.incline,
                    model=c.model, limit_damping=c.limit_damping,
                    rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
 

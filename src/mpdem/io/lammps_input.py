@@ -113,8 +113,14 @@ def input_lines(cfg, step, steps, every, dropped, source):
            "neigh_modify   delay 0 every 1 check yes exclude type 2 2\n"
            f"timestep       {float(cfg['integration']['dt']):.17g}\n\n")
     yield "fix            integ mobile nve/sphere\nfix            frz bed freeze\n"
-    if gravity != 0.0:
+    incline = float(cfg["box"].get("incline", 0.0))
+    if gravity != 0.0 and incline == 0.0:
         yield f"fix            grav mobile gravity {gravity:.17g} vector 0.0 0.0 -1.0\n"
+    elif gravity != 0.0:
+        # tilted about y (box.incline): LAMMPS's fix gravity normalises the vector, mpdem's sin and cos
+        theta = math.radians(incline)
+        yield (f"fix            grav mobile gravity {gravity:.17g} vector {math.sin(theta):.17g} 0.0 "
+               f"{-math.cos(theta):.17g}\n")
     if cfg["bed"]["wall"]:
         yield f"fix            zwall mobile wall/gran {style.split('/')[1]}/history {_literal(wall)} zplane 0.0 NULL\n"
     yield ("\ncompute        ket mobile ke\nthermo_style   custom step atoms c_ket\nthermo_modify  norm yes\n"

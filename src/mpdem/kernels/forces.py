@@ -119,8 +119,8 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
        contacts of a row, let the CPU overlap contacts (docs/performance.md).
     4. One pass over each row's entries in partner-id order sums their
        slots, again without a branch on the outcome: a slot out of contact
-       holds zeros (adding +0.0 or -0.0 to a sum that started at +0.0 or
-       -gravity leaves it as it is).
+       holds zeros (adding +0.0 or -0.0 to a sum that started at a component
+       of gravity, +0.0 or not zero, leaves it as it is).
 
     Every slot a row sums is computed by the row itself or by a lower row of
     the chunk, so of its own block or an earlier one. Each value is the same
@@ -250,9 +250,10 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
                     f[i, a] = 0.0
                     torque[i, a] = 0.0
                 continue
-            fx = 0.0
-            fy = 0.0
-            fz = -law.gravity
+            # the sums start at the force of gravity (``law.gravity_vector``)
+            fx = law.g_x
+            fy = law.g_y
+            fz = law.g_z
             tx = 0.0
             ty = 0.0
             tz = 0.0

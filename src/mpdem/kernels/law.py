@@ -35,7 +35,8 @@ class Law(NamedTuple):
     """The contact law and step, as one record for the kernels (reduced units).
 
     k_n, k_t : spring constants [m g / d]; gamma_n, gamma_t : damping rates
-    [sqrt(g/d)]; mu : Coulomb coefficient; gravity [g]; dt : time step [tau];
+    [sqrt(g/d)]; mu : Coulomb coefficient; g_x, g_y, g_z : the gravity vector [g] (the force on a
+    sphere of mass 1, where each row's force sum starts); dt : time step [tau];
     model : MODEL_HOOKE or MODEL_HERTZ; limit_damping, rescale_history : the
     options of docs/model.md 2.2 and 2.4 (off in the reference model).
     """
@@ -44,17 +45,28 @@ class Law(NamedTuple):
     gamma_n: float
     gamma_t: float
     mu: float
-    gravity: float
+    g_x: float
+    g_y: float
+    g_z: float
     dt: float
     model: int
     limit_damping: bool
     rescale_history: bool
 
 
+def gravity_vector(gravity, incline):
+    """(g_x, g_y, g_z) [g] of gravity of magnitude ``gravity`` tilted by ``incline`` degrees about y:
+    gravity (sin, 0, -cos). Untilted it is (0.0, 0.0, -gravity) exactly, zeros +0.0 (a row's sum
+    starts there: a -0.0 would change the bits of a row without contacts)."""
+    theta = math.radians(incline)
+    return gravity * math.sin(theta) + 0.0, 0.0, -(gravity * math.cos(theta))
+
+
 def law_of(physics):
     """The kernels' ``Law`` of an ``engine.base.Physics``."""
     p = physics
-    return Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu), float(p.gravity),
+    g = gravity_vector(float(p.gravity), float(getattr(p, "incline", 0.0)))
+    return Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu), *g,
                float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE, bool(p.limit_damping),
                bool(p.rescale_history))
 

@@ -128,9 +128,9 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     xi = x[i, 0]
     yi = x[i, 1]
     zi = x[i, 2]
-    fx = 0.0
-    fy = 0.0
-    fz = -law.gravity
+    fx = law.g_x
+    fy = law.g_y
+    fz = law.g_z
     tx = 0.0
     ty = 0.0
     tz = 0.0
