@@ -4,16 +4,17 @@ The interface and its promises are ``engine/__init__.py``'s; the CPU engine's
 bits, because the step's arithmetic is the law's own source, explicitly
 rounded (``kernels/gpu``; docs/computing.md, "One law, two targets").
 
-Where the data lives. Between list rebuilds the rows (x, v, omega, f,
-torque, and the wall's Delta s), the neighbour lists and each entry's
-contact history are on the GPU, and a step copies one small record back
-(the reductions that steer the run). A rebuild brings the rows and the
-history to the host ``State``, where the domain migrates, balances and
-makes the ghosts as for the CPU engine, and the lists are built and sorted
-by partner id; then all of it goes back. With several ranks the ghost
-refresh of a step goes through the host the same way. A reader of the state
-(a checkpoint, a snapshot, a sample) has ``sync_state`` copy the rows and
-pack the history first, as ``State.sync``.
+Where the data lives (docs/gpu.md). The rows (x, v, omega, f, torque, and
+the wall's Delta s), the neighbour lists and each entry's contact history
+are on the GPU; a step copies one small record back (the reductions that
+steer the run), and ``run_quiet`` one for many steps. On one rank a list
+rebuild runs on the GPU, but every ``SORT_EVERY``-th; that one, and every
+rebuild on several ranks, brings the rows and the history to the host
+``State``, where the domain migrates, balances and makes the ghosts as for
+the CPU engine and the lists are built, then all of it goes back. With
+several ranks the ghost refresh of a step goes through the host. A reader
+of the state (a checkpoint, a snapshot, a sample) has ``sync_state`` copy
+the rows and pack the history first, as ``State.sync``.
 """
 from __future__ import annotations
 
@@ -47,8 +48,8 @@ def require():
 
 
 def _kernels():
-    """numba's CUDA target and the GPU kernels (``kernels.gpu.step``), after checking that a GPU can
-    be used."""
+    """The modules of ``kernels.gpu``: ``runtime``, ``step`` and ``lists``, after checking that a GPU
+    can be used."""
     try:
         from ..kernels.gpu import runtime
     except ImportError as e:
@@ -56,16 +57,15 @@ def _kernels():
     why = runtime.unavailable()
     if why:
         raise DeviceError(f"engine.device = 'gpu': {why}")
-    from ..kernels.gpu import step
-    return runtime.cuda, step
+    from ..kernels.gpu import lists, step
+    return runtime, step, lists
 
 
-def _device_name(cuda):
+def _device_name(runtime):
     """The GPU's name ("NVIDIA H100 80GB HBM3"), or that of numba's simulator."""
-    from ..kernels.gpu.runtime import SIMULATOR
-    if SIMULATOR:
+    if runtime.SIMULATOR:
         return "numba's CUDA simulator"
-    name = cuda.get_current_device().name
+    name = runtime.cuda.get_current_device().name
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
@@ -93,21 +93,17 @@ class Engine:
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None):
-        self.cuda, self.k = _kernels()
-        from ..kernels.gpu import lists
-        from ..kernels.gpu.runtime import launch
-        self.kl, self._run = lists, launch
-        self._zr = self.cuda.to_device(np.zeros(2))
+        runtime, self.k, self.kl = _kernels()
+        self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
-        from ..kernels.gpu.runtime import SIMULATOR
-        if SIMULATOR and blocks is None:
+        if self._simulator and blocks is None:
             # numba's simulator runs every thread as a Python thread: a few threads, each many rows
             block, blocks = 2, 2
         # at most this many blocks a launch (None: one row a thread); the kernels take any grid
         self.blocks = blocks
         self.state, self.phys, self.domain = state, physics, domain
-        self.device_name = _device_name(self.cuda)
+        self.device_name = _device_name(runtime)
         self.block = int(block)
         state.wall = physics.wall
         self.law = law_of(physics)
@@ -131,6 +127,7 @@ class Engine:
         self._rec = self.cuda.device_array((BATCH, len(self.k.NEUTRAL)))
         self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
         self._coop_blocks = None
+        self._zr = self.cuda.to_device(np.zeros(2))   # the z range of the GPU's list build
         self.n_rebuilds = 0
         self.info = StepInfo()
         self.n_contacts = 0
@@ -471,8 +468,7 @@ class Engine:
         """The grid of ``advance``: one row a thread if every block fits on the GPU at once (a
         cooperative launch needs that), else as many blocks as fit, each thread taking several rows."""
         if self._coop_blocks is None:
-            from ..kernels.gpu.runtime import SIMULATOR
-            if SIMULATOR:     # numba's simulator runs a cooperative grid of one block only
+            if self._simulator:     # numba's simulator runs a cooperative grid of one block only
                 self._coop_blocks = 1
             else:
                 spec = self._launchers.setdefault("advance", self.k.advance.specialize(*args))
@@ -543,5 +539,6 @@ class Engine:
         return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)
 
     def memory_bytes(self):
-        """Bytes of the GPU's arrays (rows, lists, history)."""
-        return sum(a.nbytes for a in self._dev.values()) + self._red.nbytes
+        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch)."""
+        return (sum(a.nbytes for a in self._dev.values()) + sum(a.nbytes for a in self._buffers.values())
+                + self._red.nbytes + self._rec.nbytes)
