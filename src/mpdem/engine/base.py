@@ -1,9 +1,15 @@
-"""What every engine shares: the run's numerics (``Physics``) and the record a step reports (``StepInfo``)."""
+"""What every engine shares: the run's numerics (``Physics``), the record a step reports (``StepInfo``),
+and the methods both engines run alike (``EngineBase``)."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
+
+import numpy as np
+
+from ..kernels.bundles import Particles
+from ..kernels.exactsum import to_float
 
 
 @dataclass(frozen=True)
@@ -63,3 +69,62 @@ class StepInfo(NamedTuple):
     z_min: float = math.inf
     z_max: float = -math.inf
     flags: tuple = NO_FLAGS
+
+
+class EngineBase:
+    """The parts of the engine interface (``engine/__init__.py``) that both engines run alike, on
+    top of their own ``rebuild``, ``forces``, ``step`` and ``complete``; an engine sets ``state``,
+    ``domain``, ``info``, ``n_rebuilds``, ``last_overlap``, ``n_contacts`` and ``_contacts``."""
+
+    def start(self):
+        """Neighbour lists and the set-up force evaluation (no history increment)."""
+        self.rebuild()
+        self.last_overlap, self._contacts = self.forces(increment=False)
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
+        return self.info
+
+    def start_from_file(self, max_overlap=0.0, n_rebuilds=0):
+        """Set-up for a state read from a state file: lists only.
+
+        Forces, torques and contact slots come from the file (they carry the
+        half-step velocities of the damping terms), so nothing is recomputed
+        and the next step is bit for bit the one the straight run takes.
+        ``max_overlap`` and ``n_rebuilds`` are the straight run's (this
+        set-up's rebuild is not counted).
+        """
+        s = self.state
+        self._contacts = int(s.count[:s.n_own][s.fixed[:s.n_own] == 0].sum())
+        self.rebuild()
+        self.n_rebuilds = n_rebuilds
+        self.last_overlap = max_overlap
+        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
+        return self.info
+
+    def contacts(self):
+        """Global number of contacts (counted from both partners) of the last evaluation."""
+        n = self.n_contacts = int(self.domain.sum_int(np.array([self._contacts]))[0])
+        self.info = self.info._replace(n_contacts=n)
+        return n
+
+    def advance(self, n):
+        """Advance n steps (no monitors; each step's second half-kick deferred to the next
+        step's first pass, the last one's applied); returns the last StepInfo."""
+        info = self.info
+        for _ in range(n):
+            info = self.step(defer_kick=True)
+        self.complete()
+        return info
+
+    def _particles(self):
+        """The host State's rows as the kernels' ``Particles``."""
+        s = self.state
+        return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
+
+    def _ratio(self, acc):
+        """(unbalanced-force ratio, mobile spheres without a contact) from ``kernels.balance``'s
+        sums over all ranks (``force_ratio``)."""
+        s = self.state
+        res, con, n_c, free = (to_float(a) for a in acc)
+        n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
+        # no contact, or contacts that carry no force yet (the first evaluation of a touching pair)
+        return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..kernels import history
 from ..kernels.balance import force_balance
-from ..kernels.bundles import Lists, Near, Particles, Scratch, Slots, make_box
+from ..kernels.bundles import Lists, Near, Scratch, Slots, make_box
 from ..kernels.calls import Bound
 from ..kernels.exactsum import new_accumulator, to_float
 from ..kernels.forces import contact_forces, contact_forces_serial, floor_forces, wall_forces
@@ -23,7 +23,7 @@ from ..kernels.law import law_of
 from ..kernels.near import near_lists
 from ..kernels.pairstore import pair_places
 from ..kernels.neighbours import build_neighbours, link_entries
-from .base import NO_FLAGS, StepInfo
+from .base import NO_FLAGS, EngineBase, StepInfo
 from .order import sort_rows
 
 
@@ -39,7 +39,7 @@ FORCE_BLOCK = 1024
 PAIR_RING = 8192
 
 
-class Engine:
+class Engine(EngineBase):
     """Advance a State with a Physics over a Domain.
 
     The contact history lives in ``hist`` and ``stamp`` (one slot per
@@ -154,10 +154,6 @@ class Engine:
             k.reset()
 
     # -- the kernels' bundles, made for each call (arrays are reallocated at rebuilds) --
-    def _particles(self):
-        s = self.state
-        return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
-
     def _lists(self):
         return Lists(self.nbr_start, self.nbr_list, self.link, self.comp_start)
 
@@ -350,30 +346,6 @@ class Engine:
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c
 
-    def start(self):
-        """Neighbour lists and the set-up force evaluation (no history increment)."""
-        self.rebuild()
-        self.last_overlap, self._contacts = self.forces(increment=False)
-        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
-        return self.info
-
-    def start_from_file(self, max_overlap=0.0, n_rebuilds=0):
-        """Set-up for a state read from a state file: lists only.
-
-        Forces, torques and contact slots come from the file (they carry the
-        half-step velocities of the damping terms), so nothing is recomputed
-        and the next step is bit for bit the one the straight run takes.
-        ``max_overlap`` and ``n_rebuilds`` are the straight run's (this
-        set-up's rebuild is not counted).
-        """
-        s = self.state
-        self._contacts = int(s.count[:s.n_own][s.fixed[:s.n_own] == 0].sum())
-        self.rebuild()
-        self.n_rebuilds = n_rebuilds
-        self.last_overlap = max_overlap
-        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
-        return self.info
-
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks).
 
@@ -446,21 +418,6 @@ class Engine:
             self._kick_due = False
             self.timers["integration"] += time.perf_counter() - t
 
-    def contacts(self):
-        """Global number of contacts (counted from both partners) of the last evaluation."""
-        n = self.n_contacts = int(self.domain.sum_int(np.array([self._contacts]))[0])
-        self.info = self.info._replace(n_contacts=n)
-        return n
-
-    def advance(self, n):
-        """Advance n steps (no monitors; each step's second half-kick deferred to the next
-        step's first pass, the last one's applied); returns the last StepInfo."""
-        info = self.info
-        for _ in range(n):
-            info = self.step(defer_kick=True)
-        self.complete()
-        return info
-
     def kinetic(self):
         """Global (translational, rotational) kinetic energy sums [m g d], exact."""
         self.complete()
@@ -482,12 +439,8 @@ class Engine:
         if len(self.pair) < self.k_near:
             # the slot forces were freed when the history was packed (a state file written since)
             return math.nan, -1
-        acc = self.domain.sum_int(force_balance(s.n_own, self._particles(), self._near(), self._slots(),
-                                                self._epoch, self.nchunk))
-        res, con, n_c, free = (to_float(a) for a in acc)
-        n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
-        # no contact, or contacts that carry no force yet (the first evaluation of a touching pair)
-        return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)
+        return self._ratio(self.domain.sum_int(force_balance(s.n_own, self._particles(), self._near(),
+                                                             self._slots(), self._epoch, self.nchunk)))
 
     def memory_bytes(self):
         """Bytes held by the particle arrays and the lists with their history."""

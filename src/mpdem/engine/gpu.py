@@ -26,12 +26,12 @@ import numpy as np
 from ..errors import DeviceError
 from ..kernels import history
 from ..kernels.balance import force_balance
-from ..kernels.bundles import Lists, Near, Particles, Slots, make_box
+from ..kernels.bundles import Lists, Near, Slots, make_box
 from ..kernels.exactsum import new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
 from ..kernels.law import law_of
 from ..kernels.neighbours import build_neighbours, cell_axis
-from .base import NO_FLAGS, StepInfo
+from .base import NO_FLAGS, EngineBase, StepInfo
 from .order import sort_rows
 
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
@@ -69,7 +69,7 @@ def _device_name(runtime):
     return name.decode() if isinstance(name, bytes) else str(name)
 
 
-class Engine:
+class Engine(EngineBase):
     """Advance a State with a Physics over a Domain on one GPU (the interface of ``engine``).
 
     Parameters
@@ -365,24 +365,6 @@ class Engine:
         self.timers["forces"] += time.perf_counter() - t
         return float(red[k.RED_OVERLAP]), int(red[k.RED_CONTACTS])
 
-    def start(self):
-        """Neighbour lists and the set-up force evaluation (no history increment)."""
-        self.rebuild()
-        self.last_overlap, self._contacts = self.forces(increment=False)
-        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
-        return self.info
-
-    def start_from_file(self, max_overlap=0.0, n_rebuilds=0):
-        """Set-up for a state read from a state file: lists only (its forces, torques and slots
-        are the step's), as the CPU engine's."""
-        s = self.state
-        self._contacts = int(s.count[:s.n_own][s.fixed[:s.n_own] == 0].sum())
-        self.rebuild()
-        self.n_rebuilds = n_rebuilds
-        self.last_overlap = max_overlap
-        self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
-        return self.info
-
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks). As the CPU
         engine's ``step``: the same decisions from the same exact reductions."""
@@ -491,24 +473,6 @@ class Engine:
             self.state.slots_current = False
             self.timers["integration"] += time.perf_counter() - t
 
-    def contacts(self):
-        """Global number of contacts (counted from both partners) of the last evaluation."""
-        n = self.n_contacts = int(self.domain.sum_int(np.array([self._contacts]))[0])
-        self.info = self.info._replace(n_contacts=n)
-        return n
-
-    def advance(self, n):
-        """Advance n steps (no monitors); returns the last StepInfo."""
-        info = self.info
-        for _ in range(n):
-            info = self.step(defer_kick=True)
-        self.complete()
-        return info
-
-    def _host_particles(self):
-        s = self.state
-        return Particles(s.x, s.v, s.omega, s.f, s.torque, s.fixed)
-
     def kinetic(self):
         """Global (translational, rotational) kinetic energy sums [m g d], exact (on the host)."""
         self.complete()
@@ -516,7 +480,7 @@ class Engine:
         if self.has_lists:
             self._download_rows(("v", "omega"), s.n_own)
         acc = new_accumulator(2)
-        kinetic_energy(s.n_own, self._host_particles(), acc, 1)
+        kinetic_energy(s.n_own, self._particles(), acc, 1)
         acc = self.domain.sum_int(acc)
         return to_float(acc[0]), to_float(acc[1])
 
@@ -532,11 +496,8 @@ class Engine:
         pair = self._dev["pair"].copy_to_host()[:k]
         stamp = self._dev["stamp"].copy_to_host()[:k]
         near = Near(self.nbr_start, self._link, self.nbr_start, self.nbr_list, self._link, self._link)
-        acc = self.domain.sum_int(force_balance(s.n_own, self._host_particles(), near,
-                                                Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1))
-        res, con, n_c, free = (to_float(a) for a in acc)
-        n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]
-        return ((res / max(int(n_mob), 1)) / (con / n_c) if con > 0 else math.inf), int(free)
+        return self._ratio(self.domain.sum_int(force_balance(s.n_own, self._particles(), near,
+                                                             Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1)))
 
     def memory_bytes(self):
         """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch)."""

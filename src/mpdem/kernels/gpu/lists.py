@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..neighbours import _next_cell
 from .reduce import BLOCK_MAX, max_into, min_into
 from .rounded import min_image, norm2
 from .runtime import cuda, device
@@ -94,17 +95,8 @@ def fill_cells(n_rows, cell, fill, order):
         order[at] = i
 
 
-@device
-def _around(i, a, n):
-    """The a-th of the cells i - 1, i, i + 1 along a periodic axis of n cells (all n cells if n < 3)."""
-    if n < 3:
-        return a
-    j = i + a - 1
-    if j < 0:
-        return j + n
-    if j >= n:
-        return j - n
-    return j
+# the a-th of the cells i - 1, i, i + 1 along a periodic axis of n cells: the CPU build's function
+_around = device(_next_cell.py_func)
 
 
 @device

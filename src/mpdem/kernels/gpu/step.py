@@ -85,6 +85,13 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy
     if cuda.grid(1) == 0:
         red[RED_OVERLAP] = NEUTRAL[RED_OVERLAP]
         red[RED_CONTACTS] = NEUTRAL[RED_CONTACTS]
+    _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room)
+
+
+@device_cuda
+def _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room):
+    """This thread's rows of ``kick_drift`` (i, i + threads, ...), their reductions into ``red``'s
+    slots RED_D2, RED_ZMIN, RED_ZMAX and RED_BAD (every thread of the block calls it)."""
     d2 = 0.0
     z_lo = math.inf
     z_hi = -math.inf
@@ -256,8 +263,17 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
         red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
         red[RED_BAD] = NEUTRAL[RED_BAD]
-    now = np.uint32(epoch & 0xFFFFFFFF)
-    before = np.uint32((epoch - 1) & 0xFFFFFFFF)
+    _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+                 np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
+                 increment, red, room, iroom)
+
+
+@device_cuda
+def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+                 now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
+    """This thread's rows of ``forces`` (i, i + threads, ...) with the stamps ``now`` and ``before``,
+    their reductions into ``red``'s slots RED_OVERLAP and RED_CONTACTS (every thread of the block
+    calls it)."""
     deepest = 0.0
     contacts = 0
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
@@ -309,52 +325,20 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     iroom = cuda.shared.array(BLOCK_MAX, np.int64)
     first = cuda.grid(1)
-    stride = cuda.gridsize(1)
     if first == 0:
         for a in range(6):
             rec[0, a] = NEUTRAL[a]
     grid.sync()
     for s in range(n_steps):
-        d2 = 0.0
-        z_lo = math.inf
-        z_hi = -math.inf
-        bad = 0
-        for i in range(first, n_own, stride):
-            if fixed[i]:
-                continue
-            di, z, b = _kick_drift_row(i, x, v, omega, f, torque, x_ref, law.dt, L_x, L_y, hx, hy,
-                                       pending or s > 0)
-            if b:
-                bad += 1
-            else:
-                d2 = max(d2, di)
-                z_lo = min(z_lo, z)
-                z_hi = max(z_hi, z)
-        max_into(rec[s], RED_D2, d2, room)
-        max_into(rec[s], RED_ZMAX, z_hi, room)
-        min_into(rec[s], RED_ZMIN, z_lo, room)
-        if bad:
-            cuda.atomic.add(rec[s], RED_BAD, np.float64(bad))
+        _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, law.dt, L_x, L_y, hx, hy, pending or s > 0, rec[s],
+                     room)
         if first == 0 and s + 1 < n_steps:
             for a in range(6):
                 rec[s + 1, a] = NEUTRAL[a]
         grid.sync()
         if not _go_on(rec[s], half_skin, room):
             break
-        now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
-        before = np.uint32((epoch + s) & 0xFFFFFFFF)
-        deepest = 0.0
-        contacts = 0
-        for i in range(first, n_own, stride):
-            if fixed[i]:
-                for a in range(3):
-                    f[i, a] = 0.0
-                    torque[i, a] = 0.0
-                continue
-            d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds,
-                              wall, floor, now, before, L_x, L_y, hx, hy, law, True)
-            deepest = max(deepest, d)
-            contacts += c
-        max_into(rec[s], RED_OVERLAP, deepest, room)
-        sum_into(rec[s], RED_CONTACTS, contacts, iroom)
+        _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, wall, floor,
+                     np.uint32((epoch + s + 1) & 0xFFFFFFFF), np.uint32((epoch + s) & 0xFFFFFFFF), L_x, L_y, hx, hy,
+                     law, True, rec[s], room, iroom)
         grid.sync()
