@@ -402,28 +402,44 @@ def _main(argv):
     if n_threads and net.rank == 0:
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
-    from .config import AgreedError
     from .errors import MpdemError
     handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, net)
-    except AgreedError as e:       # every rank is here with the same message: one line, no abort
-        if net.rank == 0:
-            sys.stderr.write(f"mpdem: error: {e}\n")
-            sys.stderr.flush()
-        sys.exit(EXIT_ERROR)
-    except (MpdemError, NotImplementedError) as e:
+    except MpdemError as e:
+        if e.agreed:               # every rank is here with the same message: one line, no abort
+            if net.rank == 0:
+                sys.stderr.write(f"mpdem: error: {e}\n")
+                sys.stderr.flush()
+            _exit(net, EXIT_ERROR)
+        _fail(net, f"mpdem: error: {e}")
+    except NotImplementedError as e:
         _fail(net, f"mpdem: error: {e}")
     except BrokenPipeError:
         # the reader of the output went away (`mpdem info FILE | head`): stop quietly, as text tools do
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+    except OSError as e:           # a file this rank could not write or read (a full disk, a quota, permissions)
+        where = f"{e.filename}: " if e.filename else ""
+        ranks = f" (rank {net.rank}; ending every rank)" if net.parallel else ""
+        _fail(net, f"mpdem: error: {where}{e.strerror or e}{ranks}")
     except KeyboardInterrupt:
         _fail(net, "mpdem: interrupted")
     except Exception:
         import traceback
         _fail(net, "mpdem: internal error on rank %d:\n%s" % (net.rank, traceback.format_exc()))
+
+
+def _exit(net, status):
+    """Exit with ``status``; past the HDF5 library's clean-up (which MPI_Finalize runs too) where it
+    holds a handle it would crash on (``checkpoint.held``)."""
+    ckpt = sys.modules.get("mpdem.io.checkpoint")
+    if ckpt is None or not ckpt.held():
+        sys.exit(status)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 def _fail(net, msg):

@@ -212,6 +212,7 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
     def go(held):
         # the files are chosen and read under the lock: no other writer can change them meanwhile
         t = rs.open_target(out, net, items)
+        rs.check_room(t, net)
         say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
         if held is not None and held.taken_over:
             say.warn(held.taken_over)

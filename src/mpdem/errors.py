@@ -13,7 +13,15 @@ class MpdemError(Exception):
 
     Every error mpdem raises is one of the kinds below (each also importable from the module
     that raises it, e.g. ``config.ConfigError``).
+
+    Attributes
+    ----------
+    agreed : bool
+        Every rank raises it together, with the same message: the command line says it once (rank 0)
+        and every rank exits without MPI_Abort, whose teardown can lose the message. Otherwise one
+        rank may be alone with it, and the command line ends every rank with MPI_Abort.
     """
+    agreed = False
 
 
 class ConfigError(MpdemError, ValueError):
@@ -23,6 +31,7 @@ class ConfigError(MpdemError, ValueError):
 class AgreedError(ConfigError):
     """A ConfigError that every rank raises together, from a value all ranks were given:
     the ranks stop without MPI_Abort, whose teardown can lose the message."""
+    agreed = True
 
 
 class SweepError(ConfigError):
@@ -35,6 +44,19 @@ class InputError(MpdemError, ValueError):
 
 class StateFileError(MpdemError, ValueError):
     """A state file that cannot be used (named, with the reason)."""
+
+
+class WriteError(MpdemError, RuntimeError):
+    """A file that could not be written (named, with the reason: a full disk, a quota, no permission).
+
+    Nothing is left under the file's real name: a state file's partial ``.tmp`` is removed. The
+    collective state-file write raises it on every rank together (``agreed=True``), whatever rank
+    failed; a writer on one rank (an export) raises it there alone.
+    """
+
+    def __init__(self, message, agreed=False):
+        super().__init__(message)
+        self.agreed = agreed
 
 
 class PackingFileError(MpdemError, ValueError):

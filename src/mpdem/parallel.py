@@ -30,6 +30,7 @@ import weakref
 
 import numpy as np
 
+from .errors import MpdemError
 from .kernels.calls import Bound
 from .kernels.ghosts import gather_rows, scatter_rows
 
@@ -76,6 +77,13 @@ def _abort_on_uncaught(comm):
         comm.Abort(1)
     hook._mpdem = True
     sys.excepthook = hook
+
+
+def _everywhere(e):
+    """``e``, raised on every rank: an MpdemError is marked ``agreed`` (said once, no MPI_Abort)."""
+    if isinstance(e, MpdemError):
+        e.agreed = True
+    return e
 
 
 def channel(net):
@@ -295,11 +303,12 @@ class Channel:
         err : str or None
             This rank's error message, or None.
         exc : type of Exception
-            Raised with the first rank's message.
+            Raised with the first rank's message (an MpdemError is marked ``agreed``: the command
+            line says it once).
         """
         errs = [e for e in self.allgather(err) if e]
         if errs:
-            raise exc(errs[0])
+            raise _everywhere(exc(errs[0]))
 
     def on_root(self, fn, *args, catch=()):
         """``fn(*args)`` on rank 0 and its result on every rank (collective).
@@ -315,7 +324,7 @@ class Channel:
                 res = e
         res = self.bcast(res)
         if catch and isinstance(res, catch):
-            raise res
+            raise _everywhere(res)
         return res
 
     def abort(self, status):

@@ -11,6 +11,8 @@ import matplotlib.patches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..io.rundir import atomic  # noqa: E402
+
 
 FORMATS = ("png", "pdf", "svg")
 
@@ -25,10 +27,8 @@ def save(fig, path, formats=("png",)):
     temporary name, then renamed. PNG at 120 dpi; PDF and SVG are vector."""
     stem = os.path.splitext(path)[0]
     for fmt in formats:
-        final = f"{stem}.{fmt}"
-        tmp = f"{final}.tmp"
-        fig.savefig(tmp, format=fmt, dpi=120, bbox_inches="tight")
-        os.replace(tmp, final)
+        with atomic(f"{stem}.{fmt}", "wb") as fh:
+            fig.savefig(fh, format=fmt, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
 

@@ -13,11 +13,11 @@ import os
 import tomllib
 from dataclasses import dataclass
 
-from ..io import checkpoint
+from ..io import checkpoint, diskspace
 from .. import config
 from ..io import rundir
 from ..io.checkpoint import StateFileError
-from ..errors import EXIT_NOT_CONVERGED, EXIT_OK
+from ..errors import EXIT_NOT_CONVERGED, EXIT_OK, WriteError
 from .runstate import RunState
 
 # attributes a state file needs to be restarted from
@@ -55,29 +55,40 @@ class Target:
 
 
 def candidates(target):
-    """Files a restart of ``target`` may start from, newest first, and the run directory.
+    """Files a restart of ``target`` may start from, newest first, the run directory, and the files
+    passed over, each with why.
 
-    A directory gives its checkpoints and final.h5, ordered by step (from
-    the file attributes; a file whose attributes cannot be read is tried
-    last). A file gives itself; its run directory is the parent of
-    ``checkpoints/`` or the directory it is in.
+    A directory gives its checkpoints and final.h5, ordered by step (from the file attributes); a
+    file whose attributes cannot be read (truncated, not HDF5, another format) is passed over and
+    named. A file gives itself; its run directory is the parent of ``checkpoints/`` or the directory
+    it is in.
+
+    Returns
+    -------
+    files : list of str
+    run_dir : str
+    passed : list of str
+        ``"<file>: <what is wrong>"`` of each file passed over.
     """
-    if os.path.isdir(target):
-        run = target
-        files = [p for _, p in rundir.checkpoints(run)]
-        if os.path.exists(rundir.final_path(run)):
-            files.append(rundir.final_path(run))
-        if not files:
-            raise StateFileError(f"{run}: no checkpoints/ckpt-*.h5 and no final.h5 to restart from")
-
-        def step(p):
-            try:
-                return int(checkpoint.read_attrs(p)["step"])
-            except (StateFileError, KeyError):
-                return -1
-        # newest first; at equal steps the final state (it knows the run ended)
-        return sorted(files, key=lambda p: (step(p), p == rundir.final_path(run)), reverse=True), run
-    return [target], run_dir_of(target)
+    if not os.path.isdir(target):
+        return [target], run_dir_of(target), []
+    run = target
+    files = [p for _, p in rundir.checkpoints(run)]
+    if os.path.exists(rundir.final_path(run)):
+        files.append(rundir.final_path(run))
+    if not files:
+        raise StateFileError(f"{run}: no checkpoints/ckpt-*.h5 and no final.h5 to restart from")
+    steps, passed = {}, []
+    for p in files:
+        try:
+            steps[p] = int(checkpoint.read_attrs(p)["step"])
+        except StateFileError as e:
+            passed.append(str(e))
+        except KeyError:
+            passed.append(f"{p}: no step attribute; not a state file of a run")
+    # newest first; at equal steps the final state (it knows the run ended)
+    order = sorted(steps, key=lambda p: (steps[p], p == rundir.final_path(run)), reverse=True)
+    return order, run, passed
 
 
 def run_dir_of(target):
@@ -158,8 +169,7 @@ def open_target(target, net, sets):
         On every rank alike: no usable file (each one's reason listed).
     """
     # rank 0 chooses the order; every rank then reads the same files collectively
-    files, run_dir = net.on_root(candidates, target, catch=StateFileError)
-    skipped = []
+    files, run_dir, skipped = net.on_root(candidates, target, catch=StateFileError)
     for path in files:
         try:
             local, attrs = checkpoint.read(path, net)
@@ -181,6 +191,17 @@ def open_target(target, net, sets):
                 raise
             skipped.append(str(e))
     raise StateFileError(f"{run_dir}: no usable state file to restart from:\n  " + "\n  ".join(skipped))
+
+
+def check_room(t, net):
+    """Raise WriteError on every rank when ``t``'s run directory has no room for a state file as large as
+    ``t``'s (the restart writes checkpoints and a final state): said before the restart starts."""
+    def look():
+        # the size of the file it starts from, and some room for the log and thermo lines
+        return diskspace.room_in(t.run_dir, os.path.getsize(t.path) + 65536, f"the state files of {t.run_dir}")
+    why = net.on_root(look)
+    if why:
+        raise WriteError(f"restart: {why}; make room, then restart again (nothing was changed)", agreed=True)
 
 
 def verdict(t, say):

@@ -31,7 +31,7 @@ from ..decomp import Domain
 from ..engine import make_engine
 from ..engine import require as require_device
 from ..engine.base import Physics
-from ..errors import EXIT_RESTART
+from ..errors import EXIT_RESTART, WriteError
 from ..pairs import contact_pairs
 from .runstate import History, RunState  # noqa: F401 (simulation.History, the name of earlier versions)
 from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
@@ -341,7 +341,10 @@ class Run:
         local = checkpoint.gather_state(self.state)
         if kind != "checkpoint":
             local.update(contact_pairs(self.state, self.physics))
-        checkpoint.write(path, local, self._attrs(kind), self.domain.net)
+        try:
+            checkpoint.write(path, local, self._attrs(kind), self.domain.net)
+        except WriteError as e:     # raised on every rank: say where the run can go on from
+            raise WriteError(f"{e}. {resume_hint(self.out, path)}", agreed=True) from None
 
     def counters(self):
         """Migrations (summed over ranks) and rebalances of the whole run: the earlier
@@ -375,3 +378,16 @@ class Run:
         return summary.End(self.status, st.step, st.step - self.first_step, st.time, self.n_mobile, st.L_x, st.L_y,
                            self.ek, self.force_ratio, self.wall, self.wall_total(), self.history.segments, dom.size,
                            dom.comm_seconds, dom.parallel, migrated, rebalances)
+
+
+def resume_hint(out, failed):
+    """Where a run whose state file ``failed`` could not be written can go on from, in words.
+
+    Names the newest checkpoint without opening it: after a write the HDF5 library failed to flush,
+    it may not open another file safely (``checkpoint.HELD``).
+    """
+    done = [p for _, p in rundir.checkpoints(out) if p != failed]
+    if not done:
+        return ("No checkpoint of this run was written yet: make room, then start it again "
+                "(`python -m mpdem run ... --force`)")
+    return f"The run is whole at its last checkpoint, {done[-1]}: make room, then `python -m mpdem restart {out}`"

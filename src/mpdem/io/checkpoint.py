@@ -34,8 +34,10 @@ crash never leaves a half-written file under a real name.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
+import re
 import signal
 import sys
 
@@ -43,8 +45,9 @@ import h5py
 import numpy as np
 
 from .. import state
-from ..errors import StateFileError
+from ..errors import StateFileError, WriteError
 from ..parallel import channel
+from . import diskspace
 from .rundir import starts_with
 
 FORMAT = "mpdem-state"
@@ -67,6 +70,16 @@ SALTS = {"particles": 1, "contacts": 2, "pairs": 3, "wall": 4}
 # Test hook: SIGKILL this process in the middle of its k-th checkpoint write.
 KILL_ENV = "MPDEM_TEST_KILL_IN_WRITE"
 _writes = 0
+# Test hook: "k" or "k:rank": the k-th state-file write of this process (of that MPI rank only) fails
+# in its rows with ENOSPC, as on a full disk (a file system that fills up under one rank's writes)
+FAIL_ENV = "MPDEM_TEST_FAIL_WRITE"
+_all_writes = 0
+# HDF5 handles of files the library failed to close (a disk that filled up during the write): kept
+# alive, for freeing one crashes the library; the command line then ends the process without its
+# clean-up (``held``)
+HELD = []
+# seconds a rank whose write failed waits for the others to reach the agreement before ending every rank
+AGREE_SECONDS = 20.0
 _said_funnel = False       # rank 0 said once that it writes for every rank (no mpio)
 
 
@@ -196,6 +209,15 @@ def write(path, local, attrs, net=None):
     attrs : dict
         Attributes, identical on every rank.
     net : parallel.Channel, mpi4py communicator or None
+
+    Raises
+    ------
+    WriteError
+        On every rank together (``agreed``), whatever rank failed: the file named, why (no space, a
+        quota, an I/O error), the space it needed and the space there was; nothing is left under
+        ``path``, and the partial ``path + '.tmp'`` is removed. A rank whose write failed while
+        another is still inside the parallel HDF5 library gives it ``AGREE_SECONDS``, then ends every
+        rank with that line (MPI_Abort): a failed write never hangs the job.
     """
     net = channel(net)
     if net.parallel and not parallel_hdf5():
@@ -211,6 +233,7 @@ def _write_through_root(path, local, attrs, net):
     """
     global _said_funnel
     parts = net.gather({k: np.asarray(v) for k, v in local.items()})
+    err = None
     if net.rank == 0:
         if not _said_funnel:
             print("mpdem: h5py has no MPI driver (serial HDF5): state files are written through rank 0",
@@ -219,12 +242,97 @@ def _write_through_root(path, local, attrs, net):
         width = {k: state.FIELD[k].width if k in state.FIELD else 1 for k in parts[0]}
         whole = {k: np.concatenate([p[k].reshape((-1, width[k]) if width[k] > 1 else (-1,)) for p in parts])
                  for k in parts[0]}
-        _write(path, whole, attrs, channel(None), net.size)
-    net.barrier()
+        try:
+            _write(path, whole, attrs, channel(None), net.size)
+        except WriteError as e:
+            err = str(e)
+    net.agree(err, _agreed)
+
+
+def _agreed(message):
+    return WriteError(message, agreed=True)
+
+
+def bytes_needed(groups, total, attrs):
+    """An upper bound of a state file's size [bytes]: its data, its attributes and HDF5's own.
+
+    ``groups`` are the groups written, ``total`` their row counts (in the order of ``groups``).
+    """
+    data = 0
+    for g, rows in zip(groups, total):
+        for name in GROUPS[g]:
+            fd = state.FIELD[name]
+            n = total[0] if fd.per == state.PARTICLE else rows
+            data += int(n) * fd.width * np.dtype(fd.dtype).itemsize
+    text = sum(len(str(v)) + len(k) + 64 for k, v in attrs.items())
+    # HDF5's superblock, object headers and B-trees: under 1 kB a dataset, 2 kB a group (measured)
+    return data + text + 8192 + 2048 * len(groups) + 1024 * sum(len(GROUPS[g]) for g in groups)
+
+
+def held():
+    """Whether this process holds an HDF5 handle that its clean-up at exit would crash on (``HELD``)."""
+    return bool(HELD)
+
+
+class _Watchdog:
+    """Ends every rank with ``line`` if this rank, whose write failed, waits more than ``seconds`` for the
+    others: they may be inside a collective of the parallel HDF5 library that it can no longer join."""
+
+    def __init__(self, net, tmp, seconds):
+        import threading
+        self.net, self.tmp, self.line = net, tmp, None
+        self.timer = threading.Timer(seconds, self._fire)
+        self.timer.daemon = True
+
+    def arm(self, line):
+        if self.line is None:
+            self.line = line
+            if self.net.parallel:
+                self.timer.start()
+
+    def disarm(self):
+        self.timer.cancel()
+
+    def _fire(self):
+        diskspace.remove(self.tmp)
+        sys.stderr.write(f"mpdem: error: {self.line} (rank {self.net.rank}; the other ranks did not answer "
+                         f"within {AGREE_SECONDS:g} s: ending every rank)\n")
+        sys.stderr.flush()
+        self.net.abort(1)
+        os._exit(1)
+
+
+def _why(e):
+    """An exception of a failed write, in a few words: the system's reason where HDF5's long message has one."""
+    if isinstance(e, OSError) and e.strerror:
+        return e.strerror
+    text = str(e).strip()
+    m = re.search(r"error message = '([^']+)'", text)
+    if m:
+        return m.group(1)
+    return (text.splitlines() or [type(e).__name__])[0][:200]
+
+
+def _fail_hook():
+    """The test hook's verdict: raise ENOSPC in this rank's raw data writes of this state file."""
+    global _all_writes
+    _all_writes += 1
+    want = os.environ.get(FAIL_ENV)
+    if not want:
+        return False
+    k, _, rank = want.partition(":")
+    me = os.environ.get("OMPI_COMM_WORLD_RANK") or os.environ.get("PMI_RANK") or "0"
+    return int(k) == _all_writes and (not rank or rank == me)
 
 
 def _write(path, local, attrs, net, ranks):
-    """The collective write of ``write`` by the ranks of ``net``; the file says ``ranks`` wrote it."""
+    """The collective write of ``write`` by the ranks of ``net``; the file says ``ranks`` wrote it.
+
+    In three phases, so that a failure on some ranks cannot leave the others waiting in a collective
+    they alone reached: the layout (the file, its attributes, groups and datasets: collective, all
+    in the metadata cache), the rows (independent writes, each rank its own), and the close
+    (collective: every rank calls it, whatever failed). Then every rank learns every rank's outcome.
+    """
     global _writes
     groups = present(local)
     lengths = np.array([len(local[ROWS_OF[g]]) for g in groups], np.int64)
@@ -234,35 +342,90 @@ def _write(path, local, attrs, net, ranks):
     sums = net.sum_u64([checksums(local)[g] for g in groups])
     tmp = f"{path}.tmp"
     _writes += attrs.get("kind") == "checkpoint"
-    with _open(tmp, "w", net) as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["version"] = VERSION
-        for k, v in attrs.items():
-            f.attrs[k] = v
-        # how many ranks wrote the file is a fact of this write, not of the caller
-        f.attrs["ranks"] = ranks
-        for gi, g in enumerate(groups):
-            grp = f.create_group(g)
-            f.attrs[f"checksum_{g}"] = sums[gi]
-            for name in GROUPS[g]:
-                fd = state.FIELD[name]
-                # per-particle fields follow the particle rows (group 0), slots and pairs their own
-                k = 0 if fd.per == state.PARTICLE else gi
-                a, b = int(start[k]), int(start[k] + lengths[k])
-                shape = (int(total[k]),) + fd.shape
-                ds = grp.create_dataset(name, shape=shape, dtype=fd.dtype)
-                if b > a:
-                    ds[a:b] = np.asarray(local[name]).reshape((b - a,) + shape[1:])
-            if g == "particles" and os.environ.get(KILL_ENV) == str(_writes) and attrs.get("kind") == "checkpoint":
-                f.flush()
-                os.kill(os.getpid(), signal.SIGKILL)
-    net.barrier()
-    if rank == 0:
-        fd = os.open(tmp, os.O_RDONLY)
-        os.fsync(fd)
-        os.close(fd)
-        os.replace(tmp, path)
-    net.barrier()
+    fail = _fail_hook()
+    need = bytes_needed(groups, total, attrs)
+    # the disk space first, before the HDF5 library writes a byte (its handle of a file it could not
+    # flush is unusable: see HELD)
+    where = os.path.dirname(os.path.abspath(path))
+    free = diskspace.free_bytes(where)
+    net.agree(diskspace.reserve(tmp, need, name=path) if rank == 0 else None, _agreed)
+    dog = _Watchdog(net, tmp, AGREE_SECONDS)
+
+    def said(why):
+        now = diskspace.free_bytes(where)
+        full = "; the file system is full" if now is not None and now < need else ""
+        return (f"cannot write {path}: {why}{full} (it needs {diskspace.words(need)}; "
+                f"{diskspace.words(free)} were free)")
+
+    def failed(e):
+        dog.arm(said(_why(e)))
+
+    f = None
+    try:
+        f = _open(tmp, "w", net)
+        sets = _layout(f, attrs, groups, total, sums, ranks)
+    except (OSError, RuntimeError, ValueError) as e:
+        failed(e)
+    if f is not None and dog.line is None:
+        try:
+            for gi, g in enumerate(groups):
+                for name in GROUPS[g]:
+                    fd = state.FIELD[name]
+                    # per-particle fields follow the particle rows (group 0), slots and pairs their own
+                    k = 0 if fd.per == state.PARTICLE else gi
+                    a, b = int(start[k]), int(start[k] + lengths[k])
+                    if b > a:
+                        if fail:
+                            raise OSError(errno.ENOSPC, f"test hook {FAIL_ENV}: {os.strerror(errno.ENOSPC)}")
+                        ds = sets[g, name]
+                        ds[a:b] = np.asarray(local[name]).reshape((b - a,) + ds.shape[1:])
+        except (OSError, RuntimeError, ValueError) as e:
+            failed(e)
+        if os.environ.get(KILL_ENV) == str(_writes) and attrs.get("kind") == "checkpoint":
+            f.flush()
+            os.kill(os.getpid(), signal.SIGKILL)
+    if f is not None:
+        try:
+            f.close()
+        except (OSError, RuntimeError, ValueError) as e:
+            failed(e)
+            # the library could not flush the file: closing or freeing its handle again crashes it
+            HELD.append(f)
+    # every rank's outcome, in plain MPI (no HDF5 collective is open any more on a rank that got here)
+    errs = [e for e in net.allgather(dog.line) if e]
+    dog.disarm()
+    if not errs and rank == 0:
+        try:
+            fd = os.open(tmp, os.O_RDONLY)
+            os.fsync(fd)
+            os.close(fd)
+            os.replace(tmp, path)
+        except OSError as e:
+            errs = [said(e.strerror)]
+    errs = [e for e in net.allgather(errs[0] if errs else None) if e]
+    if errs:
+        if rank == 0:
+            diskspace.remove(tmp)
+        raise WriteError(errs[0] + "; nothing was written under that name", agreed=True)
+
+
+def _layout(f, attrs, groups, total, sums, ranks):
+    """The attributes, groups and datasets of a state file (collective); {(group, name): dataset}."""
+    f.attrs["format"] = FORMAT
+    f.attrs["version"] = VERSION
+    for k, v in attrs.items():
+        f.attrs[k] = v
+    # how many ranks wrote the file is a fact of this write, not of the caller
+    f.attrs["ranks"] = ranks
+    out = {}
+    for gi, g in enumerate(groups):
+        grp = f.create_group(g)
+        f.attrs[f"checksum_{g}"] = sums[gi]
+        for name in GROUPS[g]:
+            fd = state.FIELD[name]
+            k = 0 if fd.per == state.PARTICLE else gi
+            out[g, name] = grp.create_dataset(name, shape=(int(total[k]),) + fd.shape, dtype=fd.dtype)
+    return out
 
 
 # -- reading --

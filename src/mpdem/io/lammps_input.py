@@ -34,7 +34,7 @@ import tomllib
 
 import numpy as np
 
-from ..errors import MpdemError
+from ..errors import MpdemError, WriteError
 
 DATA_NAME = "data.mpdem"
 INPUT_NAME = "in.mpdem"
@@ -176,7 +176,10 @@ def write(path, out=None, steps=None, every=None):
     if every is None:
         every = int(cfg["output"].get("snapshot_every") or 0) or steps
     out = out or os.path.splitext(path)[0] + ".lammps"
-    os.makedirs(out, exist_ok=True)
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        raise WriteError(f"cannot make the directory {out}: {e.strerror or e}") from None
     dropped = nonzero_histories(arrays)
     script = os.path.join(out, INPUT_NAME)
     write_atomic(os.path.join(out, DATA_NAME), lammps_data(arrays, attrs, path))

@@ -26,7 +26,8 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 
-from . import checkpoint
+from . import checkpoint, diskspace
+from ..errors import WriteError
 from ..kernels.pairdist import separations
 from .rundir import CONTACTS_DIR, write_atomic
 
@@ -98,13 +99,22 @@ def write_contacts_xdmf(path, out=None):
     cells = dict(zip(CELL_DATA, (t["F_n"], t["ft"], t["zeta"], t["delta"], t["id_i"], t["id_j"])))
     n_cross = int(crossing(t, float(attrs["L_x"]), float(attrs["L_y"])).sum())
     tmp = h5 + ".tmp"
-    with h5py.File(tmp, "w") as f:
-        f["points"], f["connectivity"] = pts, conn
-        for k, v in cells.items():
-            f[f"cells/{k}"] = np.repeat(np.asarray(v), 2)
-        f.attrs.update(source=os.path.basename(path), step=int(attrs["step"]), time=float(attrs["time"]),
-                       n_contacts=P, n_crossing=n_cross)
-    os.replace(tmp, h5)
+    # the room first: the HDF5 library cannot close a file it failed to flush (checkpoint.HELD)
+    why = diskspace.reserve(tmp, pts.nbytes + conn.nbytes + sum(2 * np.asarray(v).nbytes for v in cells.values())
+                            + 65536, name=h5)
+    if why:
+        raise WriteError(why)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f["points"], f["connectivity"] = pts, conn
+            for k, v in cells.items():
+                f[f"cells/{k}"] = np.repeat(np.asarray(v), 2)
+            f.attrs.update(source=os.path.basename(path), step=int(attrs["step"]), time=float(attrs["time"]),
+                           n_contacts=P, n_crossing=n_cross)
+        os.replace(tmp, h5)
+    except (OSError, RuntimeError) as e:
+        diskspace.remove(tmp)
+        raise WriteError(f"cannot write {h5}: {e}") from None
     root = ET.Element("Xdmf", Version="3.0")
     dom = ET.SubElement(root, "Domain")
     ET.SubElement(dom, "Information", Name="contacts",

@@ -15,13 +15,12 @@ JSON in ``attrs``; ``format`` = "mpdem-packing", version 1. Written under
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 
 import numpy as np
 
 from ..errors import PackingFileError
-from .rundir import starts_with
+from .rundir import atomic, starts_with
 
 FORMAT = "mpdem-packing"
 VERSION = 1
@@ -49,10 +48,8 @@ def write(path, arrays, attrs):
             if not k.startswith("checksum_")}
     meta.update(format=FORMAT, version=VERSION, source_kind=attrs.get("kind"))
     data = {k: np.asarray(arrays[k], dtype=t) for k, t in FIELDS.items()}
-    tmp = path + ".tmp"
-    with open(tmp, "wb") as fh:
+    with atomic(path, "wb") as fh:
         np.savez_compressed(fh, attrs=np.array(json.dumps(meta, default=str)), **data)
-    os.replace(tmp, path)
     return path
 
 

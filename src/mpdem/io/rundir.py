@@ -15,6 +15,7 @@ restart starts from is ``restart``'s.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import glob
 import io
@@ -24,17 +25,47 @@ import re
 
 import numpy as np
 
+from ..errors import WriteError
+from .diskspace import remove
+
 
 CKPT_DIR, SNAP_DIR = "checkpoints", "snapshots"
 CONTACTS_DIR = "contacts"   # contact networks beside their state files (network.contacts_path)
 
 
-def write_atomic(path, chunks):
-    """Write a string, or an iterable of strings, to ``path`` via ``path.tmp`` and a rename."""
+@contextlib.contextmanager
+def atomic(path, mode="w"):
+    """A file object for ``path``, written as ``path.tmp`` and renamed when the block ends: the one way
+    mpdem writes a file other than a state file (``checkpoint.write``), an appended log or a lock.
+
+    Raises
+    ------
+    WriteError
+        Naming ``path`` and the reason, when the file cannot be made or written (no such directory,
+        no permission, a full disk): the partial ``path.tmp`` is removed and nothing is left under
+        ``path``. Any other error in the block removes the partial file too.
+    """
     tmp = f"{path}.tmp"
-    with open(tmp, "w") as fh:
+    try:
+        fh = open(tmp, mode)
+    except OSError as e:
+        raise WriteError(f"cannot write {path}: {e.strerror or e}") from None
+    try:
+        with fh:
+            yield fh
+        os.replace(tmp, path)
+    except OSError as e:
+        remove(tmp)
+        raise WriteError(f"cannot write {path}: {e.strerror or e}; nothing was written under that name") from None
+    except BaseException:
+        remove(tmp)
+        raise
+
+
+def write_atomic(path, chunks):
+    """Write a string, or an iterable of strings, to ``path`` via ``path.tmp`` and a rename (``atomic``)."""
+    with atomic(path) as fh:
         fh.writelines([chunks] if isinstance(chunks, str) else chunks)
-    os.replace(tmp, path)
 
 
 def writable(out, probe=65536):
@@ -95,8 +126,11 @@ class RunLock:
             self.taken_over = f"taking over the lock of {old}, which has ended ({self.path})"
         fh.seek(0)
         fh.truncate()
-        fh.write(f"pid {os.getpid()} on {socket.gethostname()} since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
-        fh.flush()
+        try:                        # unbuffered: nothing is left to fail again at the release
+            os.write(fh.fileno(), f"pid {os.getpid()} on {socket.gethostname()} since "
+                                  f"{time.strftime('%Y-%m-%d %H:%M:%S')}\n".encode())
+        except OSError:             # a full disk: the lock holds without the holder's name
+            pass
         self.fh = fh
         return None
 
