@@ -176,6 +176,15 @@ def test_no_gpu_is_one_clear_error(monkeypatch):
         gpu.Engine(State(np.arange(1), np.zeros((1, 3))), physics(), Domain(None))
 
 
+def test_each_rank_on_a_node_takes_its_own_gpu():
+    """Ranks on a node with 4 GPUs take GPUs 0-3 by their local rank, whichever launcher says it; with one
+    GPU visible (CUDA_VISIBLE_DEVICES per rank) each takes it; without a local rank, GPU 0."""
+    for var in runtime.LOCAL_RANK_VARS:
+        assert [runtime.gpu_of_rank(4, {var: str(r)}) for r in range(6)] == [0, 1, 2, 3, 0, 1]
+        assert runtime.gpu_of_rank(1, {var: "3"}) == 0
+    assert runtime.gpu_of_rank(4, {}) == 0
+
+
 def test_gpu_block_is_checked_before_any_work(tmp_path):
     r = mpdem("run", "--set", "engine.gpu_block=48", "--set", "run.max_steps=10", "--out", tmp_path / "r", check=1)
     assert "engine.gpu_block = 48: accepted a power of two from 32 to 1024" in r.stderr

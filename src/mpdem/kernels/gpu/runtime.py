@@ -4,6 +4,8 @@
 numba-cuda 0.30 reads ``numpy.row_stack``, which numpy 2.5 removed: the alias is put back before
 the import (``np.vstack`` is what it was).
 """
+import os
+
 import numpy as np
 
 if not hasattr(np, "row_stack"):
@@ -51,15 +53,30 @@ def device_cuda(fn):
     return call
 
 
+# the launcher's rank of this process among those on its node
+LOCAL_RANK_VARS = ("OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID", "PMI_LOCAL_RANK", "SLURM_LOCALID",
+                   "PALS_LOCAL_RANKID")
+
+
+def gpu_of_rank(n_gpus, environ=None):
+    """The GPU this process uses among the ``n_gpus`` it sees: its rank on the node modulo ``n_gpus``
+    (so ranks on a node with one GPU each, or a launcher that shows each rank one GPU through
+    ``CUDA_VISIBLE_DEVICES``, both get theirs); 0 when the launcher does not say the local rank."""
+    env = os.environ if environ is None else environ
+    local = next((env[k] for k in LOCAL_RANK_VARS if env.get(k, "").isdigit()), "0")
+    return int(local) % max(1, n_gpus)
+
+
 def unavailable():
-    """Why no GPU can be used, in one line, or None when one can."""
+    """Why no GPU can be used, in one line, or None when one can (and this process's GPU chosen,
+    ``gpu_of_rank``, before anything makes a CUDA context)."""
     if SIMULATOR:
         return None
     try:
         if not cuda.is_available():
             return ("no CUDA GPU or CUDA driver found (numba.cuda.is_available() is false; "
                     "`nvidia-smi` should list the GPU)")
-        cuda.get_current_device()
+        cuda.select_device(gpu_of_rank(len(cuda.gpus)))
     except Exception as e:   # the driver or runtime libraries: their own message says which
         return f"the CUDA runtime cannot be used: {e}"
     return None
