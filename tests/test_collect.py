@@ -425,7 +425,7 @@ def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
 def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     """A set run under another stop rule (stop.energy, not a PARAM_KEYS column) at the same mu
     is its own family: the z(mu) trend of the others does not step from mu = 0.5 to 0.5."""
-    from mpdem.campaign.runs import RunResult, families
+    from mpdem.campaign.runs import AnalysedRun, families
     rng = np.random.default_rng(11)
     root = tmp_path / "runs"
     for mu, z in ((0.0, 6.10), (0.5, 4.90), (1.0, 4.80)):
@@ -434,7 +434,7 @@ def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     s = make_run(root / "mu0.5_s1_translational", params(mu=0.5, seed=1), 5.0, 0.62, 0.5, rng)
     s["physics"] = {"stop.energy": "translational", "stop.E_stop": 1e-9}   # E_stop: derived, not a family key
     (root / "mu0.5_s1_translational/analysis/summary.json").write_text(json.dumps(s))
-    runs = [RunResult(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
     sets, _ = co.group(runs)
     assert len(sets) == 4 and sorted(x.extra.get("stop.energy", "total") for x in sets).count("translational") == 1
     fams = families(sets, "contact.mu")

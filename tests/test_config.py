@@ -170,15 +170,20 @@ def test_sections_are_built_once_and_read_only():
 
 
 def test_every_error_said_as_one_line_is_an_mpdem_error():
+    from mpdem import errors
+    kinds = [v for v in vars(errors).values() if isinstance(v, type) and issubclass(v, Exception)]
+    assert len(kinds) >= 12
+    for err in kinds:
+        assert issubclass(err, errors.MpdemError), err
+    # the modules that raise them use the same classes
     from mpdem import build, threads
     from mpdem.io import checkpoint
-    from mpdem.driver import simulation
+    from mpdem.driver import schedule
     from mpdem.campaign import sweep
     from mpdem.analysis import report
-    from mpdem.errors import MpdemError
-    for err in (config.ConfigError, config.AgreedError, build.InputError, checkpoint.StateFileError,
-                simulation.RunError, report.AnalysisError, threads.ThreadsError, sweep.SweepError):
-        assert issubclass(err, MpdemError), err
+    assert (build.InputError, checkpoint.StateFileError, schedule.RunError, report.AnalysisError,
+            threads.ThreadsError, sweep.SweepError) == (errors.InputError, errors.StateFileError, errors.RunError,
+                                                        errors.AnalysisError, errors.ThreadsError, errors.SweepError)
 
 
 def test_a_retired_key_in_an_older_config_loads_and_a_set_of_it_is_refused(tmp_path):

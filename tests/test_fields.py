@@ -150,11 +150,13 @@ def test_a_v2_file_written_by_main_loads_with_its_digest(tmp_path):
             assert f.attrs[f"checksum_{grp}"] == g.attrs[f"checksum_{grp}"]
 
 
-def test_the_old_state_attribute_names_are_aliases():
+def test_a_state_has_one_name_per_field():
+    """The State's arrays are the registry's names only (the old aliases ``ids``, ``slot_n``, ... are gone)."""
     st = filled_state()
-    assert st.ids is st.id and st.slot_n is st.count and st.slot_id is st.partner and st.slot_ds is st.ds
-    st.slot_ds = np.zeros((0, 3))
-    assert st.ds.shape == (0, 3)
+    arrays = {k for k, v in vars(st).items() if isinstance(v, np.ndarray)}
+    assert arrays == {f.name for f in state.FIELDS if f.per != state.PAIR}, arrays
+    for old in ("ids", "slot_n", "slot_id", "slot_ds"):
+        assert not hasattr(st, old)
 
 
 NEW_FIELD = '''    Field("roll", np.float64, 3, per=CONTACT, group="contacts", migrates=True, history=True,

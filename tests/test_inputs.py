@@ -139,7 +139,7 @@ def test_cli_info_and_digest(tmp_path):
 
 
 def test_runtime_checks_stop_the_run(tmp_path):
-    from mpdem.driver.simulation import RunError
+    from mpdem.errors import RunError
     # a head-on collision far too fast for k_n: overlap above checks.overlap_error
     p = tmp_path / "fast.txt"
     tables.write_table(p, np.array([0, 1]), np.array([[2.0, 2.5, 10.0], [3.2, 2.5, 10.0]]),

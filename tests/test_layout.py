@@ -1,49 +1,9 @@
-"""The package layout (ARCHITECTURE.md): moved modules keep their old import paths."""
+"""The package layout (ARCHITECTURE.md): imports point downwards, between packages and between modules."""
 import ast
-import json
-import subprocess
-import sys
 from pathlib import Path
-
-from mpdem._moved import MOVED
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "mpdem"
-
-
-def test_every_old_path_gives_the_new_module_and_names_it():
-    # a fresh interpreter, so that no old name is imported yet
-    script = (
-        "import importlib, json, sys, warnings\n"
-        "from mpdem._moved import MOVED\n"
-        "out = {}\n"
-        "for old, new in MOVED.items():\n"
-        "    with warnings.catch_warnings(record=True) as w:\n"
-        "        warnings.simplefilter('always')\n"
-        "        m = importlib.import_module(old)\n"
-        "    out[old] = [m is importlib.import_module(new), m.__name__, m.__spec__.name,\n"
-        "                [str(x.message) for x in w if x.category is DeprecationWarning]]\n"
-        "from mpdem import simulation\n"
-        "from mpdem.analysis.collect import collect\n"
-        "from mpdem.build import read_table, write_table\n"
-        "import mpdem.io.tables as t, mpdem.campaign.collect as c, mpdem.driver.simulation as s\n"
-        "out['from'] = [simulation is s, collect is c.collect, read_table is t.read_table]\n"
-        "print(json.dumps(out))\n")
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
-    out = json.loads(r.stdout)
-    assert out.pop("from") == [True, True, True]
-    assert set(out) == set(MOVED)
-    for old, (same, name, spec, warned) in out.items():
-        new = MOVED[old]
-        assert same and name == new and spec == new, old
-        assert warned == [f"{old} has moved to {new}; import it from there"], old
-
-
-def test_the_code_itself_imports_no_old_path():
-    # the finder is for users' scripts; inside the package every import names the new home
-    for path in SRC.rglob("*.py"):
-        old = [t for t in _imports(path) if t in MOVED]
-        assert not old, f"{path}: imports {old}, now {[MOVED[t] for t in old]}"
 
 
 # which packages a package may not import (ARCHITECTURE.md): files know nothing of runs or campaigns,
@@ -82,3 +42,52 @@ def test_packages_import_only_downwards():
             if mod == pkg or mod.startswith(pkg + "."):
                 bad = [t for t in _imports(path) if any(t == b or t.startswith(b + ".") for b in banned)]
                 assert not bad, f"{mod} imports {bad}"
+
+
+def _modules():
+    """{module name: path} of every module of the package (a package by its name, not ``.__init__``)."""
+    out = {}
+    for path in SRC.rglob("*.py"):
+        mod = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+        out[mod.removesuffix(".__init__")] = path
+    return out
+
+
+def _module_imports(mods, path):
+    """The modules of the package that a file imports (a name imported from a package counts as its
+    module when it is one, else as the package)."""
+    out = set()
+    for t in _imports(path):
+        parts = t.split(".")
+        while parts and ".".join(parts) not in mods:
+            parts.pop()
+        if parts:
+            out.add(".".join(parts))
+    return out
+
+
+def test_no_module_imports_back_up():
+    """The modules' imports (at any depth in a file, lazy ones included) form no cycle, no module
+    imports the package ``mpdem`` itself (the version is ``mpdem._version``), and none calls
+    ``__import__``: a module never reaches, however indirectly, one that imports it."""
+    mods = _modules()
+    graph = {m: _module_imports(mods, p) - {m} for m, p in mods.items()}
+    for m, p in mods.items():
+        if m != "mpdem":
+            assert "mpdem" not in graph[m], f"{m} imports the package mpdem"
+        assert "__import__(" not in p.read_text(), f"{m} calls __import__"
+    graph["mpdem"] = set()      # the package's API functions load api.py on first use, downwards
+    done, path = set(), []
+
+    def visit(m):
+        if m in path:
+            raise AssertionError("an import cycle: " + " -> ".join(path[path.index(m):] + [m]))
+        if m in done:
+            return
+        path.append(m)
+        for n in sorted(graph[m]):
+            visit(n)
+        path.pop()
+        done.add(m)
+    for m in sorted(graph):
+        visit(m)

@@ -17,7 +17,7 @@ import hashlib
 import os
 from pathlib import Path
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 
 def _numba_cache_dir():
@@ -33,7 +33,7 @@ def _numba_cache_dir():
 os.environ.setdefault("NUMBA_CACHE_DIR", _numba_cache_dir())
 
 
-API = ("load_config", "run", "restart", "read_state", "analyze", "collect", "RunResult", "State")
+API = ("load_config", "run", "restart", "read_state", "analyze", "collect", "RunRecord", "StateArrays")
 __all__ = ["__version__", *API]
 
 
@@ -43,9 +43,3 @@ def __getattr__(name):
         from . import api
         return getattr(api, name)
     raise AttributeError(f"module 'mpdem' has no attribute {name!r}")
-
-
-# modules that moved into io/, driver/ and campaign/ keep their old import paths (ARCHITECTURE.md)
-from ._moved import install as _install_moved  # noqa: E402
-
-_install_moved()

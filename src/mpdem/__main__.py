@@ -98,11 +98,11 @@ def default_out():
 
 def cmd_run(args, net):
     from . import api, config
-    from .build import InputError
+    from .errors import AgreedError, InputError
     try:
         cfg = config.load_run_config(args.config, args.set + device_items(args))
     except (config.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
-        raise config.AgreedError(str(e)) from None
+        raise AgreedError(str(e)) from None
     r = api.run(cfg, args.out or default_out(), threads=None, force=args.force, quiet=args.quiet,
                 walltime=args.walltime, walltime_margin=args.walltime_margin, net=net, t_start=T_START,
                 signals=SIGNALS)
@@ -241,7 +241,7 @@ def threads_wanted(args):
 
 
 def parser():
-    from . import __version__
+    from ._version import __version__
     p = argparse.ArgumentParser(prog="mpdem", description="Discrete-element sphere packings (docs/model.md).")
     p.add_argument("--version", action="version", version=f"mpdem {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)

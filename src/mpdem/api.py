@@ -19,14 +19,14 @@ import os
 import time
 from dataclasses import dataclass, field
 
-from .errors import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_RESTART, MpdemError
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_RESTART, AgreedError, MpdemError
 
 # a run's status -> the exit status of ``python -m mpdem``
 EXIT_OF = {"converged": EXIT_OK, "max_steps": EXIT_NOT_CONVERGED, "interrupted": EXIT_RESTART}
 
 
 @dataclass
-class RunResult:
+class RunRecord:
     """What a run or restart came to.
 
     Attributes
@@ -52,7 +52,7 @@ class RunResult:
         return EXIT_OF[self.status]
 
 
-class State(dict):
+class StateArrays(dict):
     """The arrays of a state file by name (``x``, ``v``, ``omega``, ``id``, ``fixed`` (n, ...),
     sorted by id; ``id_i``, ``id_j``, ``delta``, ``F_n``, ``F_t`` of the contact list where the
     file has one; ``L_x``, ``L_y``), with the file's attributes in ``.attrs``."""
@@ -89,18 +89,18 @@ def _threads(n):
 
 
 def _result(run, summary):
-    """The RunResult of a Run after ``run()`` (and ``finish()``), on every rank."""
+    """The RunRecord of a Run after ``run()`` (and ``finish()``), on every rank."""
     net = run.domain.net
     summary = net.bcast(summary if run.rank == 0 else None)
     if run.status == "interrupted":
-        return RunResult("interrupted", int(run.state.step), None, None, run.out, {})
+        return RunRecord("interrupted", int(run.state.step), None, None, run.out, {})
     from .io import rundir
-    return RunResult(run.status, int(summary["steps"]), summary["digest"], rundir.final_path(run.out),
+    return RunRecord(run.status, int(summary["steps"]), summary["digest"], rundir.final_path(run.out),
                      run.out, summary)
 
 
 def _go(run):
-    """Run to the end (final state) or to an early stop (checkpoint); the RunResult."""
+    """Run to the end (final state) or to an early stop (checkpoint); the RunRecord."""
     if run.run() == "interrupted":
         run.log.close()
         return _result(run, None)
@@ -114,7 +114,6 @@ def lock(run_dir, net):
     ------
     AgreedError on every rank, naming the holder, when another process writes ``run_dir``.
     """
-    from .config import AgreedError
     from .io.rundir import RunLock
     held = RunLock(run_dir) if net.rank == 0 else None
     why = net.on_root(lambda: held.acquire())
@@ -138,7 +137,6 @@ def check_out(out, net, force=False):
 
     Rank 0 looks, before any rank can write there; every rank raises the same AgreedError.
     """
-    from .config import AgreedError
     from .io.rundir import writable
     held, why = net.on_root(lambda: (os.path.exists(os.path.join(out, "config.toml")), writable(out)))
     if why:
@@ -164,18 +162,19 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
 
     Returns
     -------
-    RunResult
+    RunRecord
     """
     from . import config as config_mod
     from .io import lammps
     from .build import InputError
-    from .driver.simulation import Logger, Run
+    from .driver.schedule import Logger
+    from .driver.simulation import Run
     _threads(threads)
     net = _net(net)
     try:
         cfg, initial = lammps.initial_for(config)
     except (config_mod.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
-        raise config_mod.AgreedError(str(e)) from None
+        raise AgreedError(str(e)) from None
     check_out(out, net, force)
 
     def go(held):
@@ -199,11 +198,12 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
 
     Returns
     -------
-    RunResult
+    RunRecord
     """
     from . import config
     from .driver import resume as rs
-    from .driver.simulation import Logger, Run
+    from .driver.schedule import Logger
+    from .driver.simulation import Run
     _threads(threads)
     net = _net(net)
     items = list(set_items) + [f"{k}={config.toml_value(v)}" for k, v in sets.items()]
@@ -227,7 +227,7 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
 
 
 def _finished(t, status, net):
-    """The RunResult of a run with nothing left to do (``resume.verdict``'s exit ``status``):
+    """The RunRecord of a run with nothing left to do (``resume.verdict``'s exit ``status``):
     its summary.json, or, without one, what its state file says."""
     import json
 
@@ -239,7 +239,7 @@ def _finished(t, status, net):
             return None
     s = net.on_root(read) or {}
     name = "converged" if status == EXIT_OK else "max_steps"
-    return RunResult(name, int(s.get("steps", t.attrs["step"])), s.get("digest"), t.path, t.run_dir, s)
+    return RunRecord(name, int(s.get("steps", t.attrs["step"])), s.get("digest"), t.path, t.run_dir, s)
 
 
 def read_state(path):
@@ -247,7 +247,7 @@ def read_state(path):
 
     Returns
     -------
-    State: a dict of arrays sorted by id, with ``.attrs``
+    StateArrays: a dict of arrays sorted by id, with ``.attrs``
 
     Raises
     ------
@@ -255,8 +255,8 @@ def read_state(path):
     """
     from .io import checkpoint, packing
     if packing.is_packing(path):
-        return State(*packing.read(path))
-    return State(*checkpoint.read_state(path, pairs=True))
+        return StateArrays(*packing.read(path))
+    return StateArrays(*checkpoint.read_state(path, pairs=True))
 
 
 def analyze(state_or_path, *, write=False, out=None, plots=False, **sets):
@@ -264,7 +264,7 @@ def analyze(state_or_path, *, write=False, out=None, plots=False, **sets):
 
     Parameters
     ----------
-    state_or_path : a State (``read_state``), a state or packing file, or a run directory
+    state_or_path : a StateArrays (``read_state``), a state or packing file, or a run directory
     write : also write the summary and tables (and ``plots``) as ``mpdem analyze`` does, into ``out``
         (default RUN/analysis)
     sets : ``analysis.*`` keys, e.g. ``**{"analysis.margin_bottom": 5}``
@@ -277,12 +277,12 @@ def analyze(state_or_path, *, write=False, out=None, plots=False, **sets):
     from .analysis import report
     from .config import toml_value
     items = [f"{k}={toml_value(v)}" for k, v in sets.items()]
-    if isinstance(state_or_path, State):
+    if isinstance(state_or_path, StateArrays):
         if write:
-            raise MpdemError("analyze(write=True) needs a file or a run directory, not a State")
+            raise MpdemError("analyze(write=True) needs a file or a run directory, not a StateArrays")
         arrays = {k: v for k, v in state_or_path.items() if k not in ("L_x", "L_y")}
         attrs = state_or_path.attrs
-        s, tables = report.summarise(arrays, attrs, report.file_config(attrs, "the state", items), "a State")
+        s, tables = report.summarise(arrays, attrs, report.file_config(attrs, "the state", items), "a StateArrays")
     else:
         path, where = report.locate(str(state_or_path), out)
         arrays, attrs, cfg = report.read(path, items)

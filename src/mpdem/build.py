@@ -19,8 +19,6 @@ from .errors import InputError
 from .kernels.bundles import make_box
 from .kernels.insert import rsa_insert
 from .kernels.particle import VOLUME as SPHERE_VOLUME
-# the text tables moved to io/tables.py; their old names here keep working
-from .io.tables import particle_ids, read_table, tile_table, write_table  # noqa: F401
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3

@@ -14,7 +14,7 @@ import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from .errors import AgreedError, ConfigError  # noqa: F401 (AgreedError: config.AgreedError)
+from .errors import ConfigError
 
 REQUIRED = object()   # marks a key with no default
 DERIVED = object()    # marks a default computed from other keys

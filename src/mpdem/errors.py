@@ -11,8 +11,7 @@ EXIT_RESTART = 75        # stopped on purpose (wall time or signal) after a chec
 class MpdemError(Exception):
     """An input, file or run problem, said in one line naming what and why.
 
-    Every error mpdem raises is one of the kinds below (each also importable from the module
-    that raises it, e.g. ``config.ConfigError``).
+    Every error mpdem raises is one of the kinds below, imported from here.
 
     Attributes
     ----------

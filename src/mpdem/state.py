@@ -42,10 +42,8 @@ state-array dict (``checkpoint.read``, ``read_state``, ``gather_state``,
 public (``/particles/...``, ``mpdem.read_state``, docs/python.md) and are
 part of every digest (``checkpoint.digest`` hashes each dataset's name):
 renaming the datasets would change every digest or need a second table of
-old names. Before this registry the State spelled them ``ids``, ``slot_n``,
-``slot_id`` and ``slot_ds``; those names remain as read/write aliases
-(``LEGACY_NAMES``) for code written against them, and nothing in mpdem uses
-them.
+old names. (Before this registry the State spelled them ``ids``, ``slot_n``,
+``slot_id`` and ``slot_ds``; those aliases were retired on 2026-11-26.)
 
 The registry's order is the v2 format's: it fixes the order of the datasets
 that ``checkpoint.digest`` and the checksums hash, so it must not change
@@ -162,8 +160,6 @@ ROW = tuple(f for f in FIELDS if f.per == PARTICLE)
 SLOT = tuple(f for f in FIELDS if f.per == CONTACT)
 # the fields of an initial particle set (id, x, v, omega, fixed)
 INITIAL = tuple(f.name for f in FIELDS if f.initial)
-# the old in-memory names, kept as aliases of State attributes
-LEGACY_NAMES = {"ids": "id", "slot_n": "count", "slot_id": "partner", "slot_ds": "ds"}
 
 
 def names(fields):
@@ -477,16 +473,3 @@ class State:
     def nbytes(self):
         """Bytes held by the particle arrays and slots."""
         return sum(getattr(self, f.name).nbytes for f in ROW + SLOT)
-
-
-def _alias(new):
-    def get(self):
-        return getattr(self, new)
-
-    def put(self, value):
-        setattr(self, new, value)
-    return property(get, put, doc=f"Old name of ``{new}`` (``LEGACY_NAMES``).")
-
-
-for _old, _new in LEGACY_NAMES.items():
-    setattr(State, _old, _alias(_new))

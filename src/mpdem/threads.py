@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
-from .errors import ThreadsError  # noqa: F401 (threads.ThreadsError)
+from .errors import ThreadsError
 
 
 # threads of the time-step kernels: one per rank unless asked (numba's own default is every core)

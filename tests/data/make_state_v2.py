@@ -1,7 +1,7 @@
 """Writes tests/data/state_v2.h5 (format mpdem-state v2) with checkpoint.write: 12 random particles."""
 import sys
 import numpy as np
-from mpdem import checkpoint
+from mpdem.io import checkpoint
 
 rng = np.random.default_rng(24)
 n = 12

@@ -12,7 +12,7 @@
 This module finds and loads the runs (analysing those that need it), groups
 them into parameter sets, fits eqs. 7 and 9 and writes the CSV and JSON
 tables; the figures are drawn by ``figures``, the comparison with the paper
-and README.md by ``comparison`` (``RunResult``, ``Set`` and families: ``runs``).
+and README.md by ``comparison`` (``AnalysedRun``, ``Set`` and families: ``runs``).
 
 A parameter set is every run parameter of ``config.PARAM_KEYS`` except the
 seed, compared exactly, and every other physics key of the run's config
@@ -38,7 +38,7 @@ from . import paper, pooled
 from .comparison import comparisons, write_readme
 from .figures import make_figures
 from ..analysis.report import PACKING, SUMMARY, AnalysisError
-from .runs import NAN, SHORT, RunResult, Set, families, mean_sem
+from .runs import NAN, SHORT, AnalysedRun, Set, families, mean_sem
 
 SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mobilised_fraction",
                   "z_halved", "phi_halved", "overlap_median", "step", "z_backbone", "z_iso", "crystal_fraction")
@@ -124,11 +124,11 @@ def _analyse(path, why, log, settings=None):
 
 
 def load_run(path, analyze_missing=True, log=print):
-    """One run directory as a RunResult, analysing it first if it needs it and may.
+    """One run directory as a AnalysedRun, analysing it first if it needs it and may.
 
     Returns
     -------
-    (RunResult, None), or (None, reason) when the run cannot be used: unfinished,
+    (AnalysedRun, None), or (None, reason) when the run cannot be used: unfinished,
     not analysed (with ``analyze_missing`` False), analysis failed, summary
     unreadable or incomplete, or not converged (docs/model.md 5.4: a run at the
     step cap is not used for comparisons).
@@ -169,7 +169,7 @@ def load_run(path, analyze_missing=True, log=print):
     if not s.get("converged"):
         return None, (f"not converged (stopped at step {s.get('step', '?')} without reaching the kinetic-energy "
                       f"threshold; docs/model.md 5.4: not used for comparisons)")
-    run = RunResult(os.path.normpath(path), s)
+    run = AnalysedRun(os.path.normpath(path), s)
     if not (math.isfinite(run.q["z"]) and math.isfinite(run.q["phi"])):
         return None, f"{summ}: no bulk z or phi"
     return run, None

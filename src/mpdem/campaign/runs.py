@@ -1,6 +1,6 @@
 """Runs, parameter sets and families of sets, shared by ``collect``, ``figures`` and ``comparison``.
 
-A ``RunResult`` is one analysed run directory (its summary.json and the
+A ``AnalysedRun`` is one analysed run directory (its summary.json and the
 numbers read from it); a ``Set`` is the runs of one parameter set (every
 parameter of ``config.PARAM_KEYS`` but the seed equal), with the mean and
 standard error of a quantity over its seeds (``mean_sem``). ``families``
@@ -26,7 +26,7 @@ NAN = float("nan")
 # ---------------------------------------------------------------- runs and sets
 
 @dataclass
-class RunResult:
+class AnalysedRun:
     """One analysed run: its directory, its summary.json and the numbers read from it."""
     path: str
     s: dict
@@ -42,7 +42,7 @@ class RunResult:
 
 @dataclass
 class Set:
-    """The runs (``RunResult``) of one parameter set (all of ``PARAM_KEYS`` but the seed equal).
+    """The runs (``AnalysedRun``) of one parameter set (all of ``PARAM_KEYS`` but the seed equal).
 
     ``extra`` holds the physics keys outside ``PARAM_KEYS`` that the set's runs chose
     away from their defaults (e.g. ``{"stop.energy": "translational"}``); derived keys

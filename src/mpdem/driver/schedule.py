@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field, fields
 
 from ..io import rundir
-from ..errors import RunError  # noqa: F401 (schedule.RunError, simulation.RunError)
+from ..errors import RunError
 
 
 def from_dict(cls, d):

@@ -31,11 +31,11 @@ from ..decomp import Domain
 from ..engine import make_engine
 from ..engine import require as require_device
 from ..engine.base import Physics
+from .._version import __version__
 from ..errors import EXIT_RESTART, WriteError
 from ..pairs import contact_pairs
-from .runstate import History, RunState  # noqa: F401 (simulation.History, the name of earlier versions)
-from .schedule import (Checkpoints, Checks, Logger, Progress, RunError, Snapshots, StopRule,  # noqa: F401
-                       Thermo)
+from .runstate import History, RunState
+from .schedule import Checkpoints, Checks, Logger, Progress, Snapshots, StopRule, Thermo
 from ..state import State
 
 # the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
@@ -333,7 +333,7 @@ class Run:
                 "n_mobile": self.n_mobile, "n_bed": self.n_bed, "L_x": st.L_x, "L_y": st.L_y,
                 "z_bed": self.pile.z_bed, "converged": self.converged, "ranks": self.domain.size,
                 "seed": cfg.run.seed, "rng": "numpy PCG64 streams keyed by (run.seed, purpose); used at set-up only",
-                "mpdem_version": __import__("mpdem").__version__,
+                "mpdem_version": __version__,
                 "config": cfg.to_toml(), "run_state": self.records().dumps()}
 
     def _write(self, path, kind):
