@@ -171,6 +171,30 @@ def test_unknown_format_is_named(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["snap.h5"]
 
 
+def test_a_new_format_is_one_entry_in_the_table(tmp_path, monkeypatch, capsys):
+    """A format added to ``export.FORMATS`` alone is a --format choice, in the help, and written by
+    ``mpdem export`` (the command line reads the table)."""
+    from mpdem.__main__ import cmd_export, parser
+    from mpdem.parallel import Channel
+
+    def write(path, out):
+        out = out or path + ".ids"
+        arrays, _ = checkpoint.read_state(path)
+        export.write_atomic(out, [f"{i}\n" for i in arrays["id"]])
+        return out, ["one id a line"]
+    monkeypatch.setitem(export.FORMATS, "ids", export.Format("ids", "the particle ids, one a line", write))
+    h5 = tmp_path / "snap.h5"
+    write_state(h5)
+    args = parser().parse_args(["export", str(h5), "--format", "ids"])
+    assert cmd_export(args, Channel(None)) == 0
+    assert capsys.readouterr().out == f"wrote {h5}.ids\none id a line\n"
+    assert (tmp_path / "snap.h5.ids").read_text().split() == [str(i) for i in checkpoint.read_state(str(h5))[0]["id"]]
+    with pytest.raises(SystemExit):
+        parser().parse_args(["export", str(h5), "--format", "nope"])
+    assert "ids: the particle ids, one a line" in " ".join(parser()._subparsers._group_actions[0].choices["export"]
+                                                            .format_help().split())
+
+
 def test_contact_network_for_paraview_and_ovito_reads_back(tmp_path):
     """export --format contacts (XDMF Polyline grid) and lammps-local (dump local): one line (or two
     half-lines) per contact with the file's forces; contacts across a periodic face are split."""

@@ -6,7 +6,7 @@
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
     python -m mpdem info FILE [--digest]
-    python -m mpdem export FILE --format lammps-dump|lammps-data|xyz|packing|contacts|lammps-local|lammps-input
+    python -m mpdem export FILE --format FORMAT          (python -m mpdem export -h lists them)
         [--out PATH]
     python -m mpdem bench --table FILE [--steps S] [--threads T] [--tile NXxNY] [--set ...]
     python -m mpdem bench --io|--analysis [--N 1000000]
@@ -120,16 +120,10 @@ def cmd_restart(args, net):
 def cmd_export(args, net):
     from .io import export
     if net.rank == 0:          # one writer, however it was launched
-        if args.format == "lammps-input":
-            from .io import lammps_input
-            script, dropped = lammps_input.write(args.file, args.out)
-            print(f"wrote {script} and {lammps_input.DATA_NAME} beside it; run it there with `lmp -in "
-                  f"{lammps_input.INPUT_NAME}`")
-            if dropped:
-                print(f"note: {dropped} nonzero contact histories of {args.file} start at zero in LAMMPS (a data "
-                      f"file has none); the trajectories agree to round-off only from a state without them")
-        else:
-            print(f"wrote {export.export_file(args.file, args.format, args.out)}")
+        out, notes = export.export(args.file, args.format, args.out)
+        print(f"wrote {out}")
+        for line in notes:
+            print(line)
     return EXIT_OK
 
 
@@ -269,12 +263,10 @@ def parser():
                             "write time (default min(60, walltime / 20))")
     e = sub.add_parser("export", help="write a state file for other tools (OVITO, LAMMPS, ASE)")
     e.add_argument("file")
-    e.add_argument("--format", required=True,
-                   choices=("lammps-dump", "lammps-data", "xyz", "packing", "contacts", "lammps-local",
-                            "lammps-input"))
-    e.add_argument("--out", help="output path (default: FILE with .dump, .data, .xyz, .local or .contacts.xmf; "
-                                 "RUN/packing.npz for a final.h5's packing; for lammps-input a directory, "
-                                 "default FILE with .lammps)")
+    from .io.export import FORMATS
+    e.add_argument("--format", required=True, choices=tuple(FORMATS), metavar="FORMAT",
+                   help="; ".join(f"{f.name}: {f.about}" for f in FORMATS.values()))
+    e.add_argument("--out", help="output path (default: beside FILE, as each format says)")
     b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",

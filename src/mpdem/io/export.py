@@ -6,17 +6,22 @@ LAMMPS dump and extended XYZ formats (OVITO, ASE, VMD) are text copies.
 Particles only: the contact slots and a snapshot's pair list are not
 exported (``checkpoint.read_state(path, pairs=True)`` reads them).
 
+The export formats are one table, ``FORMATS`` (name -> ``Format``): the command line's
+``--format`` choices and help come from it, so a new format is one writer and one entry here.
+The module imports h5py and the state files' reader on first use, so the command line can read
+the table without loading them.
+
 Reduced units throughout: lengths [d], times [sqrt(d/g)], forces [m g].
 """
 from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from typing import Callable
 
-import h5py
 import numpy as np
 
-from . import checkpoint
 from ..kernels.particle import R    # particle radius [d]
 from .rundir import write_atomic
 from ..state import FIELDS, PARTICLE
@@ -52,6 +57,8 @@ def _grid(h5_path, xmf_dir):
     -------
     (time, step, grid) : float, int, Element
     """
+    import h5py
+    from . import checkpoint
     attrs = checkpoint.read_attrs(h5_path)          # layout checks; raises StateFileError
     time, step = float(attrs["time"]), int(attrs["step"])
     ref = os.path.relpath(os.path.abspath(h5_path), xmf_dir)
@@ -171,7 +178,7 @@ def _rows(fmt, columns):
     return (fmt % row + "\n" for row in zip(*(np.asarray(c).tolist() for c in columns)))
 
 
-def _lammps_dump(a, attrs):
+def _lammps_dump(a, attrs, path=None):
     """LAMMPS text dump (one frame): box pp pp ff, atom types 1 mobile, 2 bed."""
     zlo, zhi = _z_bounds(a["x"])
     bounds = ((0.0, attrs["L_x"]), (0.0, attrs["L_y"]), (zlo, zhi))
@@ -183,7 +190,7 @@ def _lammps_dump(a, attrs):
                       np.full(len(a["id"]), R)])
 
 
-def _xyz(a, attrs):
+def _xyz(a, attrs, path=None):
     """Extended XYZ (one frame): species M mobile, B bed; cell origin at z_lo."""
     zlo, zhi = _z_bounds(a["x"])
     yield (f"{len(a['id'])}\n"
@@ -205,7 +212,102 @@ def lammps_data(a, attrs, path):
                       title)
 
 
-FORMATS = {"lammps-dump": (".dump", _lammps_dump), "xyz": (".xyz", _xyz), "lammps-data": (".data", lammps_data)}
+# -- the formats --
+@dataclass(frozen=True)
+class Format:
+    """One export format.
+
+    Attributes
+    ----------
+    name : str
+        ``--format NAME``.
+    about : str
+        What it is and for which tool, a few words (the command line's help).
+    write : callable(path, out) -> (str, list of str)
+        Writes the export of state file ``path`` to ``out`` (None: its default beside ``path``), under a
+        temporary name renamed when complete; returns the path written and notes for the user.
+    """
+    name: str
+    about: str
+    write: Callable
+
+
+def _text(render, suffix):
+    """The writer of a text format: ``render(arrays, attrs, path)`` -> lines, default ``FILE<suffix>``."""
+    def write(path, out):
+        from . import checkpoint
+        out = out or os.path.splitext(path)[0] + suffix
+        arrays, attrs = checkpoint.read_state(path)
+        write_atomic(out, render(arrays, attrs, path))
+        return out, []
+    return write
+
+
+def _packing(path, out):
+    # what the analyses need, compressed (mpdem.io.packing): RUN/final.h5 -> RUN/packing.npz
+    from . import checkpoint, packing
+    base = os.path.basename(path)
+    out = out or (os.path.join(os.path.dirname(path), "packing.npz") if base == "final.h5"
+                  else os.path.splitext(path)[0] + ".packing.npz")
+    arrays, attrs = checkpoint.read_state(path, pairs=True)
+    return packing.write(out, arrays, attrs), []
+
+
+def _contacts(path, out):
+    # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.io.network)
+    from .network import write_contacts_xdmf
+    return write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None), []
+
+
+def _lammps_local(path, out):
+    # the contact network for OVITO: a LAMMPS dump local of the contacts (mpdem.io.network)
+    from .network import lammps_local_lines
+    out = out or os.path.splitext(path)[0] + ".local"
+    write_atomic(out, lammps_local_lines(path))
+    return out, []
+
+
+def _lammps_input(path, out):
+    # a LAMMPS input script and data file that continue the run in LAMMPS (mpdem.io.lammps_input)
+    from . import lammps_input
+    script, dropped = lammps_input.write(path, out)
+    notes = [f"run it there with `lmp -in {lammps_input.INPUT_NAME}` ({lammps_input.DATA_NAME} beside it)"]
+    if dropped:
+        notes.append(f"note: {dropped} nonzero contact histories of {path} start at zero in LAMMPS (a data file "
+                     f"has none); the trajectories agree to round-off only from a state without them")
+    return script, notes
+
+
+FORMATS = {f.name: f for f in (
+    Format("lammps-dump", "a LAMMPS dump frame, FILE.dump (OVITO, LAMMPS rerun)",
+           _text(_lammps_dump, ".dump")),
+    Format("lammps-data", "a LAMMPS data file, FILE.data (read_data; reads back as run.initial_file)",
+           _text(lammps_data, ".data")),
+    Format("xyz", "extended XYZ, FILE.xyz (ASE, OVITO, VMD)", _text(_xyz, ".xyz")),
+    Format("packing", "positions and contact forces, compressed: RUN/packing.npz beside a final.h5 (analyze)",
+           _packing),
+    Format("contacts", "the contact network, FILE.contacts.h5 and .xmf (ParaView)", _contacts),
+    Format("lammps-local", "the contact network as a LAMMPS dump local, FILE.local (OVITO)", _lammps_local),
+    Format("lammps-input", "a LAMMPS input script and data file that continue the run, directory FILE.lammps",
+           _lammps_input),
+)}
+
+
+def export(path, fmt, out=None):
+    """Export state file ``path`` in format ``fmt`` (a name in ``FORMATS``) to ``out`` (default beside it).
+
+    Returns
+    -------
+    (str, list of str) : the path written and notes for the user.
+
+    Raises
+    ------
+    ValueError for a format not in ``FORMATS``; StateFileError for a damaged file; WriteError
+    when ``out`` cannot be written (nothing is left under its name).
+    """
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}")
+    return FORMATS[fmt].write(path, out)
 
 
 def export_file(path, fmt, out=None):
@@ -222,49 +324,21 @@ def export_file(path, fmt, out=None):
     sphere, types 1 mobile and 2 bed, and Velocities with the angular
     velocities (``lammps.data_lines``); it reads back as ``run.initial_file``
     with ``run.fixed_types = [2]`` to the same particles.
+    The others (``packing``, ``contacts``, ``lammps-local``, ``lammps-input``): ``FORMATS``.
 
     Floats are written with 17 significant digits, so they read back exactly.
-    Particles only (no contacts or pairs).
 
     Parameters
     ----------
     path : str
         An mpdem state file (checksums are verified).
-    fmt : {"lammps-dump", "xyz", "lammps-data", "packing", "contacts", "lammps-local"}
-        ``contacts`` and ``lammps-local``: the contact network (``mpdem.io.network``).
-        ``packing``: the positions and the contact list with its forces, compressed
-        (``mpdem.io.packing``; what ``analyze`` needs, not a restart).
+    fmt : str
+        A name in ``FORMATS``.
     out : str, optional
-        Output path; default ``path`` with the suffix ``.dump``, ``.xyz`` or ``.data``;
-        for ``packing`` RUN/packing.npz beside a final.h5, else ``.packing.npz``.
+        Output path; default ``path`` with the format's suffix (``FORMATS``).
 
     Returns
     -------
     str : the output path (written atomically).
     """
-    if fmt == "packing":
-        # what the analyses need, compressed (mpdem.io.packing): RUN/final.h5 -> RUN/packing.npz
-        from . import packing
-        base = os.path.basename(path)
-        out = out or (os.path.join(os.path.dirname(path), "packing.npz") if base == "final.h5"
-                      else os.path.splitext(path)[0] + ".packing.npz")
-        arrays, attrs = checkpoint.read_state(path, pairs=True)
-        return packing.write(out, arrays, attrs)
-    if fmt == "contacts":
-        # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.io.network)
-        from .network import write_contacts_xdmf
-        return write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None)
-    if fmt == "lammps-local":
-        # the contact network for OVITO: a LAMMPS dump local of the contacts (mpdem.io.network)
-        from .network import lammps_local_lines
-        out = out or os.path.splitext(path)[0] + ".local"
-        write_atomic(out, lammps_local_lines(path))
-        return out
-    if fmt not in FORMATS:
-        raise ValueError(f"unknown export format {fmt!r}; accepted: {', '.join(FORMATS)}, packing, contacts, "
-                         f"lammps-local")
-    suffix, render = FORMATS[fmt]
-    out = out or os.path.splitext(path)[0] + suffix
-    arrays, attrs = checkpoint.read_state(path)
-    write_atomic(out, render(arrays, attrs, path) if fmt == "lammps-data" else render(arrays, attrs))
-    return out
+    return export(path, fmt, out)[0]
