@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from .errors import ConfigError
+from .kernels.models import MODELS
 
 REQUIRED = object()   # marks a key with no default
 DERIVED = object()    # marks a default computed from other keys
@@ -67,7 +68,8 @@ SCHEMA = (
     _k("pour", "N", 20000, "number of mobile spheres", int, param=9),
     _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)", param=8),
     _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest", param=10),
-    _k("contact", "model", "hooke", "normal/tangential force law", str, ("hooke", "hertz"), param=7),
+    _k("contact", "model", "hooke", "normal/tangential force law: hooke or hertz (kernels/models.py)", str,
+       tuple(MODELS), param=7),
     _k("contact", "k_n", 2e5, "normal spring constant [m g / d]", param=3),
     _k("contact", "k_t", DERIVED, "tangential spring constant [m g / d]; default 2 k_n / 7", param=4),
     _k("contact", "epsilon", 0.88, "coefficient of restitution of a free pair; sets gamma_n (eq. 4-5)", param=2),
@@ -514,9 +516,9 @@ def resolve(raw):
     need("contact.mu", 0 <= mu <= 1e4, "0 <= mu <= 1e4")
     if mu > 10:
         warns.append(f"contact.mu = {mu:g} is above the paper's range (0 to 10)")
-    if vals["contact.model"] == "hertz":
-        warns.append("contact.model = 'hertz': epsilon is nominal (velocity dependent); "
-                     "gamma_n is the Hookean value for it")
+    if MODELS[vals["contact.model"]].sqrt_overlap:
+        warns.append(f"contact.model = {vals['contact.model']!r}: epsilon is nominal (velocity dependent); "
+                     f"gamma_n is the Hookean value for it")
 
     phi = vals["pour.phi_i"]
     need("pour.phi_i", 0 < phi < 0.35, "0 < phi_i < 0.35 (random sequential addition fails near 0.38)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels.models import overlap_scale
 from .kernels.particle import INV_I, R
 from .kernels.pairdist import separations
 
@@ -52,7 +53,7 @@ def contact_pairs(state, phys):
     vn = (vr * nrm).sum(axis=1)
     w = R * wh[i] + R * wh[j]
     vt = vr - vn[:, None] * nrm - np.cross(w, nrm)
-    scale = np.sqrt(np.maximum(delta, 0.0)) if phys.model == "hertz" else np.ones_like(delta)
+    scale = overlap_scale(phys.model, delta)
     F_n = scale * (phys.k_n * delta - meff * phys.gamma_n * vn)
     if phys.limit_damping:
         F_n = np.maximum(F_n, 0.0)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernels.models import overlap_scale
 from ..kernels.pairdist import separations
 
 
@@ -47,7 +48,7 @@ class ContactForces:
 def elastic_normal(delta, k_n, model="hooke"):
     """The static normal force of an overlap: k_n delta (Hooke) or sqrt(delta) k_n delta (Hertz) [m g]."""
     f = k_n * delta
-    return f * np.sqrt(np.maximum(delta, 0.0)) if model == "hertz" else f
+    return f * overlap_scale(model, delta)
 
 
 def contact_forces(pk, arrays, k_n, mu, model="hooke"):

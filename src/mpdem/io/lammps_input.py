@@ -35,6 +35,7 @@ import tomllib
 import numpy as np
 
 from ..errors import MpdemError, WriteError
+from ..kernels.models import MODELS
 
 DATA_NAME = "data.mpdem"
 INPUT_NAME = "in.mpdem"
@@ -69,11 +70,9 @@ def coefficients(contact):
     k = [float(contact[key]) + 0.0 for key in ("k_n", "k_t", "gamma_n", "gamma_t")]
     mu = float(contact["mu"])
     damp = 1 if k[3] > 0.0 else 0
-    if contact["model"] == "hertz":
-        # LAMMPS's sqrt(delta R_eff) with R_eff = 1/4 (pair) and 1/2 (wall) against mpdem's sqrt(delta / d)
-        return ("gran/hertz/history", (*[2.0 * c for c in k], mu, damp),
-                (*[math.sqrt(2.0) * c for c in k], mu, damp))
-    return "gran/hooke/history", (*k, mu, damp), (*k, mu, damp)
+    model = MODELS[contact["model"]]
+    pair, wall = model.lammps_scale
+    return model.lammps, (*[pair * c for c in k], mu, damp), (*[wall * c for c in k], mu, damp)
 
 
 def _literal(values):

@@ -23,10 +23,12 @@ from typing import NamedTuple
 
 from numba import njit
 
+from .models import MODELS
 from .particle import INV_I, R
 
-MODEL_HOOKE = 0
-MODEL_HERTZ = 1
+# the kernels' ids of the models whose forces they branch on (models.MODELS)
+MODEL_HOOKE = MODELS["hooke"].kernel
+MODEL_HERTZ = MODELS["hertz"].kernel
 # |F_t|^2 < SURE_STICK bound^2 implies sqrt(|F_t|^2) <= bound in floating point
 SURE_STICK = 1.0 - 1e-9
 
@@ -67,7 +69,7 @@ def law_of(physics):
     p = physics
     g = gravity_vector(float(p.gravity), float(getattr(p, "incline", 0.0)))
     return Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu), *g,
-               float(p.dt), MODEL_HERTZ if p.model == "hertz" else MODEL_HOOKE, bool(p.limit_damping),
+               float(p.dt), MODELS[p.model].kernel, bool(p.limit_damping),
                bool(p.rescale_history))
 
 
