@@ -54,13 +54,14 @@ def cases():
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))
     red, rec, cells = np.zeros(6), np.zeros((4, 6)), np.zeros(n, np.int32)
     box = (10.0, 10.0, 5.0, 5.0)
+    planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
     return {
         "step.kick_drift": (step.kick_drift, (n, x, x, x, x, x, fixed, x, 1e-4, *box, True, red)),
         "step.kick": (step.kick, (n, x, x, x, x, fixed, 1e-4)),
-        "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, True, False,
+        "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, planes, kinds,
                                       5, *box, law, True, red)),
-        "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, True, False,
+        "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds,
                                         5, *box, law, True, 0.1, 4, rec)),
         "lists.z_range": (lists.z_range, (n, x, np.zeros(2))),
         "lists.zero": (lists.zero, (n, cells)),

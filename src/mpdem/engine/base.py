@@ -30,6 +30,7 @@ class Physics:
     rescale_history: bool = False
     floor: bool = False         # temporary frictionless floor at z = 0 (bed making)
     wall: bool = False          # the wall plane z = 0 under the bed (bed.wall)
+    planes: tuple = ()          # further planes (planes.Plane: a lid, a side wall), after those two
 
     @classmethod
     def from_config(cls, cfg):

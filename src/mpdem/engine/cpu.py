@@ -12,12 +12,13 @@ import time
 
 import numpy as np
 
+from .. import planes
 from ..kernels import history
 from ..kernels.balance import force_balance
 from ..kernels.bundles import Lists, Near, Scratch, Slots, make_box
 from ..kernels.calls import Bound
 from ..kernels.exactsum import new_accumulator, to_float
-from ..kernels.forces import contact_forces, contact_forces_serial, floor_forces, wall_forces
+from ..kernels.forces import contact_forces, contact_forces_serial, plane_forces
 from ..kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
 from ..kernels.law import law_of
 from ..kernels.near import near_lists
@@ -66,6 +67,8 @@ class Engine(EngineBase):
         self.state, self.phys, self.domain = state, physics, domain
         state.wall = physics.wall
         self.law = law_of(physics)
+        # the floor, the wall and any other plane (planes.py), as the kernels take them
+        self.planes, self.plane_kinds = planes.arrays(planes.of_physics(physics))
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
@@ -125,8 +128,8 @@ class Engine(EngineBase):
         # each called through the overload numba chose at its first call after a reallocation
         self._bound = (Bound(contact_forces if self.nchunk > 1 else contact_forces_serial),
                        Bound(kick_drift if self.nchunk > 1 else kick_drift_serial),
-                       Bound(kick if self.nchunk > 1 else kick_serial), Bound(floor_forces), Bound(wall_forces))
-        self._contact_forces, self._kick_drift, self._kick, self._floor_forces, self._wall_forces = self._bound
+                       Bound(kick if self.nchunk > 1 else kick_serial), Bound(plane_forces))
+        self._contact_forces, self._kick_drift, self._kick, self._plane_forces = self._bound
         self._scratch(self._width)
         self._chunk_max = np.zeros(self.nchunk)
         self._chunk_count = np.zeros(self.nchunk, np.int64)
@@ -322,7 +325,7 @@ class Engine(EngineBase):
         (``kernels.pairstore``), which the rows reuse. The same values either way.
         """
         t = time.perf_counter()
-        s, p = self.state, self.phys
+        s = self.state
         if keep_pairs:
             # a store of its own, made for this pass (its first touch costs some 2 ms on the 20k pile)
             near = self._near()._replace(cpair=np.arange(self.k_near + 1, dtype=np.int32))
@@ -338,10 +341,10 @@ class Engine(EngineBase):
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep, self._tangent)
         max_ov, n_c = self._contact_forces(s.n_own, part, near, self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
-        if p.floor:
-            self._floor_forces(s.n_own, part, p.k_n, p.gamma_n)
-        if p.wall:
-            max_ov = max(max_ov, self._wall_forces(s.n_own, part, s.wall_ds, self.law, increment, self._chunk_max))
+        if len(self.plane_kinds):
+            # the rough plane's history is the state's wall_ds
+            max_ov = max(max_ov, self._plane_forces(s.n_own, part, self.planes, self.plane_kinds, s.wall_ds,
+                                                    self.law, increment, self._chunk_max))
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c

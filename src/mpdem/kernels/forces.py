@@ -15,9 +15,8 @@ from numba import njit, prange
 from .chunks import chunk_bounds
 from .geometry import min_image
 from .history import slot_of, stamp_of
-from .law import (approach, contact_force, contact_torque, dot, floor_force, normal, normal_force, norm2, plane_slip,
-                  plane_torque, slip, spin, tangential)
-from .particle import R
+from .law import (PLANE_FLOOR, PLANE_ROUGH, approach, contact_force, contact_torque, dot, normal, normal_force, norm2,
+                  plane_contact, slip, spin, tangential)
 from .prefetch import prefetch_row
 
 
@@ -279,41 +278,27 @@ def _rows(lo, hi, particles, near, slots, epoch, box, law, increment, room):
     return max_overlap, n_contacts
 
 
-@njit(cache=True)
-def floor_forces(n_own, particles, k_n, gamma_n):
-    """Add a flat frictionless floor at z = 0 (only for building the bed).
-
-    Hookean normal force k_n delta - m gamma_n v_z [m g] on owned mobile rows
-    with delta = R - z > 0 (m_eff = m, as for any fixed partner), added to
-    ``particles.f``; k_n [m g / d], gamma_n [sqrt(g/d)].
-    """
-    x, v, f, fixed = particles.x, particles.v, particles.f, particles.fixed
-    for i in range(n_own):
-        if fixed[i]:
-            continue
-        delta = R - x[i, 2]
-        if delta > 0.0:
-            f[i, 2] += floor_force(delta, v[i, 2], k_n, gamma_n)
-
-
 @njit(cache=True, parallel=True, error_model="numpy")
-def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
-    """Add the contact of each owned mobile sphere with the wall plane z = 0 (``bed.wall``).
+def plane_forces(n_own, particles, planes, kinds, plane_ds, law, increment, chunk_max):
+    """Add the contacts of each owned mobile sphere with the planes (``planes.Plane``, ``law.plane_contact``).
 
-    The wall is a partner of infinite mass at rest (m_eff = m = 1) with the
-    pile's contact law and a tangential history of its own per sphere, as
-    LAMMPS's ``wall/gran hooke/history ... zplane 0``: overlap delta = R - z,
-    n = +z. Added after the pair contacts, so the sum order does not depend
-    on ranks or threads. Out of contact the history is +0.0.
+    Each plane is a partner at rest of infinite mass (m_eff = m = 1): the bed-making floor, the wall
+    under the bed (``bed.wall``, as LAMMPS's ``wall/gran hooke/history ... zplane 0``), a lid.
+    Added after the pair contacts, plane by plane in the order given, so the sum order does not
+    depend on ranks or threads.
 
     Parameters
     ----------
     particles : Particles
-        ``x``, ``v``, ``omega``: position [d], half-step velocity [sqrt(g d)]
-        and angular velocity [sqrt(g/d)]; the wall's force [m g] and torque
-        [m g d] are added to ``f`` and ``torque``.
-    wall_ds : (n_rows, 3) float64, in/out
-        Delta s of each sphere's wall contact [d].
+        ``x``, ``v``, ``omega``: position [d], half-step velocity [sqrt(g d)] and angular velocity
+        [sqrt(g/d)]; the planes' forces [m g] and torques [m g d] are added to ``f`` and ``torque``.
+    planes : (P, 4) float64
+        Each plane's unit normal and offset [d].
+    kinds : (P,) int64
+        Each plane's kind (``law.PLANE_*``); at most one is ``PLANE_ROUGH``.
+    plane_ds : (n_rows, 3) float64, in/out
+        Delta s of each sphere's contact with the rough plane [d] (+0.0 out of contact; not read
+        without one).
     law : Law
     increment : bool
         False on the set-up evaluation (no history increment).
@@ -322,7 +307,7 @@ def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
 
     Returns
     -------
-    float : the largest wall overlap [d] (0 if none).
+    float : the largest overlap with a plane other than the floor [d] (0 if none).
     """
     x, v, omega, fixed = particles.x, particles.v, particles.omega, particles.fixed
     f, torque = particles.f, particles.torque
@@ -333,33 +318,27 @@ def wall_forces(n_own, particles, wall_ds, law, increment, chunk_max):
         for i in range(lo, hi):
             if fixed[i]:
                 continue
-            delta = R - x[i, 2]
-            if not delta > 0.0:
-                wall_ds[i, 0] = 0.0
-                wall_ds[i, 1] = 0.0
-                wall_ds[i, 2] = 0.0
-                continue
-            deepest = max(deepest, delta)
-            fn, scale = normal(delta, v[i, 2], 1.0, law)
-            fz = fn
-            if law.mu > 0.0:
-                # the contact point moves with v + R omega x (-n); n = (0, 0, 1)
-                vtx, vty = plane_slip(v[i, 0], v[i, 1], omega[i, 0], omega[i, 1])
-                vtz = 0.0
-                sx, sy, sz, ftx, fty, ftz = tangential(
-                    (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2]), (vtx, vty, vtz), (0.0, 0.0, 1.0),
-                    scale, 1.0, abs(fn), law, increment)
-                wall_ds[i, 0] = sx + 0.0
-                wall_ds[i, 1] = sy + 0.0
-                wall_ds[i, 2] = sz + 0.0
-                f[i, 0] += ftx
-                f[i, 1] += fty
-                fz += ftz
-                # T = -R n x F_t with n = (0, 0, 1)
-                tx, ty = plane_torque(ftx, fty)
+            for k in range(len(kinds)):
+                kind = kinds[k]
+                rough = kind == PLANE_ROUGH
+                ds = (plane_ds[i, 0], plane_ds[i, 1], plane_ds[i, 2]) if rough else (0.0, 0.0, 0.0)
+                delta, fx, fy, fz, tx, ty, tz, sx, sy, sz = plane_contact(
+                    x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2],
+                    ds, planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], kind, law, increment)
+                if rough:
+                    plane_ds[i, 0] = sx
+                    plane_ds[i, 1] = sy
+                    plane_ds[i, 2] = sz
+                if not delta > 0.0:
+                    continue
+                if kind != PLANE_FLOOR:
+                    deepest = max(deepest, delta)
+                f[i, 0] += fx
+                f[i, 1] += fy
+                f[i, 2] += fz
                 torque[i, 0] += tx
                 torque[i, 1] += ty
-            f[i, 2] += fz
+                torque[i, 2] += tz
         chunk_max[c] = deepest
     deepest = 0.0
     for c in range(nchunk):

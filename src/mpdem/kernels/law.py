@@ -29,6 +29,11 @@ from .particle import INV_I, R
 # the kernels' ids of the models whose forces they branch on (models.MODELS)
 MODEL_HOOKE = MODELS["hooke"].kernel
 MODEL_HERTZ = MODELS["hertz"].kernel
+# the kinds of plane (planes.Plane): the bed-making floor (a frictionless Hookean spring of the pile's
+# k_n and gamma_n), a smooth plane (the pile's normal law), a rough one (the pile's law, with history)
+PLANE_FLOOR = 0
+PLANE_SMOOTH = 1
+PLANE_ROUGH = 2
 # |F_t|^2 < SURE_STICK bound^2 implies sqrt(|F_t|^2) <= bound in floating point
 SURE_STICK = 1.0 - 1e-9
 
@@ -234,22 +239,60 @@ def contact_torque(nx, ny, nz, ftx, fty, ftz):
 
 
 @njit(cache=True, inline="always")
-def plane_slip(vx, vy, ox, oy):
-    """The tangential velocity of a sphere's contact with the plane z = 0 (n = +z) [sqrt(g d)]:
-    v + R omega x (-n), whose z part is 0."""
-    return vx - R * oy, vy + R * ox
-
-
-@njit(cache=True, inline="always")
-def plane_torque(ftx, fty):
-    """The torque -R n x F_t of a contact with the plane z = 0 (n = +z) [m g d]: (x, y) parts."""
-    return R * fty, -(R * ftx)
-
-
-@njit(cache=True, inline="always")
 def floor_force(delta, vz, k_n, gamma_n):
     """The bed-making floor's frictionless force k_n delta - gamma_n v_z [m g] (m_eff = m)."""
     return k_n * delta - gamma_n * vz
+
+
+@njit(cache=True, inline="always")
+def plane_contact(x, y, z, vx, vy, vz, ox, oy, oz, ds, nx, ny, nz, offset, kind, law, increment):
+    """The contact of a sphere with a plane (``planes.Plane``): the points p with n . p = offset, the
+    spheres on the side n points to; the plane at rest, of infinite mass (m_eff = m = 1).
+
+    The overlap is delta = R - (n . x - offset) [d]. A ``PLANE_FLOOR`` pushes with the bed-making
+    floor's frictionless spring (``floor_force``); a ``PLANE_SMOOTH`` with the pile's normal law; a
+    ``PLANE_ROUGH`` with the pile's whole law, its tangential history ``ds`` carried per sphere
+    (a pair's functions with the plane as the partner: ``slip`` with the sphere's own spin,
+    ``tangential``, ``contact_force``, ``contact_torque``). For the plane z = 0 (n = +z) these are,
+    bit for bit, the floor and the wall of before.
+
+    Parameters
+    ----------
+    x, y, z, vx, vy, vz, ox, oy, oz : float
+        The sphere's position [d], half-step velocity [sqrt(g d)] and angular velocity [sqrt(g/d)].
+    ds : (3,) tuple of float
+        Its Delta s with the plane [d] (read by a rough plane only).
+    nx, ny, nz, offset : float
+        The plane's unit normal and offset [d].
+    kind : int
+        PLANE_FLOOR, PLANE_SMOOTH or PLANE_ROUGH.
+    law : Law
+    increment : bool
+
+    Returns
+    -------
+    delta, fx, fy, fz, tx, ty, tz, sx, sy, sz : float
+        The overlap [d] (not positive: no contact, and zeros after it), the force [m g] and torque
+        [m g d] on the sphere, and its new Delta s (+0.0 out of contact; unchanged without friction).
+    """
+    delta = R - (dot(x, y, z, nx, ny, nz) - offset)
+    sx, sy, sz = ds
+    if not delta > 0.0:
+        return delta, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    vn = dot(vx, vy, vz, nx, ny, nz)
+    if kind == PLANE_FLOOR:
+        fx, fy, fz = normal_force(floor_force(delta, vn, law.k_n, law.gamma_n), nx, ny, nz)
+        return delta, fx, fy, fz, 0.0, 0.0, 0.0, sx, sy, sz
+    fn, scale = normal(delta, vn, 1.0, law)
+    if kind == PLANE_ROUGH and law.mu > 0.0:
+        vtx, vty, vtz = slip(vx, vy, vz, vn, nx, ny, nz, R * ox, R * oy, R * oz)
+        sx, sy, sz, ftx, fty, ftz = tangential((sx, sy, sz), (vtx, vty, vtz), (nx, ny, nz), scale, 1.0, abs(fn),
+                                               law, increment)
+        fx, fy, fz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
+        tx, ty, tz = contact_torque(nx, ny, nz, ftx, fty, ftz)
+        return delta, fx, fy, fz, tx, ty, tz, sx + 0.0, sy + 0.0, sz + 0.0
+    fx, fy, fz = normal_force(fn, nx, ny, nz)
+    return delta, fx, fy, fz, 0.0, 0.0, 0.0, sx, sy, sz
 
 
 @njit(cache=True, inline="always")

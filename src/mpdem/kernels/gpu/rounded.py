@@ -116,7 +116,7 @@ def twins(module, names, namespace):
 
 # every law function, in the order of law.py (one may call those above it)
 LAW_FUNCTIONS = ("norm2", "dot", "approach", "spin", "slip", "normal", "tangential", "normal_force",
-                 "contact_force", "contact_torque", "plane_slip", "plane_torque", "floor_force", "kicks", "drift")
+                 "contact_force", "contact_torque", "floor_force", "plane_contact", "kicks", "drift")
 
 _space = {k: v for k, v in vars(law).items() if not k.startswith("__")}
 _space.update(OPS)
@@ -128,6 +128,6 @@ min_image = _space["min_image"]
 norm2, dot, approach, spin, slip = (_space[k] for k in ("norm2", "dot", "approach", "spin", "slip"))
 normal, tangential, normal_force = _space["normal"], _space["tangential"], _space["normal_force"]
 contact_force, contact_torque = _space["contact_force"], _space["contact_torque"]
-plane_slip, plane_torque, floor_force = _space["plane_slip"], _space["plane_torque"], _space["floor_force"]
+floor_force, plane_contact = _space["floor_force"], _space["plane_contact"]
 kicks, drift = _space["kicks"], _space["drift"]
 add, sub, mul, sqrt = _add, _sub, _mul, _sqrt

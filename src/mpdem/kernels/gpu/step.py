@@ -23,9 +23,9 @@ import numpy as np
 
 from .reduce import BLOCK_MAX, max_into, min_into, sum_into
 from .runtime import cuda, device, device_cuda
-from .rounded import (add, approach, contact_force, contact_torque, dot, drift, floor_force, kicks, min_image,
-                      normal, normal_force, norm2, plane_slip, plane_torque, slip, spin, sqrt, tangential)
-from ..particle import R
+from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
+                      normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
+from ..law import PLANE_FLOOR, PLANE_ROUGH
 
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
@@ -126,7 +126,7 @@ def kick(n_own, v, omega, f, torque, fixed, dt):
 
 
 @device
-def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                now, before, L_x, L_y, hx, hy, law, increment):
     """Row i (mobile) of ``forces``; returns (its largest overlap [d], its contacts)."""
     deepest = 0.0
@@ -194,36 +194,29 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
             pair[e, 3] = ctx
             pair[e, 4] = cty
             pair[e, 5] = ctz
-    if floor:
-        delta = R - zi
-        if delta > 0.0:
-            fz = add(fz, floor_force(delta, v[i, 2], law.k_n, law.gamma_n))
-    if wall:
-        delta = R - zi
-        if not delta > 0.0:
-            wall_ds[i, 0] = 0.0
-            wall_ds[i, 1] = 0.0
-            wall_ds[i, 2] = 0.0
+    for k in range(len(kinds)):
+        kind = kinds[k]
+        rough = kind == PLANE_ROUGH
+        if rough:
+            ds = (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2])
         else:
-            if delta > deepest:
+            ds = (0.0, 0.0, 0.0)
+        delta, pfx, pfy, pfz, ptx, pty, ptz, sx, sy, sz = plane_contact(
+            xi, yi, zi, v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2], ds,
+            planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], kind, law, increment)
+        if rough:
+            wall_ds[i, 0] = sx
+            wall_ds[i, 1] = sy
+            wall_ds[i, 2] = sz
+        if delta > 0.0:
+            if kind != PLANE_FLOOR and delta > deepest:
                 deepest = delta
-            fn, scale = normal(delta, v[i, 2], 1.0, law)
-            wz = fn
-            if friction:
-                vtx, vty = plane_slip(v[i, 0], v[i, 1], omega[i, 0], omega[i, 1])
-                sx, sy, sz, ftx, fty, ftz = tangential(
-                    (wall_ds[i, 0], wall_ds[i, 1], wall_ds[i, 2]), (vtx, vty, 0.0), (0.0, 0.0, 1.0),
-                    scale, 1.0, abs(fn), law, increment)
-                wall_ds[i, 0] = sx + 0.0
-                wall_ds[i, 1] = sy + 0.0
-                wall_ds[i, 2] = sz + 0.0
-                fx = add(fx, ftx)
-                fy = add(fy, fty)
-                wz = add(wz, ftz)
-                wtx, wty = plane_torque(ftx, fty)
-                tx = add(tx, wtx)
-                ty = add(ty, wty)
-            fz = add(fz, wz)
+            fx = add(fx, pfx)
+            fy = add(fy, pfy)
+            fz = add(fz, pfz)
+            tx = add(tx, ptx)
+            ty = add(ty, pty)
+            tz = add(tz, ptz)
     f[i, 0] = fx
     f[i, 1] = fy
     f[i, 2] = fz
@@ -234,12 +227,12 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
 
 
 @cuda.jit
-def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
            epoch, L_x, L_y, hx, hy, law, increment, red):
     """Forces (gravity included) and torques on the owned rows, the contact history in place.
 
-    As ``kernels.forces.contact_forces``, then ``floor_forces`` when ``floor`` (bed making) and
-    ``wall_forces`` when ``wall``, each row in one thread (any grid: a thread takes rows i,
+    As ``kernels.forces.contact_forces``, then ``plane_forces`` over ``planes`` and ``kinds`` (the
+    floor, the wall, a lid: ``planes.arrays``), each row in one thread (any grid: a thread takes rows i,
     i + threads, ...).
 
     Parameters
@@ -252,7 +245,9 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     pair : (K, 6) float64, out when ``keep``
         Each entry's contact force on the row [m g] and torque [m g d] (zeros out of contact).
     wall_ds : (n_own, 3) float64
-        Each row's Delta s with the wall plane z = 0 [d] (read and written only with ``wall``).
+        Each row's Delta s with the rough plane [d] (read and written only with one).
+    planes : (P, 4) float64, kinds : (P,) int64
+        The planes' normals and offsets [d] and kinds (``law.PLANE_*``).
     red : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
         owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
     """
@@ -263,13 +258,13 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
         red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
         red[RED_BAD] = NEUTRAL[RED_BAD]
-    _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+    _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
                  increment, red, room, iroom)
 
 
 @device_cuda
-def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall, floor,
+def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
     """This thread's rows of ``forces`` (i, i + threads, ...) with the stamps ``now`` and ``before``,
     their reductions into ``red``'s slots RED_OVERLAP and RED_CONTACTS (every thread of the block
@@ -282,8 +277,8 @@ def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, 
                 f[i, a] = 0.0
                 torque[i, a] = 0.0
             continue
-        d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, wall,
-                          floor, now, before, L_x, L_y, hx, hy, law, increment)
+        d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
+                          kinds, now, before, L_x, L_y, hx, hy, law, increment)
         deepest = max(deepest, d)
         contacts += c
     max_into(red, RED_OVERLAP, deepest, room)
@@ -307,7 +302,7 @@ def _go_on(red, half_skin, room):
 
 
 @cuda.jit
-def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, wall, floor,
+def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
             epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
@@ -338,7 +333,7 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
         grid.sync()
         if not _go_on(rec[s], half_skin, room):
             break
-        _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, wall, floor,
+        _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes, kinds,
                      np.uint32((epoch + s + 1) & 0xFFFFFFFF), np.uint32((epoch + s) & 0xFFFFFFFF), L_x, L_y, hx, hy,
                      law, True, rec[s], room, iroom)
         grid.sync()
