@@ -223,6 +223,27 @@ def test_force_ratios_histogram_and_mobilised_fraction():
     assert big["count_ratio"].tolist() == [0, 0, 0, 0, 0, 1, 0, 0, 0, 0] and big["n_ratio_above_one"] == 3
 
 
+def test_the_generalized_isostatic_count_removes_one_degree_of_freedom_per_mobilised_contact():
+    """physics.md 6.2: with N_m fully mobilised contacts among N spheres, 3 N z / 2 - N_m = 6 N, so
+    z_iso = 4 + 2 N_m / (3 N) = 4 + n_m / 3 with n_m = 2 N_m / N counted per sphere as z is."""
+    from types import SimpleNamespace
+    x, L = simple_cubic(4, 4, SQUEEZE)
+    pk = bulk.Packing(x, np.zeros(len(x)), L, L, mu=0.5)
+    n, P = len(x), len(pk.pairs)
+    zeta = np.zeros(P)
+    zeta[: P // 5] = 1.0                                   # N_m mobilised contacts
+    cf = SimpleNamespace(zeta=zeta, from_file=np.ones(P, bool))
+    every = np.ones(n, bool)
+    iso = report.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)
+    N_m = P // 5
+    assert iso["n_m"] == pytest.approx(2 * N_m / n)
+    assert iso["z_iso"] == pytest.approx(4 + 2 * N_m / (3 * n))
+    # the counting with every contact mobilised: 3 N z / 2 - N z / 2 = 6 N needs z = 6
+    cf.zeta[:] = 1.0
+    z = 2 * P / n
+    assert report.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)["z_iso"] == pytest.approx(4 + z / 3)
+
+
 def test_bulk_contacts_select_by_midpoint():
     ids = np.array([3, 7, 9])
     z = np.array([1.0, 2.0, 4.0])

@@ -129,9 +129,10 @@ def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
     """The generalized isostatic count of a frictional packing (docs/model.md 6.2).
 
     Contacts at the Coulomb limit (zeta > ``mobilised``) remove a degree of
-    freedom each, so the count to compare z with is 4 + 2 n_m / 3, n_m the
-    fully mobilised contacts per sphere (over the bulk spheres), for all
-    spheres and for the backbone. At mu = 0 it is 2 x 3 = 6.
+    freedom each: with N_m of them among N spheres, 3 N z / 2 - N_m = 6 N gives
+    z_iso = 4 + 2 N_m / (3 N). Counted per sphere like z (each contact once for
+    each of its two spheres, n_m = 2 N_m / N, over the bulk spheres) that is
+    4 + n_m / 3, for all spheres and for the backbone. At mu = 0 it is 2 x 3 = 6.
     """
     if mu == 0:
         return {"z_iso": 6.0, "note": "mu = 0: isostatic z = 6 (2 x 3 degrees of freedom per sphere)"}
@@ -144,8 +145,10 @@ def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
     bk = bulk_rows & kept
     n_m = float(per[bulk_rows].mean()) if bulk_rows.any() else math.nan
     n_m_bb = float(per_bb[bk].mean()) if bk.any() else math.nan
-    return {"n_m": n_m, "z_iso": 4.0 + 2.0 * n_m / 3.0, "n_m_backbone": n_m_bb,
-            "z_iso_backbone": 4.0 + 2.0 * n_m_bb / 3.0, "mobilised": mobilised}
+    return {"n_m": n_m, "z_iso": 4.0 + n_m / 3.0, "n_m_backbone": n_m_bb,
+            "z_iso_backbone": 4.0 + n_m_bb / 3.0, "mobilised": mobilised,
+            "note": "z_iso = 4 + n_m / 3, n_m the fully mobilised contacts per sphere (each counted for both "
+                    "of its spheres): 3 N z / 2 - N_m = 6 N"}
 
 
 def _alpha(pk, z1, z2, a, overlap_median):

@@ -79,7 +79,9 @@ def quantities(s):
     bb, iso, od = s.get("backbone") or {}, s.get("isostatic") or {}, s.get("order") or {}
     q.update(mobilised_fraction=num(zt.get("mobilised_fraction")), z_halved=num(hm.get("z")),
              phi_halved=num(hm.get("phi")), z_backbone=num(bb.get("z")),
-             z_iso=num(iso.get("z_iso")) if "n_m" in iso else NAN, crystal_fraction=num(od.get("crystal_fraction")))
+             # from n_m (4 + n_m / 3, physics.md 6.2): summaries written before 2026-11-26 hold 4 + 2 n_m / 3
+             z_iso=4.0 + num(iso["n_m"]) / 3.0 if "n_m" in iso else NAN,
+             crystal_fraction=num(od.get("crystal_fraction")))
     return q
 
 
