@@ -153,13 +153,16 @@ def test_pooled_seeds_are_the_estimate_of_all_their_gaps_and_bootstrap_scatters(
     assert math.isnan(nearcontact.window_stats(runs[0][:5], a, b)["alpha"])
 
 
-def test_gaps_count_each_ordered_reference_partner_pair():
+def test_gaps_count_each_pair_once_and_say_its_ordered_count():
     # three spheres on a line at gaps 0.01 and 0.03; a fourth far away
     x = np.array([[1.0, 1, 1], [2.01, 1, 1], [3.04, 1, 1], [1.0, 5, 5]])
     refs = np.array([True, True, False, True])
-    xi = np.sort(nearcontact.gaps(x, refs, 10.0, 10.0, 0.05))
-    # 0-1 has two references (counted twice), 1-2 one
-    assert xi == pytest.approx([0.01, 0.01, 0.03])
+    xi, w = nearcontact.gaps(x, refs, 10.0, 10.0, 0.05)
+    order = np.argsort(xi)
+    # 0-1 has two references: one gap for the likelihood, two ordered pairs for g(r); 1-2 one
+    assert xi[order] == pytest.approx([0.01, 0.03]) and w[order].tolist() == [2, 1]
+    st = nearcontact.window_stats(xi, 1e-3, 5e-2, w)
+    assert (st["n"], st["n_ordered"]) == (2, 3)
     assert nearcontact.windows_of([1e-3, 1e-2, 5e-2]) == [(1e-3, 1e-2), (1e-2, 5e-2), (1e-3, 5e-2)]
 
 

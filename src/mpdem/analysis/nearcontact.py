@@ -1,12 +1,16 @@
 """The near-contact power law g(r) ~ xi^(-alpha), xi = r/d - 1, by maximum likelihood (paper eq. 6;
 docs/model.md 6.5).
 
-The gaps of every ordered (reference, partner) pair with xi in a window
-[a, b] are a sample of the density
+The gaps of every pair with a reference sphere at one end at least, each
+pair once, with xi in a window [a, b] are a sample of the density
 
     p(xi) = xi^(-alpha) (1 + xi)^2 / Z(alpha),   Z = int_a^b xi^(-alpha) (1 + xi)^2 dxi
 
-(g times the shell area 4 pi r^2). Its log-likelihood depends on the data
+(g times the shell area 4 pi r^2). A pair with both ends references is one
+gap, not two: counted twice (as g(r) counts it, and as this module did before
+2026-11-26) it would make the Fisher error too small by up to sqrt(2). g(r)'s
+own normalisation (``prefactor``) counts ordered pairs, ``n_ordered``.
+Its log-likelihood depends on the data
 only through n and S = sum ln xi, so a run stores (n, S) per window and seeds
 pool by adding them. The estimate solves <ln xi>_alpha = S / n; its standard
 error is 1 / sqrt(n Var_alpha(ln xi)) (the Fisher information). No bins: a
@@ -31,7 +35,7 @@ SLOPE_RANGE = (1e-5, 1e-1)  # the local-slope windows lie inside this range of x
 
 
 def gaps(xm, refs, L_x, L_y, xi_max):
-    """xi of every ordered (reference, partner) pair with 0 < xi < xi_max.
+    """xi of every pair with a reference at one end at least and 0 < xi < xi_max, each pair once.
 
     Parameters
     ----------
@@ -41,14 +45,16 @@ def gaps(xm, refs, L_x, L_y, xi_max):
 
     Returns
     -------
-    (K,) float64 gaps; a pair with both ends references counts twice, as in g(r)
+    xi : (K,) float64 gaps, one per pair (the likelihood's sample)
+    w : (K,) int64, the pair's references (1 or 2): its count among the ordered (reference,
+        partner) pairs, as g(r) counts them
     """
     pairs = close_pairs(xm, L_x, L_y, 1.0 + xi_max)
     d = separations(np.asarray(xm, float), pairs[:, 0], pairs[:, 1], L_x, L_y)
     xi = np.sqrt(np.einsum("ij,ij->i", d, d)) - 1.0
     w = refs[pairs[:, 0]].astype(np.int64) + refs[pairs[:, 1]]
     ok = (xi > 0) & (xi < xi_max) & (w > 0)
-    return np.repeat(xi[ok], w[ok])
+    return xi[ok], w[ok]
 
 
 def _moments(alpha, a, b):
@@ -68,7 +74,7 @@ def prefactor(st, n_ref, rho):
     ua, ub = math.log(a), math.log(b)
     u = 0.5 * (ub - ua) * _NODES + 0.5 * (ub + ua)
     Z = 0.5 * (ub - ua) * float(_WEIGHTS @ np.exp((1.0 - al) * u + 2.0 * np.log1p(np.exp(u))))
-    return st["n"] / (n_ref * rho * 4.0 * math.pi * Z)
+    return st.get("n_ordered", st["n"]) / (n_ref * rho * 4.0 * math.pi * Z)
 
 
 def ml_alpha(n, S, a, b):
@@ -92,12 +98,16 @@ def ml_alpha(n, S, a, b):
     return float(al), float(1.0 / math.sqrt(n * _moments(al, a, b)[1]))
 
 
-def window_stats(xi, a, b):
-    """{'xi_lo', 'xi_hi', 'n', 'sum_log_xi', 'alpha', 'alpha_err'} of the gaps in [a, b)."""
-    sel = xi[(xi >= a) & (xi < b)]
+def window_stats(xi, a, b, w=None):
+    """{'xi_lo', 'xi_hi', 'n', 'n_ordered', 'sum_log_xi', 'alpha', 'alpha_err'} of the gaps in [a, b):
+    ``n`` gaps (pairs), ``n_ordered`` the ordered pairs they are (``w``, from ``gaps``; n without it)."""
+    inside = (xi >= a) & (xi < b)
+    sel = xi[inside]
     n, S = int(sel.size), float(np.log(sel).sum())
+    n_ordered = int(w[inside].sum()) if w is not None else n
     al, err = ml_alpha(n, S, a, b)
-    return {"xi_lo": float(a), "xi_hi": float(b), "n": n, "sum_log_xi": S, "alpha": al, "alpha_err": err}
+    return {"xi_lo": float(a), "xi_hi": float(b), "n": n, "n_ordered": n_ordered, "sum_log_xi": S, "alpha": al,
+            "alpha_err": err}
 
 
 def windows_of(edges):
@@ -116,10 +126,10 @@ def slope_centres(xi_lo, xi_hi):
     return [10.0 ** (k / SLOPE_PER_DECADE) for k in range(k0, k1 + 1)]
 
 
-def local_slope(xi, centres):
+def local_slope(xi, centres, w=None):
     """alpha on half-decade windows around each centre: the local slope -d ln g / d ln xi as a curve."""
     f = 10.0 ** SLOPE_HALF_WIDTH
-    return [dict(window_stats(xi, c / f, c * f), xi=float(c)) for c in centres]
+    return [dict(window_stats(xi, c / f, c * f, w), xi=float(c)) for c in centres]
 
 
 def pooled(stats):
@@ -128,7 +138,8 @@ def pooled(stats):
     S = sum(s["sum_log_xi"] for s in stats)
     a, b = stats[0]["xi_lo"], stats[0]["xi_hi"]
     al, err = ml_alpha(n, S, a, b)
-    return {"xi_lo": a, "xi_hi": b, "n": n, "sum_log_xi": S, "alpha": al, "alpha_err": err}
+    return {"xi_lo": a, "xi_hi": b, "n": n, "n_ordered": sum(s.get("n_ordered", s["n"]) for s in stats),
+            "sum_log_xi": S, "alpha": al, "alpha_err": err}
 
 
 def bootstrap(stats, n_boot=2000, seed=12345):

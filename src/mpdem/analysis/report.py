@@ -158,16 +158,16 @@ def _alpha(pk, z1, z2, a, overlap_median):
     centres = nearcontact.slope_centres(*nearcontact.SLOPE_RANGE)
     reach = max([hi] + [w[1] for w in wins] + [c * 10 ** nearcontact.SLOPE_HALF_WIDTH for c in centres])
     refs = pk.in_slab(z1, z2)[pk.mobile]
-    xi = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, reach)
+    xi, w = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, reach)
     soft = 20.0 * overlap_median
 
     def mark(st):
         # soft-sphere compression flattens g below ~20 x the typical overlap
         return dict(st, soft=bool(st["xi_lo"] < soft))
 
-    return (mark(nearcontact.window_stats(xi, lo, hi)),
-            [mark(nearcontact.window_stats(xi, w0, w1)) for w0, w1 in wins],
-            nearcontact.local_slope(xi, centres), int(refs.sum()))
+    return (mark(nearcontact.window_stats(xi, lo, hi, w)),
+            [mark(nearcontact.window_stats(xi, w0, w1, w)) for w0, w1 in wins],
+            nearcontact.local_slope(xi, centres, w), int(refs.sum()))
 
 
 def measure(arrays, attrs, cfg):
