@@ -272,6 +272,18 @@ def test_eq7_fit_recovers_the_paper_like_parameters():
     assert f["weighted"] and f["dof"] == k.size - 3
 
 
+def test_an_eq7_fit_whose_parameters_the_points_cannot_tell_apart_is_not_determined():
+    """z that does not fall with k_n: alpha_n -> 0, where z_inf and a trade off exactly; the fit says
+    so (``determined`` false, its parameters correlated to 1) instead of giving numbers like
+    -321 +- 6e12. A paper-like ladder is determined."""
+    k = np.array([2e5, 2e6, 2e7])
+    flat = fits.fit_eq7(k, np.array([4.85, 4.85 + 1e-6, 4.85 - 1e-6]), np.full(3, 0.02))
+    assert not flat["determined"] and flat["correlation"] > 1 - 1e-9
+    good = fits.fit_eq7(np.repeat([2e5, 2e6, 2e7, 2e8], 2), fits.eq7(np.repeat([2e5, 2e6, 2e7, 2e8], 2), 6.01, 0.134,
+                                                                       0.498), np.full(8, 2e-3))
+    assert good["determined"] and good["correlation"] < 0.999
+
+
 def test_eq7_fit_weights_by_the_standard_errors():
     # the stiffest point is far off but has a large error: a weighted fit discounts it
     k = np.array([2e5, 6e5, 2e6, 6e6, 2e7, 6e7, 2e8, 2e9])

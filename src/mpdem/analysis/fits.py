@@ -44,9 +44,22 @@ def _fit(model, x, y, sigma, p0, names):
     out = {n: float(v) for n, v in zip(names, p)}
     out.update({f"{n}_err": float(e) for n, e in zip(names, err)})
     out.update(n_points=int(len(x)), weighted=bool(weighted), chi2=float(res @ res),
-               dof=int(len(x) - len(p)))
+               dof=int(len(x) - len(p)), correlation=_largest_correlation(cov))
+    # parameters the points cannot tell apart (a correlation of +-1 to 9 digits): no values to report
+    out["determined"] = bool(np.all(np.isfinite(err)) and out["correlation"] < 1.0 - 1e-9)
     out["p_value"] = p_value(out["chi2"], out["dof"]) if weighted else math.nan
     return out, cov
+
+
+def _largest_correlation(cov):
+    """The largest |correlation| between two parameters of a fit's covariance (nan if not finite)."""
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+        return math.nan
+    sd = np.sqrt(np.diag(cov))
+    rho = np.abs(cov / np.outer(sd, sd))
+    np.fill_diagonal(rho, 0.0)
+    return float(rho.max()) if rho.size > 1 else 0.0
 
 
 def p_value(chi2, dof):

@@ -275,8 +275,11 @@ def _fit_one(kind, fam, members):
             e["fixed"] = fits.fit_eq7_fixed(x, e[q], sem, fixed)
         except (ValueError, np.linalg.LinAlgError) as err:
             e["fixed"] = {"status": "failed", "reason": str(err)}
-    if not all(math.isfinite(r[f"{n}_err"]) for n in (("z_inf", "a", "alpha_n") if kind == "eq7" else "ABC")):
-        e["note"] = (e.get("note", "") + "; " if "note" in e else "") + "parameter errors not determined"
+    if not r["determined"]:
+        # e.g. alpha_n -> 0, where z_inf and a trade off exactly: printing them would print noise
+        e.update(status="not determined",
+                 reason=f"the points cannot tell the parameters apart (largest parameter correlation "
+                        f"{r['correlation']:.10g}); no values are reported")
     return e
 
 

@@ -222,7 +222,7 @@ def _fit_lines(e, kind):
     head = f"- {_fam_text(e['family'], ('k_n',) if kind == 'eq7' else ('phi_i',))} [sets {' '.join(e['sets'])}]; " \
            f"points (seeds): {pts}: "
     if e["status"] != "fitted":
-        return head + f"**{e['status']}**: {e['reason']}"
+        return head + f"**{e['status']}**: {e['reason']}" + _fixed_text(e)
     if kind == "eq7":
         c = e["check_alpha_n"]
         s = (f"z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, ã = {fmt_pm(e['a_tilde'], e['a_tilde_err'], 1)}, "
@@ -234,14 +234,20 @@ def _fit_lines(e, kind):
     s += f"; χ² = {e['chi2']:.3g} for {e['dof']} degrees of freedom" + (" (weighted)" if e["weighted"] else "")
     if math.isfinite(e.get("p_value", math.nan)):
         s += f", p = {e['p_value']:.2g}"
-    fx = e.get("fixed") or {}
-    if "z_inf" in fx:
-        s += (f". α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, "
-              f"ã = {fmt_pm(fx['a_tilde'], fx['a_tilde_err'], 1)}; χ² = {fx['chi2']:.3g} for {fx['dof']} degrees "
-              f"of freedom, p = {fx['p_value']:.2g}")
+    s += _fixed_text(e)
     if math.isfinite(e.get("pooled_scatter", math.nan)):
         s += f" (pooled scatter of z over seeds {e['pooled_scatter']:.4f}, {e['pooled_dof']} degrees of freedom)"
     return head + s + (f". Note: {e['note']}" if e.get("note") else "")
+
+
+def _fixed_text(e):
+    """The eq. 7 fit with its exponent fixed, in words ('' without one)."""
+    fx = e.get("fixed") or {}
+    if "z_inf" not in fx:
+        return ""
+    return (f". α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, "
+            f"ã = {fmt_pm(fx['a_tilde'], fx['a_tilde_err'], 1)}; χ² = {fx['chi2']:.3g} for {fx['dof']} degrees "
+            f"of freedom, p = {fx['p_value']:.2g}")
 
 
 def _by_id(entries):
