@@ -8,6 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .. import planes
 from ..kernels.bundles import Particles
 from ..kernels.exactsum import to_float
 
@@ -100,6 +101,14 @@ class EngineBase:
         self.last_overlap = max_overlap
         self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
+
+    def plane_arrays(self):
+        """The kernels' arrays of the planes of ``phys`` (``planes.arrays`` of ``planes.of_physics``):
+        made again when ``phys`` is replaced (bed making and tests swap in a floor), else kept."""
+        if getattr(self, "_planes_of", None) is not self.phys:
+            self._plane_arrays = planes.arrays(planes.of_physics(self.phys))
+            self._planes_of = self.phys
+        return self._plane_arrays
 
     def contacts(self):
         """Global number of contacts (counted from both partners) of the last evaluation."""

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 
-from .. import planes
 from ..kernels import history
 from ..kernels.balance import force_balance
 from ..kernels.bundles import Lists, Near, Scratch, Slots, make_box
@@ -67,8 +66,7 @@ class Engine(EngineBase):
         self.state, self.phys, self.domain = state, physics, domain
         state.wall = physics.wall
         self.law = law_of(physics)
-        # the floor, the wall and any other plane (planes.py), as the kernels take them
-        self.planes, self.plane_kinds = planes.arrays(planes.of_physics(physics))
+        self.plane_arrays()     # the floor, the wall and any other plane (planes.py): checked here
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(state.capacity + 1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
@@ -341,10 +339,11 @@ class Engine(EngineBase):
         scratch = Scratch(self._chunk_max, self._chunk_count, self._found, self._sep, self._tangent)
         max_ov, n_c = self._contact_forces(s.n_own, part, near, self._slots(), self._epoch, self._box(),
                                            self.law, increment, scratch)
-        if len(self.plane_kinds):
+        geo, kinds = self.plane_arrays()
+        if len(kinds):
             # the rough plane's history is the state's wall_ds
-            max_ov = max(max_ov, self._plane_forces(s.n_own, part, self.planes, self.plane_kinds, s.wall_ds,
-                                                    self.law, increment, self._chunk_max))
+            max_ov = max(max_ov, self._plane_forces(s.n_own, part, geo, kinds, s.wall_ds, self.law, increment,
+                                                    self._chunk_max))
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return max_ov, n_c

@@ -23,7 +23,6 @@ import time
 
 import numpy as np
 
-from .. import planes
 from ..errors import DeviceError
 from ..kernels import history
 from ..kernels.balance import force_balance
@@ -108,8 +107,7 @@ class Engine(EngineBase):
         self.block = int(block)
         state.wall = physics.wall
         self.law = law_of(physics)
-        # the floor, the wall and any other plane (planes.py), as the kernels take them
-        self.planes, self.plane_kinds = planes.arrays(planes.of_physics(physics))
+        self.plane_arrays()     # the floor, the wall and any other plane (planes.py): checked here
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(1, np.int64)
         self.nbr_list = np.zeros(0, np.int32)
@@ -185,11 +183,18 @@ class Engine(EngineBase):
         self._sent_host = cuda.pinned_array((3, m, 3))
         if "wall_ds" not in d:
             d["wall_ds"] = cuda.device_array((1, 3))
-        if "planes" not in d:
-            # at least one row each: numba's device arrays are not made empty (no kind: no plane is read)
-            d["planes"] = cuda.to_device(self.planes if len(self.planes) else np.zeros((1, 4)))
-            d["kinds"] = cuda.to_device(self.plane_kinds)
         self._pairs_kept = False
+
+    def _device_planes(self):
+        """The planes' arrays on the GPU (``plane_arrays``), copied there again when they change."""
+        arrays = self.plane_arrays()
+        if getattr(self, "_planes_sent", None) is not arrays:
+            geo, kinds = arrays
+            # a row at least: no kind, no plane read
+            self._planes_dev = (self.cuda.to_device(geo if len(geo) else np.zeros((1, 4))),
+                                self.cuda.to_device(kinds))
+            self._planes_sent = arrays
+        return self._planes_dev
 
     def _download_rows(self, names, rows):
         """Copy the GPU's ``names`` rows 0..rows-1 into the host State."""
@@ -364,8 +369,9 @@ class Engine(EngineBase):
             d["pair"] = self.cuda.device_array((max(self._k, 1), 6))
         self._pairs_kept = keep_pairs
         self._epoch += 1
+        planes_d, kinds_d = self._device_planes()
         self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
-                     d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs, d["wall_ds"], d["planes"], d["kinds"],
+                     d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs, d["wall_ds"], planes_d, kinds_d,
                      self._epoch, *make_box(s.L_x, s.L_y), self.law, increment, self._red)
         red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
@@ -420,11 +426,12 @@ class Engine(EngineBase):
             return [self.step(flags, defer_kick=True) for _ in range(n)]
         s, p, d, k = self.state, self.phys, self._dev, self.k
         infos = []
+        planes_d, kinds_d = self._device_planes()
         while len(infos) < n:
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
-                    d["nbr"], d["hist"], d["stamp"], d["pair"], d["wall_ds"], d["planes"], d["kinds"], self._epoch,
+                    d["nbr"], d["hist"], d["stamp"], d["pair"], d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
             self._launch("advance", *args, grid=self._cooperative_grid(args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
