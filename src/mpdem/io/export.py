@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from ..kernels.particle import R    # particle radius [d]
+from .lammps import state_data
 from .rundir import write_atomic
 from ..state import FIELDS, PARTICLE
 
@@ -203,15 +204,6 @@ def _xyz(a, attrs, path=None):
                       np.full(len(a["id"]), R), a["id"]])
 
 
-def lammps_data(a, attrs, path):
-    """LAMMPS data file, atom_style sphere (``lammps.data_lines``)."""
-    from .lammps import data_lines
-    title = (f"mpdem state {os.path.basename(path)}, step {int(attrs['step'])}, time {float(attrs['time']):.17g}; "
-             f"atom_style sphere, type 1 mobile, 2 bed")
-    return data_lines(a["id"], a["x"], a["v"], a["omega"], a["fixed"], float(attrs["L_x"]), float(attrs["L_y"]),
-                      title)
-
-
 # -- the formats --
 @dataclass(frozen=True)
 class Format:
@@ -282,7 +274,7 @@ FORMATS = {f.name: f for f in (
     Format("lammps-dump", "a LAMMPS dump frame, FILE.dump (OVITO, LAMMPS rerun)",
            _text(_lammps_dump, ".dump")),
     Format("lammps-data", "a LAMMPS data file, FILE.data (read_data; reads back as run.initial_file)",
-           _text(lammps_data, ".data")),
+           _text(state_data, ".data")),
     Format("xyz", "extended XYZ, FILE.xyz (ASE, OVITO, VMD)", _text(_xyz, ".xyz")),
     Format("packing", "positions and contact forces, compressed: RUN/packing.npz beside a final.h5 (analyze)",
            _packing),

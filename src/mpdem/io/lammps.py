@@ -16,6 +16,7 @@ Reduced units throughout (LAMMPS ``units lj`` with d = m = g = 1).
 from __future__ import annotations
 
 import math
+import os
 import re
 
 import numpy as np
@@ -355,3 +356,12 @@ def data_lines(ids, x, v, omega, fixed, L_x, L_y, title):
     yield "\nVelocities\n\n"
     for row in zip(ids.tolist(), *np.asarray(v).T.tolist(), *np.asarray(omega).T.tolist()):
         yield "%d" % row[0] + " %.17g" * 6 % row[1:] + "\n"
+
+
+def state_data(a, attrs, path):
+    """The lines of a LAMMPS data file (atom_style sphere, ``data_lines``) of a state file's arrays ``a``
+    and attributes: what ``export --format lammps-data`` and the LAMMPS input writer write."""
+    title = (f"mpdem state {os.path.basename(path)}, step {int(attrs['step'])}, time {float(attrs['time']):.17g}; "
+             f"atom_style sphere, type 1 mobile, 2 bed")
+    return data_lines(a["id"], a["x"], a["v"], a["omega"], a["fixed"], float(attrs["L_x"]), float(attrs["L_y"]),
+                      title)

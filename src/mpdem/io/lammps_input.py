@@ -165,7 +165,7 @@ def write(path, out=None, steps=None, every=None):
     (str, int) : the input script's path and the number of dropped histories.
     """
     from . import checkpoint
-    from .export import lammps_data
+    from .lammps import state_data
     from .rundir import write_atomic
     arrays, attrs = checkpoint.read_state(path)
     cfg = tomllib.loads(attrs["config"])
@@ -181,6 +181,6 @@ def write(path, out=None, steps=None, every=None):
         raise WriteError(f"cannot make the directory {out}: {e.strerror or e}") from None
     dropped = nonzero_histories(arrays)
     script = os.path.join(out, INPUT_NAME)
-    write_atomic(os.path.join(out, DATA_NAME), lammps_data(arrays, attrs, path))
+    write_atomic(os.path.join(out, DATA_NAME), state_data(arrays, attrs, path))
     write_atomic(script, input_lines(cfg, step, steps, every, dropped, os.path.basename(path)))
     return script, dropped
