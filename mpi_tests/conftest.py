@@ -15,10 +15,16 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 import pytest  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
+from mpdem import memory, threads  # noqa: E402
 from mpdem.kernels.calls import Bound  # noqa: E402
 
 # every 16th kernel call through an overload numba chose compares its argument types with the chosen ones
 Bound.check = 16
+
+# the process's threads and allocator as a run sets them (``simulation``; the engines set neither): one
+# thread, not numba's default of every core, whose idle threads would wait on a core the others use
+threads.apply()
+memory.return_freed_memory()
 
 
 @pytest.fixture

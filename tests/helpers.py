@@ -48,7 +48,7 @@ def make_engine(x, v=None, omega=None, fixed=None, L=10.0, **phys):
     defaults.update(phys)
     x = np.asarray(x, float)
     st = State(np.arange(len(x)), x, v, omega, fixed, L, L)
-    eng = Engine(st, Physics(**defaults), Domain(None))
+    eng = Engine(st, Physics.of(**defaults), Domain(None))
     eng.start()
     return eng
 

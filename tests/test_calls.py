@@ -93,14 +93,14 @@ def test_engine_rebinds_at_reallocation(engine_factory):
     runs = [engine_factory(x, fixed=fixed, L=3.0, mu=0.5, gamma_t=10.0, gravity=1.0) for _ in range(2)]
     for eng in runs:
         eng.advance(20)
-        assert eng._contact_forces._entry is not None
+        assert eng._kernels.contact_forces._entry is not None
     grown = runs[1]
     grown.state.grow(2 * grown.state.capacity)
     grown.rebuild()
-    assert grown._contact_forces._entry is None and grown._kick._entry is None
+    assert grown._kernels.contact_forces._entry is None and grown._kernels.kick._entry is None
     runs[0].rebuild()
     for eng in runs:
         eng.advance(200)
-    assert grown._contact_forces._entry is not None
+    assert grown._kernels.contact_forces._entry is not None
     for a, b in zip(*(_by_id(e) for e in runs)):
         np.testing.assert_array_equal(a, b)

@@ -166,7 +166,7 @@ def _pair_forces_sum(st, phys, pairs):
     """Per-row force rebuilt from the contact list: gravity + sum of pair forces."""
     row = {int(i): k for k, i in enumerate(st.id[:st.n_rows])}
     f = np.zeros((st.n_own, 3))
-    f[:, 2] = -phys.gravity
+    f[:, 2] = phys.law.g_z
     for a in range(len(pairs["id_i"])):
         i, j = row[int(pairs["id_i"][a])], row[int(pairs["id_j"][a])]
         d = st.x[i] - st.x[j]
@@ -201,10 +201,10 @@ def test_contact_list_reproduces_the_step_forces(engine_factory, model, gamma_t)
     mobile = st.fixed[:st.n_own] == 0
     ft, fn = np.linalg.norm(pairs["F_t"], axis=1), np.abs(pairs["F_n"])
     # many contacts, some sliding (|F_t| = mu |F_n|) and some sticking
-    assert len(pairs["id_i"]) > 60 and np.any(ft > 0.999 * phys.mu * fn) and np.any(ft < 0.9 * phys.mu * fn)
+    assert len(pairs["id_i"]) > 60 and np.any(ft > 0.999 * phys.law.mu * fn) and np.any(ft < 0.9 * phys.law.mu * fn)
     f = _pair_forces_sum(st, phys, pairs)
     assert np.allclose(f[mobile], st.f[:st.n_own][mobile], rtol=0, atol=1e-10 * np.abs(st.f).max())
-    assert np.all(ft <= phys.mu * fn * (1 + 1e-9) + 1e-12)        # Coulomb, to rounding
+    assert np.all(ft <= phys.law.mu * fn * (1 + 1e-9) + 1e-12)        # Coulomb, to rounding
     # each contact once, and as many as the slots hold (mobile-mobile pairs in two slots)
     assert len(set(zip(pairs["id_i"].tolist(), pairs["id_j"].tolist()))) == len(pairs["id_i"])
     n_bed = int(np.sum(pairs["id_j"] >= len(g)))          # bed ids follow the block's

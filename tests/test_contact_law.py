@@ -19,7 +19,7 @@ def total_energy(eng):
     n = st.n_own
     ke = 0.5 * np.sum(st.v[:n] ** 2) + HALF_I * np.sum(st.omega[:n] ** 2)
     pairs, r = find_contacts(st.x[:n], st.L_x, st.L_y)
-    return ke + 0.5 * eng.phys.k_n * np.sum((1.0 - r) ** 2)
+    return ke + 0.5 * eng.law.k_n * np.sum((1.0 - r) ** 2)
 
 
 def test_elastic_energy_conservation():
@@ -28,7 +28,7 @@ def test_elastic_energy_conservation():
     x = insert_random(rng(7, 99), n, L, L, 0.5, 0.5 + n * (math.pi / 6) / (L * L * 0.25))
     v = rng(7, 98).normal(0.0, 1.0, (n, 3))
     eng = make_engine(x, v, L=L, epsilon=1.0)
-    assert eng.phys.gamma_n == 0.0
+    assert eng.law.gamma_n == 0.0
     e0 = total_energy(eng)
     collisions = 0
     for _ in range(100):

@@ -33,7 +33,7 @@ def physics(mu=0.5, model="hooke", **kw):
     base = dict(k_n=k_n, k_t=2 * k_n / 7, gamma_n=gamma_n_from_epsilon(0.88, k_n), gamma_t=0.0, mu=mu, dt=1e-4,
                 gravity=1.0, model=model, skin=0.006)
     base.update(kw)
-    return Physics(**base)
+    return Physics.of(**base)
 
 
 def stepped(engine, phys, steps, grid=None):

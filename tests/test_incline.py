@@ -21,8 +21,8 @@ K_N = 2e5
 def on_the_plane(theta, mu, engine=cpu.Engine, steps=20000, **kw):
     """One sphere resting on the wall plane (its overlap the one that carries g cos(theta)), stepped
     ``steps`` times (dt 1e-4); returns its state."""
-    p = Physics(k_n=K_N, k_t=2 * K_N / 7, gamma_n=gamma_n_from_epsilon(0.5, K_N), gamma_t=0.0, mu=mu, dt=1e-4,
-                gravity=1.0, incline=theta, wall=True)
+    p = Physics.of(k_n=K_N, k_t=2 * K_N / 7, gamma_n=gamma_n_from_epsilon(0.5, K_N), gamma_t=0.0, mu=mu, dt=1e-4,
+                   gravity=1.0, incline=theta, wall=True)
     z = R - math.cos(math.radians(theta)) / K_N
     st = State(np.arange(1), np.array([[5.0, 5.0, z]]), L_x=10.0, L_y=10.0)
     eng = engine(st, p, Domain(None), **kw)

@@ -26,36 +26,36 @@ def test_near_lists_keep_exactly_the_list_entries_within_reach_in_partner_order(
     s = eng.state
     r2_near = 1.1 ** 2
     # each slot's computing row and partner, from the lists
-    hist_rows = np.full(len(eng.hist), -1)
-    partner = np.full(len(eng.hist), -1)
+    hist_rows = np.full(len(eng.lists.hist), -1)
+    partner = np.full(len(eng.lists.hist), -1)
     for i in range(s.n_own):
-        for k in range(eng.nbr_start[i], eng.nbr_start[i + 1]):
-            if eng.link[k] >= 0:
-                hist_rows[eng.link[k]], partner[eng.link[k]] = i, eng.nbr_list[k]
+        for k in range(eng.lists.nbr_start[i], eng.lists.nbr_start[i + 1]):
+            if eng.lists.link[k] >= 0:
+                hist_rows[eng.lists.link[k]], partner[eng.lists.link[k]] = i, eng.lists.nbr_list[k]
     assert np.all(hist_rows >= 0)
     kept = 0
     for i in range(s.n_own):
-        full = range(eng.nbr_start[i], eng.nbr_start[i + 1])
-        near = eng.near_link[eng.near_start[i]:eng.near_start[i + 1]]
-        d = s.x[eng.nbr_list[full.start:full.stop]] - s.x[i]
+        full = range(eng.lists.nbr_start[i], eng.lists.nbr_start[i + 1])
+        near = eng.lists.near_link[eng.lists.near_start[i]:eng.lists.near_start[i + 1]]
+        d = s.x[eng.lists.nbr_list[full.start:full.stop]] - s.x[i]
         d[:, :2] -= L * np.round(d[:, :2] / L)
         within = (d ** 2).sum(axis=1) < r2_near
         if s.fixed[i]:
             assert len(near) == 0
             continue
         # the near entries are the list entries within reach, in the lists' (partner-id) order
-        want = [eng.link[k] for k, w in zip(full, within) if w]
-        got = [eng.near_cslot[slot_of(lk)] for lk in near]
+        want = [eng.lists.link[k] for k, w in zip(full, within) if w]
+        got = [eng.lists.near_cslot[slot_of(lk)] for lk in near]
         assert got == [slot_of(lk) for lk in want]
         # computed stays computed, taken stays taken
         assert [lk < 0 for lk in near] == [lk < 0 for lk in want]
         kept += len(near)
         # a row's computed near entries are its own slots' partners
-        for e in range(eng.near_cstart[i], eng.near_cstart[i + 1]):
-            g = eng.near_cslot[e]
-            assert hist_rows[g] == i and eng.near_cj[e] == partner[g]
-    assert 0 < kept < eng.nbr_start[s.n_own]
-    assert 0 < eng.k_near < len(eng.hist)
+        for e in range(eng.lists.near_cstart[i], eng.lists.near_cstart[i + 1]):
+            g = eng.lists.near_cslot[e]
+            assert hist_rows[g] == i and eng.lists.near_cj[e] == partner[g]
+    assert 0 < kept < eng.lists.nbr_start[s.n_own]
+    assert 0 < eng.lists.k_near < len(eng.lists.hist)
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])
@@ -71,7 +71,8 @@ def test_near_lists_change_no_bit_of_a_pour(mu):
         eng.phys = dataclasses.replace(eng.phys, floor=True)
         eng.advance(60000)
         assert eng.contacts() > len(x) // 2
-        runs.append((digest(gather_state(eng.state)), eng.n_filters - eng.n_rebuilds, eng.k_near, len(eng.hist),
+        lists = eng.lists
+        runs.append((digest(gather_state(eng.state)), lists.n_filters - eng.n_rebuilds, lists.k_near, len(lists.hist),
                      eng.n_rebuilds))
     assert len({r[0] for r in runs}) == 1
     whole, small = runs[0], runs[1]

@@ -10,6 +10,7 @@ import pytest
 
 from helpers import make_engine, tight_lattice
 from mpdem.engine import cpu as engine
+from mpdem.engine import pairstore
 from mpdem.io.checkpoint import digest, gather_state
 from mpdem.kernels.bundles import Near
 from mpdem.kernels.pairstore import pair_places
@@ -19,21 +20,21 @@ def _run(mu, nchunk, keep, monkeypatch, ring=None):
     x, v, omega, fixed, L = tight_lattice(3)
     if ring:
         monkeypatch.setattr(engine, "FORCE_BLOCK", 1)
-        monkeypatch.setattr(engine, "PAIR_RING", ring)
+        monkeypatch.setattr(pairstore, "PAIR_RING", ring)
     eng = make_engine(x, v.copy(), omega.copy(), fixed.copy(), L=L, mu=mu, gravity=1.0,
                       gamma_t=10.0 if mu else 0.0)
     eng.set_chunks(nchunk)
     if ring:
         # blocks of a few rows, so that a short ring is allowed (at least 4 blocks)
-        eng._scratch(int(np.diff(eng.nbr_start[:eng.state.n_own + 1]).max()))
+        eng._scratch(int(np.diff(eng.lists.nbr_start[:eng.state.n_own + 1]).max()))
     seen = []
     for k in range(400):
         eng.step(keep_pairs=keep)
         if not keep and k % 50 == 0:
             n_own = eng.state.n_own
-            per_chunk = max(np.diff(eng.near_cstart[[c * n_own // nchunk for c in range(nchunk + 1)]]))
-            far = int(np.sum(eng.near_cpair[:eng.k_near] >= nchunk * eng.pair_ring))
-            seen.append((eng.pair_ring, int(per_chunk), far, eng.k_near))
+            per_chunk = max(np.diff(eng.lists.near_cstart[[c * n_own // nchunk for c in range(nchunk + 1)]]))
+            far = int(np.sum(eng.lists.near_cpair[:eng.lists.k_near] >= nchunk * eng.store.pair_ring))
+            seen.append((eng.store.pair_ring, int(per_chunk), far, eng.lists.k_near))
     s = eng.state
     return digest(gather_state(s)), s.f[:s.n_own].copy(), s.torque[:s.n_own].copy(), eng.contacts(), seen
 

@@ -22,7 +22,7 @@ K_N = 2e5
 def physics(**kw):
     base = dict(k_n=K_N, k_t=2 * K_N / 7, gamma_n=gamma_n_from_epsilon(0.5, K_N), gamma_t=0.0, mu=0.0, dt=1e-4)
     base.update(kw)
-    return Physics(**base)
+    return Physics.of(**base)
 
 
 def stepped(x, p, steps, engine=cpu.Engine, **kw):

@@ -24,7 +24,7 @@ def test_rows_are_ordered_by_columns_of_cells_then_z_and_the_order_changes_no_bi
     for sort_every in (1, 10 ** 9):
         eng = make_engine(x, v.copy(), L=L, mu=0.5, gravity=1.0, gamma_t=10.0)
         eng.phys = dataclasses.replace(eng.phys, floor=True)
-        eng.sort_every = sort_every
+        eng.lists.sort_every = sort_every
         eng.advance(3000)
         assert eng.n_rebuilds > 3
         runs.append(digest(gather_state(eng.state)))

@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from . import build, config, initial
+from . import build, config, initial, memory, threads
 from .errors import InputError
 from .io import tables
 from .io import checkpoint
@@ -272,6 +272,12 @@ def steadiness_line(per_rank):
             + each("switches", 1, "{:.0f}") + " a second")
 
 
+def set_up_process():
+    """The process's threads (``--threads``) and allocator, as a run sets them (``simulation``)."""
+    threads.apply()
+    memory.return_freed_memory()
+
+
 def run_table_bench(args, net):
     """Time ``args.steps`` steps from a particle table; print figures on rank 0.
 
@@ -279,6 +285,7 @@ def run_table_bench(args, net):
     (the slowest rank's) x 1e9 / (steps x all atoms, bed included), as LAMMPS
     counts them. Returns X.
     """
+    set_up_process()
     cfg = table_config(args.set)
     net = channel(net)
     rank = net.rank
@@ -461,6 +468,7 @@ def tiled_pile(a, L, N, mu, k_n, seed=0):
 
 def run_analysis_bench(args, net):
     """Write a tiled pile of N spheres with all ranks, then time ``mpdem analyze`` of it (rank 0)."""
+    set_up_process()
     import shutil
     import tempfile
     from .analysis.report import analyze

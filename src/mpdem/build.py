@@ -103,9 +103,9 @@ def make_bed(cfg, progress=None):
     h = insertion_height(n, L_x, L_y, 0.3)
     x = insert_random(gen, n, L_x, L_y, 0.5, 0.5 + h)
     k_n = b.settle_k_n
-    phys = Physics(k_n=k_n, k_t=0.0, gamma_n=gamma_n_from_epsilon(b.settle_epsilon, k_n),
-                   gamma_t=0.0, mu=0.0, dt=1e-4 * math.sqrt(2e5 / k_n), skin=0.3,
-                   gravity=1.0, floor=True)
+    phys = Physics.of(k_n=k_n, k_t=0.0, gamma_n=gamma_n_from_epsilon(b.settle_epsilon, k_n),
+                      gamma_t=0.0, mu=0.0, dt=1e-4 * math.sqrt(2e5 / k_n), skin=0.3,
+                      gravity=1.0, floor=True)
     state = State(np.arange(n), x, L_x=L_x, L_y=L_y)
     eng = Engine(state, phys, Domain(None))
     eng.start()

@@ -53,12 +53,13 @@ def contact_pairs(state, phys):
     vn = (vr * nrm).sum(axis=1)
     w = R * wh[i] + R * wh[j]
     vt = vr - vn[:, None] * nrm - np.cross(w, nrm)
-    scale = overlap_scale(phys.model, delta)
-    F_n = scale * (phys.k_n * delta - meff * phys.gamma_n * vn)
-    if phys.limit_damping:
+    law = phys.law
+    scale = overlap_scale(law.model, delta)
+    F_n = scale * (law.k_n * delta - meff * law.gamma_n * vn)
+    if law.limit_damping:
         F_n = np.maximum(F_n, 0.0)
-    if phys.mu > 0.0:
-        F_t = -scale[:, None] * (phys.k_t * ds + (meff * phys.gamma_t)[:, None] * vt)
+    if law.mu > 0.0:
+        F_t = -scale[:, None] * (law.k_t * ds + (meff * law.gamma_t)[:, None] * vt)
     else:
         F_t = np.zeros_like(ds)
     return {"id_i": ids[i], "id_j": jid, "delta": delta, "F_n": F_n, "F_t": F_t, "ds_i": ds}

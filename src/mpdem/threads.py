@@ -64,10 +64,18 @@ def oversubscribed(n, cores=None):
     return n > 1 and (n > cores or ranks_on_node() * n > (os.cpu_count() or 1))
 
 
-def apply():
-    """Set numba to the requested count (1 unless ``configure`` asked for more); returns it."""
+def requested():
+    """The requested count (1 unless ``configure`` asked for more), within numba's pool: the chunks an
+    engine splits its rows into. Sets nothing."""
     import numba
-    numba.set_num_threads(min(_requested, numba.config.NUMBA_NUM_THREADS))
+    return min(_requested, numba.config.NUMBA_NUM_THREADS)
+
+
+def apply():
+    """Set numba to the requested count (``requested``) in this process; returns it. Called where a run
+    or a benchmark starts, not by the engines."""
+    import numba
+    numba.set_num_threads(requested())
     return numba.get_num_threads()
 
 

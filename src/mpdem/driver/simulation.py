@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .. import initial
+from .. import initial, memory, threads
 from ..io import tables
 from ..io import checkpoint
 from . import summary
@@ -149,6 +149,9 @@ class Run:
         self.cfg, self.out = cfg, out_dir
         # a device that cannot run is one line before any work
         require_device(cfg.engine.device)
+        # the process's threads and allocator, for this run's engines (the bed's and the pile's)
+        threads.apply()
+        memory.return_freed_memory()
         self.domain = Domain.from_config(net, cfg)
         self.rank = self.domain.rank
         if self.rank == 0:
@@ -203,11 +206,11 @@ class Run:
 
     def _describe(self):
         """The log lines that describe the run."""
-        p, cfg = self.physics, self.cfg
-        t_col = collision_time(p.gamma_n, p.k_n)
+        p, law, cfg = self.physics, self.physics.law, self.cfg
+        t_col = collision_time(law.gamma_n, law.k_n)
         self.log(f"mpdem: {self.n_mobile} mobile + {self.n_bed} bed spheres, box {cfg.box.L_x:g} x {cfg.box.L_y:g}, "
-                 f"{cfg.contact.model} k_n = {p.k_n:g}, k_t = {p.k_t:g}, gamma_n = {p.gamma_n:.6g} "
-                 f"(epsilon = {cfg.contact.epsilon:.4g}), gamma_t = {p.gamma_t:g}, mu = {p.mu:g}")
+                 f"{cfg.contact.model} k_n = {law.k_n:g}, k_t = {law.k_t:g}, gamma_n = {law.gamma_n:.6g} "
+                 f"(epsilon = {cfg.contact.epsilon:.4g}), gamma_t = {law.gamma_t:g}, mu = {law.mu:g}")
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
                  f"E_stop = {cfg.stop.E_stop:.3g} ({cfg.stop.rule}), max_steps = {cfg.run.max_steps}, "
                  f"seed = {cfg.run.seed}, ranks = {self.domain.size}")

@@ -4,7 +4,16 @@ Every engine is built as ``Engine(state, physics, domain)`` and offers:
 
 - ``start()`` / ``start_from_file(max_overlap, n_rebuilds)``: lists and the set-up evaluation
   (from a state file: its forces kept), returning the first ``StepInfo``;
-- ``step(flags, defer_kick, keep_pairs)`` -> ``StepInfo``, ``advance(n)``, ``complete()``;
+- ``step(flags, defer_kick, keep_pairs)`` -> ``StepInfo``, one velocity-Verlet step, reduced over the
+  ranks in one allreduce. ``flags``: the driver's per-rank record of floats (``simulation.StepFlags``:
+  signal, wall time, clock checkpoint), agreed by max in that allreduce and returned as
+  ``info.flags``, of the same type. ``info.max_overlap`` is the previous force evaluation's (it
+  travels in the same allreduce); ``info.n_contacts`` the last ``contacts()`` count. With
+  ``defer_kick`` the step's second half-kick is left for the next step (the same bits); until then
+  ``v`` and ``omega`` are the half-step values, and ``complete()`` applies it (every reader of the
+  rows, through ``State.sync``, and ``kinetic`` call it first). ``keep_pairs`` keeps every pair's
+  force of the step's evaluation for ``force_ratio`` (the same bits either way);
+- ``advance(n)``, ``complete()``;
 - ``rebuild()``; ``kinetic()`` -> exact (translational, rotational) sums; ``contacts()``;
   ``force_ratio()``; ``sync_state()`` (the state's rows and compact contact slots current for a reader,
   attached as ``State.sync``); ``memory_bytes()``;

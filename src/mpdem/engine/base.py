@@ -11,36 +11,52 @@ import numpy as np
 from .. import planes
 from ..kernels.bundles import Particles
 from ..kernels.exactsum import to_float
+from ..kernels.law import Law, make_law
 
 
 @dataclass(frozen=True)
 class Physics:
-    """Scalars of the force law and integrator (reduced units)."""
-    k_n: float
-    k_t: float
-    gamma_n: float
-    gamma_t: float
-    mu: float
-    dt: float
+    """A run's contact law, as the kernels take it, and the numerics and boundaries around it.
+
+    Attributes
+    ----------
+    law : kernels.law.Law
+        The contact law, gravity vector and time step (reduced units), built once
+        (``from_config``, ``of``).
+    skin, near_skin : float
+        Reach of the neighbour lists beyond contact, and of the near lists [d].
+    floor : bool
+        The temporary frictionless floor at z = 0 (bed making).
+    wall : bool
+        The wall plane z = 0 under the bed (``bed.wall``).
+    planes : tuple of planes.Plane
+        Further planes (a lid, a side wall), after those two.
+    """
+    law: Law
     skin: float = 0.2
     near_skin: float = 0.03
-    gravity: float = 1.0
-    incline: float = 0.0        # tilt about y [degrees]: gravity along (sin, 0, -cos)
-    model: str = "hooke"
-    limit_damping: bool = False
-    rescale_history: bool = False
-    floor: bool = False         # temporary frictionless floor at z = 0 (bed making)
-    wall: bool = False          # the wall plane z = 0 under the bed (bed.wall)
-    planes: tuple = ()          # further planes (planes.Plane: a lid, a side wall), after those two
+    floor: bool = False
+    wall: bool = False
+    planes: tuple = ()
+
+    @property
+    def dt(self):
+        """The time step [tau] (the law's: the kernels take it there)."""
+        return self.law.dt
+
+    @classmethod
+    def of(cls, *, skin=0.2, near_skin=0.03, floor=False, wall=False, planes=(), **law):
+        """Physics of the law's values by the names of ``kernels.law.make_law`` (k_n, k_t, gamma_n,
+        gamma_t, mu, dt, gravity, incline, model, limit_damping, rescale_history) and the numerics."""
+        return cls(make_law(**law), skin, near_skin, floor, wall, tuple(planes))
 
     @classmethod
     def from_config(cls, cfg):
         c = cfg.contact
-        return cls(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
-                   dt=cfg.integration.dt, skin=cfg.integration.skin, near_skin=cfg.integration.near_skin,
-                   gravity=cfg.box.gravity, incline=cfg.box.incline,
-                   model=c.model, limit_damping=c.limit_damping,
-                   rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
+        return cls.of(k_n=c.k_n, k_t=c.k_t, gamma_n=c.gamma_n, gamma_t=c.gamma_t, mu=c.mu,
+                      dt=cfg.integration.dt, skin=cfg.integration.skin, near_skin=cfg.integration.near_skin,
+                      gravity=cfg.box.gravity, incline=cfg.box.incline, model=c.model,
+                      limit_damping=c.limit_damping, rescale_history=(c.history == "rotate"), wall=cfg.bed.wall)
 
 
 class NoFlags(NamedTuple):
@@ -102,13 +118,18 @@ class EngineBase:
         self.info = StepInfo(self.domain.max(self.last_overlap), self.contacts())
         return self.info
 
+    @property
+    def law(self):
+        """The kernels' ``Law`` (``phys.law``)."""
+        return self.phys.law
+
     def plane_arrays(self):
         """The kernels' arrays of the planes of ``phys`` (``planes.arrays`` of ``planes.of_physics``):
         made again when ``phys`` is replaced (bed making and tests swap in a floor), else kept."""
-        if getattr(self, "_planes_of", None) is not self.phys:
-            self._plane_arrays = planes.arrays(planes.of_physics(self.phys))
-            self._planes_of = self.phys
-        return self._plane_arrays
+        made = getattr(self, "_planes", None)
+        if made is None or made[0] is not self.phys:
+            made = self._planes = (self.phys, planes.arrays(planes.of_physics(self.phys)))
+        return made[1]
 
     def contacts(self):
         """Global number of contacts (counted from both partners) of the last evaluation."""
@@ -132,7 +153,8 @@ class EngineBase:
 
     def _ratio(self, acc):
         """(unbalanced-force ratio, mobile spheres without a contact) from ``kernels.balance``'s
-        sums over all ranks (``force_ratio``)."""
+        sums over all ranks (``force_ratio``): the ratio is the mean |resultant| over the mobile spheres
+        over the mean |contact force| (inf without contacts), exact on any number of ranks."""
         s = self.state
         res, con, n_c, free = (to_float(a) for a in acc)
         n_mob = self.domain.sum_int(np.array([int(np.sum(s.fixed[:s.n_own] == 0))], np.int64))[0]

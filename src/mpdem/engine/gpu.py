@@ -29,7 +29,6 @@ from ..kernels.balance import force_balance
 from ..kernels.bundles import Lists, Near, Slots, make_box
 from ..kernels.exactsum import new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
-from ..kernels.law import law_of
 from ..kernels.neighbours import build_neighbours, cell_axis
 from .base import NO_FLAGS, EngineBase, StepInfo
 from .order import sort_rows
@@ -106,7 +105,6 @@ class Engine(EngineBase):
         self.device_name = _device_name(runtime)
         self.block = int(block)
         state.wall = physics.wall
-        self.law = law_of(physics)
         self.plane_arrays()     # the floor, the wall and any other plane (planes.py): checked here
         self.r_list = 1.0 + physics.skin
         self.nbr_start = np.zeros(1, np.int64)

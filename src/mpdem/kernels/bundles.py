@@ -85,8 +85,8 @@ class Near(NamedTuple):
         CSR offsets into ``link``.
     link : (E_near,) int32
         Each near entry's place in ``Slots.pair``: p, or ~p for an entry that takes its
-        pair (as ``Lists.link``). The near lists' own (``Engine._near``) have the near
-        slot e for p; the force pass's (``Engine._near_places``) the place ``cpair[e]``.
+        pair (as ``Lists.link``). The near lists' own (``NeighbourLists.near``) have the near
+        slot e for p; the force pass's (``NeighbourLists.near_places``) the place ``cpair[e]``.
     cstart : (n_own + 1,) int64
         CSR offsets into ``cj`` and ``cslot``.
     cj : (K_near,) int32

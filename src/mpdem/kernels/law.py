@@ -69,13 +69,14 @@ def gravity_vector(gravity, incline):
     return gravity * math.sin(theta) + 0.0, 0.0, -(gravity * math.cos(theta))
 
 
-def law_of(physics):
-    """The kernels' ``Law`` of an ``engine.base.Physics``."""
-    p = physics
-    g = gravity_vector(float(p.gravity), float(getattr(p, "incline", 0.0)))
-    return Law(float(p.k_n), float(p.k_t), float(p.gamma_n), float(p.gamma_t), float(p.mu), *g,
-               float(p.dt), MODELS[p.model].kernel, bool(p.limit_damping),
-               bool(p.rescale_history))
+def make_law(k_n, k_t, gamma_n, gamma_t, mu, dt, gravity=1.0, incline=0.0, model="hooke",
+             limit_damping=False, rescale_history=False):
+    """The kernels' ``Law`` from the values as the config names them: ``model`` a name of
+    ``models.MODELS``, gravity of magnitude ``gravity`` [g] tilted by ``incline`` degrees about y
+    (``gravity_vector``)."""
+    return Law(float(k_n), float(k_t), float(gamma_n), float(gamma_t), float(mu),
+               *gravity_vector(float(gravity), float(incline)), float(dt), MODELS[model].kernel,
+               bool(limit_damping), bool(rescale_history))
 
 
 @njit(cache=True, inline="always")

@@ -1,7 +1,7 @@
 """The contact models, one row each (docs/model.md 2.2 and 2.7).
 
 The table is read by everything that depends on which model a run uses: the config schema (the
-accepted ``contact.model`` names), the law record (``law.law_of``: the kernels' model id), the
+accepted ``contact.model`` names), the law record (``law.make_law``: the kernels' model id), the
 contact list and the analysis (``overlap_scale``), and the LAMMPS input writer (the pair style and
 its coefficients). A new model is a row here and its force in ``kernels/law.py``.
 Plain Python: the command line reads it without loading numba.
@@ -49,8 +49,13 @@ MODELS = {m.name: m for m in (
 )}
 
 
+# the models by the kernels' id (``Law.model``)
+BY_KERNEL = {m.kernel: m for m in MODELS.values()}
+
+
 def overlap_scale(model, delta):
-    """The factor on the forces of contacts with overlaps ``delta`` (M,) [d] under ``model`` (a name):
-    sqrt(delta) for a Hertzian model, 1 otherwise; (M,)."""
+    """The factor on the forces of contacts with overlaps ``delta`` (M,) [d] under ``model`` (a name,
+    or the kernels' id ``Law.model``): sqrt(delta) for a Hertzian model, 1 otherwise; (M,)."""
     delta = np.asarray(delta, dtype=float)
-    return np.sqrt(np.maximum(delta, 0.0)) if MODELS[model].sqrt_overlap else np.ones_like(delta)
+    m = BY_KERNEL[model] if isinstance(model, int) else MODELS[model]
+    return np.sqrt(np.maximum(delta, 0.0)) if m.sqrt_overlap else np.ones_like(delta)

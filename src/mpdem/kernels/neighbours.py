@@ -22,7 +22,7 @@ from .geometry import min_image
 @njit(cache=True)
 def cell_axis(length, r_list):
     """Cells of the list build along a periodic axis of ``length`` [d]: as many as are at least
-    ``r_list`` wide, and at least one (``Engine._sort_rows`` orders rows by the same cells)."""
+    ``r_list`` wide, and at least one (``order.sort_rows`` orders rows by the same cells)."""
     n = int(length // r_list)
     return max(n, 1)
 
