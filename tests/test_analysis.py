@@ -14,7 +14,7 @@ import pytest
 from mpdem.io import checkpoint
 from mpdem import config
 from mpdem.io import rundir
-from mpdem.analysis import bulk, fits, gofr, mobilisation, report
+from mpdem.analysis import bulk, fits, gofr, measures, mobilisation, report
 from mpdem.kernels import pairdist
 from mpdem.kernels.bundles import make_box
 
@@ -234,14 +234,14 @@ def test_the_generalized_isostatic_count_removes_one_degree_of_freedom_per_mobil
     zeta[: P // 5] = 1.0                                   # N_m mobilised contacts
     cf = SimpleNamespace(zeta=zeta, from_file=np.ones(P, bool))
     every = np.ones(n, bool)
-    iso = report.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)
+    iso = measures.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)
     N_m = P // 5
     assert iso["n_m"] == pytest.approx(2 * N_m / n)
     assert iso["z_iso"] == pytest.approx(4 + 2 * N_m / (3 * n))
     # the counting with every contact mobilised: 3 N z / 2 - N z / 2 = 6 N needs z = 6
     cf.zeta[:] = 1.0
     z = 2 * P / n
-    assert report.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)["z_iso"] == pytest.approx(4 + z / 3)
+    assert measures.isostatic(pk, cf, np.ones(P, bool), every, every, 0.5, 0.99)["z_iso"] == pytest.approx(4 + z / 3)
 
 
 def test_bulk_contacts_select_by_midpoint():
@@ -345,6 +345,22 @@ def test_analyze_a_crystal_file_writes_summary_tables_and_plots(tmp_path):
     from matplotlib import colormaps
     twelve = (np.array(colormaps["viridis"].resampled(13)(12)[:3]) * 255).astype(int)
     assert (np.abs((img * 255).astype(int) - twelve).max(axis=-1) <= 2).sum() > 1000
+
+
+def test_a_new_measurement_is_one_row_in_the_table(tmp_path, monkeypatch):
+    """A measurement added to ``measures.MEASURES`` alone runs after the others (it reads what they
+    left) and lands in summary.json."""
+    def spheres_above_bulk(m):
+        m.summary["above_bulk"] = int((m.pk.x[m.pk.mobile, 2] > m.z2).sum())
+    row = measures.Measure("above_bulk", spheres_above_bulk, "mobile spheres above the slab")
+    monkeypatch.setattr(measures, "MEASURES", measures.MEASURES + (row,))
+    a = math.sqrt(2.0) * SQUEEZE
+    x, L = fcc(4, 12, a)
+    fixed = (x[:, 2] < a).astype(np.uint8)
+    write_crystal(tmp_path / "fcc.h5", x, fixed, L)
+    report.analyze(str(tmp_path / "fcc.h5"), plots=False, log=lambda m: None)
+    saved = json.loads((tmp_path / "fcc-analysis" / "summary.json").read_text())
+    assert saved["above_bulk"] == int(((x[:, 2] > saved["z2"]) & (fixed == 0)).sum()) > 0
 
 
 def test_analyze_settings_and_errors(tmp_path):

@@ -258,3 +258,19 @@ def test_info_into_a_closed_pipe_stops_quietly():
                        shell=True, capture_output=True, text=True, env=child_env(), timeout=120,
                        executable="/bin/bash")
     assert p.returncode == 0, p.stderr
+
+
+def test_a_new_sidecar_is_one_entry_in_the_table(tmp_path, monkeypatch):
+    """A file added to ``export.SIDECARS`` alone is written beside every snapshot and final.h5."""
+    from mpdem.io import export
+    seen = []
+
+    def steps(path, run_dir, final):
+        seen.append((os.path.basename(path), final))
+        export.write_atomic(path[:-len(".h5")] + ".step", [f"{checkpoint.read_attrs(path)['step']}\n"])
+    monkeypatch.setattr(export, "SIDECARS", export.SIDECARS + (export.Sidecar("step", "the step", steps),))
+    out = tmp_path / "side"
+    assert main(["run", *sets("output.snapshot_every=10000"), "--out", str(out), "--quiet"]) == 3
+    assert seen == [("snap-00000.h5", False), ("snap-00001.h5", False), ("final.h5", True)]
+    assert (out / "snapshots" / "snap-00001.step").read_text() == "20000\n"
+    assert (out / "final.xmf").exists() and (out / "snapshots" / "series.xmf").exists()

@@ -31,7 +31,8 @@ from .. import config
 from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import AnalysisError
-from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
+from . import bands
+from .measures import measure
 
 SUMMARY = "summary.json"
 PACKING = "packing.npz"     # a run's kept packing (``mpdem export --format packing``) when final.h5 is gone
@@ -89,172 +90,9 @@ def file_config(attrs, path, sets=()):
     return config.resolve(raw)
 
 
-def _range(want, L_x, L_y, z1, z2, dr, name, warns):
-    """A g(r) range below half the box that leaves a core slab a third of the bulk."""
-    cap = min(0.5 * min(L_x, L_y), (z2 - z1) / 3.0)
-    if want < cap:
-        return want
-    got = dr * math.floor((cap - 1e-9) / dr)
-    if got <= 1.0:
-        warns.append(f"no g(r): the bulk slab [{z1:.3g}, {z2:.3g}] is too thin for g(r) beyond contact "
-                     f"(it needs more than 3 d); lower analysis.margin_bottom and analysis.margin_top")
-        return None
-    warns.append(f"analysis.{name} = {want:g} d cut to {got:g} d (half the box is {0.5 * min(L_x, L_y):g} d, "
-                 f"a third of the bulk slab {(z2 - z1) / 3:.3g} d)")
-    return got
-
-
-def _profile(pk, reg):
-    """Per-height-bin z with and without rattlers (mobile spheres) on the phi(z) grid."""
-    edges = reg["edges"]
-    zc = pk.x[:, 2]
-    k = np.floor((zc - edges[0]) / (edges[1] - edges[0])).astype(np.int64)
-    nb = len(edges) - 1
-    ok = pk.mobile & (k >= 0) & (k < nb)
-    n_all = np.bincount(k[ok], minlength=nb)
-    z_all = np.bincount(k[ok], weights=pk.counts[ok], minlength=nb)
-    ok_nr = ok & pk.kept
-    n_nr = np.bincount(k[ok_nr], minlength=nb)
-    z_nr = np.bincount(k[ok_nr], weights=pk.counts_nr[ok_nr], minlength=nb)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return n_all, z_all / n_all, z_nr / n_nr
-
-
 def _csv(path, header, cols):
     """Columns (equal lengths) as a CSV file (``rundir.write_csv``)."""
     rundir.write_csv(path, header, zip(*cols))
-
-
-def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
-    """The generalized isostatic count of a frictional packing (docs/model.md 6.2).
-
-    Contacts at the Coulomb limit (zeta > ``mobilised``) remove a degree of
-    freedom each: with N_m of them among N spheres, 3 N z / 2 - N_m = 6 N gives
-    z_iso = 4 + 2 N_m / (3 N). Counted per sphere like z (each contact once for
-    each of its two spheres, n_m = 2 N_m / N, over the bulk spheres) that is
-    4 + n_m / 3, for all spheres and for the backbone. At mu = 0 it is 2 x 3 = 6.
-    """
-    if mu == 0:
-        return {"z_iso": 6.0, "note": "mu = 0: isostatic z = 6 (2 x 3 degrees of freedom per sphere)"}
-    if not cf.from_file.any():
-        return {"note": "no contact forces in the file: no fully mobilised contacts to count"}
-    mob = np.nan_to_num(cf.zeta, nan=0.0) > mobilised
-    n = len(pk.x)
-    per = np.bincount(pk.pairs[mob].ravel(), minlength=n)
-    per_bb = np.bincount(pk.pairs[mob & live].ravel(), minlength=n)
-    bk = bulk_rows & kept
-    n_m = float(per[bulk_rows].mean()) if bulk_rows.any() else math.nan
-    n_m_bb = float(per_bb[bk].mean()) if bk.any() else math.nan
-    return {"n_m": n_m, "z_iso": 4.0 + n_m / 3.0, "n_m_backbone": n_m_bb,
-            "z_iso_backbone": 4.0 + n_m_bb / 3.0, "mobilised": mobilised,
-            "note": "z_iso = 4 + n_m / 3, n_m the fully mobilised contacts per sphere (each counted for both "
-                    "of its spheres): 3 N z / 2 - N_m = 6 N"}
-
-
-def _alpha(pk, z1, z2, a, overlap_median):
-    """alpha by maximum likelihood on the windows, the default window and the local slope (6.5)."""
-    lo, hi = fits.fit_window(a.fit_xi_hi, a.fit_xi_lo)
-    wins = nearcontact.windows_of(a.alpha_windows)
-    centres = nearcontact.slope_centres(*nearcontact.SLOPE_RANGE)
-    reach = max([hi] + [w[1] for w in wins] + [c * 10 ** nearcontact.SLOPE_HALF_WIDTH for c in centres])
-    refs = pk.in_slab(z1, z2)[pk.mobile]
-    xi, w = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, reach)
-    soft = 20.0 * overlap_median
-
-    def mark(st):
-        # soft-sphere compression flattens g below ~20 x the typical overlap
-        return dict(st, soft=bool(st["xi_lo"] < soft))
-
-    return (mark(nearcontact.window_stats(xi, lo, hi, w)),
-            [mark(nearcontact.window_stats(xi, w0, w1, w)) for w0, w1 in wins],
-            nearcontact.local_slope(xi, centres, w), int(refs.sum()))
-
-
-def measure(arrays, attrs, cfg):
-    """All section 6 measurements of one state.
-
-    Parameters
-    ----------
-    arrays : dict of a state sorted by id (``checkpoint.read_state``): id, x
-        (n, 3), fixed (n,), and with a contact list id_i, id_j, F_n, F_t
-    attrs : the file's attributes (L_x, L_y)
-    cfg : Config (contact.*, analysis.*)
-
-    Returns
-    -------
-    summary : dict (JSON-ready, see docs/analysis.md)
-    tables : dict of arrays for the CSV files and plots
-    """
-    a, c = cfg.analysis, cfg.contact
-    L_x, L_y = float(attrs["L_x"]), float(attrs["L_y"])
-    warns = []
-    pk = bulk.Packing(arrays["x"], arrays["fixed"], L_x, L_y, c.mu, a.n_min)
-    reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin, a.tall_pile)
-    z1, z2, h = reg["z1"], reg["z2"], reg["h"]
-    cf = contacts.contact_forces(pk, arrays, c.k_n, c.mu, c.model)
-    bb = backbone.of_packing(pk, cf, h, a.band_width, a.force_fraction)
-    if a.rattlers == "force":
-        pk.use_backbone(bb["kept"], bb["counts"])
-    s = {k: v for k, v in reg.items() if k not in ("edges", "phi_z")}
-    s["n_min"] = pk.n_min
-    s.update(pk.measure(z1, z2))
-    bulk_rows = pk.in_slab(z1, z2)
-    bk = bulk_rows & bb["kept"]
-    mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
-    in_slab = (mid >= z1) & (mid <= z2)
-    s["backbone"] = {"z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
-                     "rattler_fraction": float(1.0 - bk.sum() / max(bulk_rows.sum(), 1)),
-                     "weak_fraction": float(bb["weak"][in_slab].mean()) if in_slab.any() else math.nan,
-                     "force_fraction": a.force_fraction, "band_width": a.band_width,
-                     "forces_from_file": float(cf.from_file.mean()) if len(cf.from_file) else math.nan,
-                     "P_z": bulk.histogram_z(bb["counts"][bk]).tolist()}
-    s["isostatic"] = isostatic(pk, cf, bb["live"], bb["kept"], bulk_rows, c.mu, a.mobilised)
-    # docs/model.md 6.1.4: the same with both margins halved
-    half = bulk.bulk_region(pk.x[pk.mobile, 2], pk.z_bed, L_x, L_y, 0.5 * reg["margin_bottom"],
-                            0.5 * reg["margin_top"], a.profile_bin)
-    s["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])
-    Q6, crystal, _ = order.crystal_order(pk.x, L_x, L_y, a.order_cutoff, a.order_bond, a.order_bonds)
-    s["order"] = {"Q6_mean": float(np.nanmean(Q6[bulk_rows])) if bulk_rows.any() else math.nan,
-                  "crystal_fraction": float(crystal[bulk_rows].mean()) if bulk_rows.any() else math.nan,
-                  "cutoff": a.order_cutoff, "bond": a.order_bond, "bonds": a.order_bonds}
-    s["bands"] = bands.depth_profile(pk, cf, bb["kept"], bb["counts"], crystal, h, a.band_width, z1, z2)
-    comp = in_slab & (cf.F_n > 0)
-    s["P_f"] = bands.force_distribution(cf.F_n[comp] / bb["ref_force"][comp])
-
-    tables = {"profile": reg, "z_profile": _profile(pk, reg),
-              "packing": {"x": pk.x, "fixed": pk.fixed, "counts": pk.counts, "L_x": L_x, "L_y": L_y,
-                          "z_bed": pk.z_bed}}
-    s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, alpha_windows=[], alpha_local=[], gofr=None)
-    dflt, wins, local, n_refs = _alpha(pk, z1, z2, a, s["overlap_median"])
-    s.update(alpha=dflt["alpha"], alpha_err=dflt["alpha_err"], alpha_fit=dict(dflt, method="maximum likelihood",
-             n_ref=n_refs), alpha_windows=wins, alpha_local=local)
-    if not math.isfinite(dflt["alpha"]):
-        warns.append(f"alpha not estimated: {dflt['n']} gaps in [{dflt['xi_lo']:.3g}, {dflt['xi_hi']:.3g}] "
-                     f"(needs {nearcontact.N_MIN})")
-    r_full = _range(a.g_r_max, L_x, L_y, z1, z2, a.g_dr, "g_r_max", warns)
-    r_near = _range(a.near_r_max, L_x, L_y, z1, z2, a.g_dr, "near_r_max", warns)
-    if r_full is not None and r_near is not None:
-        xm = pk.x[pk.mobile]
-        g = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_full, a.g_dr, a.xi_min, a.xi_per_decade)
-        near = gofr.radial_distribution(xm, L_x, L_y, z1, z2, r_near, a.g_dr, a.xi_min, a.xi_per_decade)
-        xi_c = np.sqrt(near["xi_lo"] * near["xi_hi"])
-        s["gofr"] = {"r_max": g["r_max"], "n_ref": g["n_ref"], "rho": g["rho"],
-                     "near_r_max": near["r_max"], "near_n_ref": near["n_ref"],
-                     "near_contacts_per_ref": near["n_overlap"] / near["n_ref"]}
-        tables.update(gofr=g, near=near, xi_c=xi_c, fit=s["alpha_fit"])
-    s["zeta"] = None
-    if c.mu == 0:
-        s["zeta_note"] = "mu = 0: no tangential forces"
-    elif "id_i" not in arrays:
-        s["zeta_note"] = f"no contact forces in a {attrs.get('kind', '?')} file (snapshots and final.h5 have them)"
-    else:
-        sel = mobilisation.bulk_contacts(arrays, arrays["id"], pk.x[:, 2], z1, z2)
-        fr = mobilisation.force_ratios(arrays["F_n"][sel], arrays["F_t"][sel], c.mu, a.zeta_bins, a.mobilised)
-        s["zeta"] = {k: fr[k] for k in ("n_contacts", "n_tensile", "n_above_one", "mobilised_fraction",
-                                        "zeta_mean", "zeta_max", "n_ratio_above_one") if k in fr}
-        tables["zeta"] = fr
-    s["warnings"] = warns
-    return s, tables
 
 
 def write_tables(out, s, t):

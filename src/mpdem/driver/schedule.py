@@ -318,7 +318,8 @@ class SnapshotRecord:
 
 
 class Snapshots:
-    """RUN/snapshots/snap-NNNNN.h5 every ``output.snapshot_every`` steps, with XDMF sidecars.
+    """RUN/snapshots/snap-NNNNN.h5 every ``output.snapshot_every`` steps, with the files of
+    ``io.export.SIDECARS`` beside each (XDMF, the contact network, the time series).
 
     ``write`` takes the same callable as ``Checkpoints``.
     """
@@ -332,8 +333,7 @@ class Snapshots:
 
     def write(self, final=False):
         """Write the next snapshot, or RUN/final.h5 (collective); returns its path."""
-        from ..io import export
-        from ..io.network import contacts_path, write_contacts_xdmf
+        from ..io.export import SIDECARS
         if final:
             path = rundir.final_path(self.out)
         else:
@@ -343,12 +343,8 @@ class Snapshots:
                 os.makedirs(os.path.dirname(path), exist_ok=True)
         self._write(path, "final" if final else "snapshot")
         if self.rank == 0:
-            export.write_xdmf(path)
-            # its contact network, for force chains in ParaView (contacts/<name>.contacts.h5 / .xmf)
-            write_contacts_xdmf(path, contacts_path(path)[:-len(".h5")])
-            if not final:
-                export.write_xdmf_series([p for _, p in rundir.snapshots(self.out)],
-                                         os.path.join(self.out, rundir.SNAP_DIR, "series.xmf"))
+            for sidecar in SIDECARS:
+                sidecar.write(path, self.out, final)
         return path
 
     def record(self):

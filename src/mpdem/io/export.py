@@ -7,7 +7,8 @@ Particles only: the contact slots and a snapshot's pair list are not
 exported (``checkpoint.read_state(path, pairs=True)`` reads them).
 
 The export formats are one table, ``FORMATS`` (name -> ``Format``): the command line's
-``--format`` choices and help come from it, so a new format is one writer and one entry here.
+``--format`` choices and help come from it, so a new format is one writer and one entry here. The
+files a run writes beside every snapshot and final.h5 are another, ``SIDECARS``.
 The module imports h5py and the state files' reader on first use, so the command line can read
 the table without loading them.
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..kernels.particle import R    # particle radius [d]
 from .lammps import state_data
+from . import rundir
 from .rundir import write_atomic
 from ..state import FIELDS, PARTICLE
 
@@ -283,6 +285,46 @@ FORMATS = {f.name: f for f in (
     Format("lammps-input", "a LAMMPS input script and data file that continue the run, directory FILE.lammps",
            _lammps_input),
 )}
+
+
+# -- the files beside every snapshot and final.h5 --
+@dataclass(frozen=True)
+class Sidecar:
+    """A file a run writes beside each snapshot and its final.h5 (rank 0, once the state file is whole).
+
+    Attributes
+    ----------
+    name : str
+    about : str
+    write : callable(path, run_dir, final)
+        Writes it for state file ``path`` of the run in ``run_dir``; ``final``: ``path`` is final.h5.
+    """
+    name: str
+    about: str
+    write: Callable
+
+
+def _state_xdmf(path, run_dir, final):
+    write_xdmf(path)
+
+
+def _contacts_beside(path, run_dir, final):
+    from .network import contacts_path, write_contacts_xdmf
+    write_contacts_xdmf(path, contacts_path(path)[:-len(".h5")])
+
+
+def _series(path, run_dir, final):
+    if not final:
+        write_xdmf_series([p for _, p in rundir.snapshots(run_dir)],
+                          os.path.join(run_dir, rundir.SNAP_DIR, "series.xmf"))
+
+
+SIDECARS = (
+    Sidecar("xdmf", "the state file's XDMF 3 sidecar, FILE.xmf (ParaView, VisIt)", _state_xdmf),
+    Sidecar("contacts", "its contact network, contacts/FILE.contacts.h5 and .xmf (force chains in ParaView)",
+            _contacts_beside),
+    Sidecar("series", "the snapshots as one time series, snapshots/series.xmf (ParaView)", _series),
+)
 
 
 def export(path, fmt, out=None):

@@ -1,0 +1,302 @@
+"""The measurements of one packing, one row each of ``MEASURES`` (docs/model.md section 6).
+
+``measure`` makes what every measurement reads once (the ``Packing``, its bulk slab, the contact
+forces and the force backbone: a ``Sample``) and then runs the table in order; each row adds its
+numbers to the summary (``summary.json``, docs/analysis.md) and its arrays to the tables that the
+CSV files and the plots are made of. A new measurement is a function here and a row in the table;
+a row may read what a row above it left (``bands`` reads the crystal fraction of ``order``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
+
+
+@dataclass
+class Sample:
+    """One packing as every measurement reads it, and what the measurements made so far.
+
+    Attributes
+    ----------
+    arrays, attrs, cfg
+        The state (sorted by id), its file's attributes and the config (``measure``).
+    pk : bulk.Packing
+    reg : dict
+        The bulk slab and the phi(z) profile (``Packing.region``): z1, z2, h [d], edges, phi_z.
+    cf : contacts.ContactForces
+    bb : dict
+        The force backbone (``backbone.of_packing``): kept, counts, live, weak, ref_force.
+    bulk_rows : (n,) bool
+        Spheres in the slab.
+    in_slab : (P,) bool
+        Contacts whose midpoint is in the slab.
+    summary : dict
+        The summary so far (JSON-ready).
+    tables : dict
+        Arrays for the CSV files and the plots.
+    warnings : list of str
+    found : dict
+        What a row leaves for the rows below it (``crystal``: order's crystal flags).
+    """
+    arrays: dict
+    attrs: dict
+    cfg: object
+    pk: bulk.Packing
+    reg: dict
+    cf: object
+    bb: dict
+    bulk_rows: np.ndarray
+    in_slab: np.ndarray
+    summary: dict = field(default_factory=dict)
+    tables: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+    found: dict = field(default_factory=dict)
+
+    @property
+    def z1(self):
+        return self.reg["z1"]
+
+    @property
+    def z2(self):
+        return self.reg["z2"]
+
+    @property
+    def L(self):
+        return self.pk.L_x, self.pk.L_y
+
+
+def sample(arrays, attrs, cfg):
+    """The ``Sample`` of a state: the packing, its slab, contact forces and backbone."""
+    a, c = cfg.analysis, cfg.contact
+    pk = bulk.Packing(arrays["x"], arrays["fixed"], float(attrs["L_x"]), float(attrs["L_y"]), c.mu, a.n_min)
+    reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin, a.tall_pile)
+    cf = contacts.contact_forces(pk, arrays, c.k_n, c.mu, c.model)
+    bb = backbone.of_packing(pk, cf, reg["h"], a.band_width, a.force_fraction)
+    if a.rattlers == "force":
+        pk.use_backbone(bb["kept"], bb["counts"])
+    mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
+    return Sample(arrays, attrs, cfg, pk, reg, cf, bb, pk.in_slab(reg["z1"], reg["z2"]),
+                  (mid >= reg["z1"]) & (mid <= reg["z2"]))
+
+
+# -- the measurements: each reads the Sample and adds to its summary and tables --
+
+def slab(m):
+    """z, P(z) with and without rattlers, phi and the overlaps in the bulk slab (6.1)."""
+    m.summary.update({k: v for k, v in m.reg.items() if k not in ("edges", "phi_z")})
+    m.summary["n_min"] = m.pk.n_min
+    m.summary.update(m.pk.measure(m.z1, m.z2))
+    pk = m.pk
+    m.tables.update(profile=m.reg, z_profile=_profile(pk, m.reg),
+                    packing={"x": pk.x, "fixed": pk.fixed, "counts": pk.counts, "L_x": pk.L_x, "L_y": pk.L_y,
+                             "z_bed": pk.z_bed})
+
+
+def backbone_z(m):
+    """z of the force backbone and its rattlers (6.3)."""
+    a, bb, cf = m.cfg.analysis, m.bb, m.cf
+    bk = m.bulk_rows & bb["kept"]
+    m.summary["backbone"] = {
+        "z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
+        "rattler_fraction": float(1.0 - bk.sum() / max(m.bulk_rows.sum(), 1)),
+        "weak_fraction": float(bb["weak"][m.in_slab].mean()) if m.in_slab.any() else math.nan,
+        "force_fraction": a.force_fraction, "band_width": a.band_width,
+        "forces_from_file": float(cf.from_file.mean()) if len(cf.from_file) else math.nan,
+        "P_z": bulk.histogram_z(bb["counts"][bk]).tolist()}
+
+
+def isostatic_count(m):
+    """The generalized isostatic count of a frictional packing (6.2; ``isostatic``)."""
+    m.summary["isostatic"] = isostatic(m.pk, m.cf, m.bb["live"], m.bb["kept"], m.bulk_rows, m.cfg.contact.mu,
+                                       m.cfg.analysis.mobilised)
+
+
+def halved_margins(m):
+    """The slab's numbers with both margins halved (6.1.4)."""
+    pk, reg = m.pk, m.reg
+    half = bulk.bulk_region(pk.x[pk.mobile, 2], pk.z_bed, pk.L_x, pk.L_y, 0.5 * reg["margin_bottom"],
+                            0.5 * reg["margin_top"], m.cfg.analysis.profile_bin)
+    m.summary["halved_margins"] = dict(pk.measure(half["z1"], half["z2"]), z1=half["z1"], z2=half["z2"])
+
+
+def crystal_order(m):
+    """Q6 and the crystal fraction in the slab (6.7)."""
+    a, rows = m.cfg.analysis, m.bulk_rows
+    Q6, crystal, _ = order.crystal_order(m.pk.x, m.pk.L_x, m.pk.L_y, a.order_cutoff, a.order_bond, a.order_bonds)
+    m.found["crystal"] = crystal
+    m.summary["order"] = {"Q6_mean": float(np.nanmean(Q6[rows])) if rows.any() else math.nan,
+                          "crystal_fraction": float(crystal[rows].mean()) if rows.any() else math.nan,
+                          "cutoff": a.order_cutoff, "bond": a.order_bond, "bonds": a.order_bonds}
+
+
+def depth_bands(m):
+    """The depth profile in bands of ``analysis.band_width`` (6.1.3)."""
+    a = m.cfg.analysis
+    m.summary["bands"] = bands.depth_profile(m.pk, m.cf, m.bb["kept"], m.bb["counts"], m.found["crystal"],
+                                             m.reg["h"], a.band_width, m.z1, m.z2)
+
+
+def force_distribution(m):
+    """P(f), f = F_n over its depth band's mean, bulk contacts (6.4)."""
+    comp = m.in_slab & (m.cf.F_n > 0)
+    m.summary["P_f"] = bands.force_distribution(m.cf.F_n[comp] / m.bb["ref_force"][comp])
+
+
+def alpha(m):
+    """alpha by maximum likelihood on the default window and the others, and the local slope (6.5)."""
+    s, a, pk = m.summary, m.cfg.analysis, m.pk
+    s.update(alpha=math.nan, alpha_err=math.nan, alpha_fit=None, alpha_windows=[], alpha_local=[])
+    lo, hi = fits.fit_window(a.fit_xi_hi, a.fit_xi_lo)
+    wins = nearcontact.windows_of(a.alpha_windows)
+    centres = nearcontact.slope_centres(*nearcontact.SLOPE_RANGE)
+    reach = max([hi] + [w[1] for w in wins] + [c * 10 ** nearcontact.SLOPE_HALF_WIDTH for c in centres])
+    refs = pk.in_slab(m.z1, m.z2)[pk.mobile]
+    xi, w = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, reach)
+    # soft-sphere compression flattens g below ~20 x the typical overlap
+    soft = 20.0 * s["overlap_median"]
+
+    def stats(lo, hi):
+        st = nearcontact.window_stats(xi, lo, hi, w)
+        return dict(st, soft=bool(st["xi_lo"] < soft))
+
+    dflt = stats(lo, hi)
+    s.update(alpha=dflt["alpha"], alpha_err=dflt["alpha_err"],
+             alpha_fit=dict(dflt, method="maximum likelihood", n_ref=int(refs.sum())),
+             alpha_windows=[stats(w0, w1) for w0, w1 in wins], alpha_local=nearcontact.local_slope(xi, centres, w))
+    if not math.isfinite(dflt["alpha"]):
+        m.warnings.append(f"alpha not estimated: {dflt['n']} gaps in [{dflt['xi_lo']:.3g}, {dflt['xi_hi']:.3g}] "
+                          f"(needs {nearcontact.N_MIN})")
+
+
+def radial_distribution(m):
+    """g(r) on linear bins and near contact on logarithmic bins of xi (6.6)."""
+    a, pk = m.cfg.analysis, m.pk
+    m.summary["gofr"] = None
+    r_full = _range(a.g_r_max, pk.L_x, pk.L_y, m.z1, m.z2, a.g_dr, "g_r_max", m.warnings)
+    r_near = _range(a.near_r_max, pk.L_x, pk.L_y, m.z1, m.z2, a.g_dr, "near_r_max", m.warnings)
+    if r_full is None or r_near is None:
+        return
+    xm = pk.x[pk.mobile]
+    g = gofr.radial_distribution(xm, pk.L_x, pk.L_y, m.z1, m.z2, r_full, a.g_dr, a.xi_min, a.xi_per_decade)
+    near = gofr.radial_distribution(xm, pk.L_x, pk.L_y, m.z1, m.z2, r_near, a.g_dr, a.xi_min, a.xi_per_decade)
+    m.summary["gofr"] = {"r_max": g["r_max"], "n_ref": g["n_ref"], "rho": g["rho"],
+                         "near_r_max": near["r_max"], "near_n_ref": near["n_ref"],
+                         "near_contacts_per_ref": near["n_overlap"] / near["n_ref"]}
+    m.tables.update(gofr=g, near=near, xi_c=np.sqrt(near["xi_lo"] * near["xi_hi"]), fit=m.summary["alpha_fit"])
+
+
+def force_ratios(m):
+    """P(zeta), zeta = |F_t| / (mu F_n), of the bulk contacts of a frictional packing (6.4)."""
+    s, c, a, arrays = m.summary, m.cfg.contact, m.cfg.analysis, m.arrays
+    s["zeta"] = None
+    if c.mu == 0:
+        s["zeta_note"] = "mu = 0: no tangential forces"
+    elif "id_i" not in arrays:
+        s["zeta_note"] = f"no contact forces in a {m.attrs.get('kind', '?')} file (snapshots and final.h5 have them)"
+    else:
+        sel = mobilisation.bulk_contacts(arrays, arrays["id"], m.pk.x[:, 2], m.z1, m.z2)
+        fr = mobilisation.force_ratios(arrays["F_n"][sel], arrays["F_t"][sel], c.mu, a.zeta_bins, a.mobilised)
+        s["zeta"] = {k: fr[k] for k in ("n_contacts", "n_tensile", "n_above_one", "mobilised_fraction",
+                                        "zeta_mean", "zeta_max", "n_ratio_above_one") if k in fr}
+        m.tables["zeta"] = fr
+
+
+@dataclass(frozen=True)
+class Measure:
+    """One measurement of a packing: ``run(sample)`` adds to the sample's summary and tables."""
+    name: str
+    run: Callable
+    about: str
+
+
+MEASURES = tuple(Measure(f.__name__, f, f.__doc__.split("\n")[0]) for f in (
+    slab, backbone_z, isostatic_count, halved_margins, crystal_order, depth_bands, force_distribution, alpha,
+    radial_distribution, force_ratios))
+
+
+def measure(arrays, attrs, cfg):
+    """All the measurements (``MEASURES``) of one state.
+
+    Parameters
+    ----------
+    arrays : dict of a state sorted by id (``checkpoint.read_state``): id, x
+        (n, 3), fixed (n,), and with a contact list id_i, id_j, F_n, F_t
+    attrs : the file's attributes (L_x, L_y)
+    cfg : Config (contact.*, analysis.*)
+
+    Returns
+    -------
+    summary : dict (JSON-ready, see docs/analysis.md), with ``warnings``
+    tables : dict of arrays for the CSV files and plots
+    """
+    m = sample(arrays, attrs, cfg)
+    for row in MEASURES:
+        row.run(m)
+    m.summary["warnings"] = m.warnings
+    return m.summary, m.tables
+
+
+# -- helpers --
+
+def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
+    """The generalized isostatic count of a frictional packing (docs/model.md 6.2).
+
+    Contacts at the Coulomb limit (zeta > ``mobilised``) remove a degree of
+    freedom each: with N_m of them among N spheres, 3 N z / 2 - N_m = 6 N gives
+    z_iso = 4 + 2 N_m / (3 N). Counted per sphere like z (each contact once for
+    each of its two spheres, n_m = 2 N_m / N, over the bulk spheres) that is
+    4 + n_m / 3, for all spheres and for the backbone. At mu = 0 it is 2 x 3 = 6.
+    """
+    if mu == 0:
+        return {"z_iso": 6.0, "note": "mu = 0: isostatic z = 6 (2 x 3 degrees of freedom per sphere)"}
+    if not cf.from_file.any():
+        return {"note": "no contact forces in the file: no fully mobilised contacts to count"}
+    mob = np.nan_to_num(cf.zeta, nan=0.0) > mobilised
+    n = len(pk.x)
+    per = np.bincount(pk.pairs[mob].ravel(), minlength=n)
+    per_bb = np.bincount(pk.pairs[mob & live].ravel(), minlength=n)
+    bk = bulk_rows & kept
+    n_m = float(per[bulk_rows].mean()) if bulk_rows.any() else math.nan
+    n_m_bb = float(per_bb[bk].mean()) if bk.any() else math.nan
+    return {"n_m": n_m, "z_iso": 4.0 + n_m / 3.0, "n_m_backbone": n_m_bb,
+            "z_iso_backbone": 4.0 + n_m_bb / 3.0, "mobilised": mobilised,
+            "note": "z_iso = 4 + n_m / 3, n_m the fully mobilised contacts per sphere (each counted for both "
+                    "of its spheres): 3 N z / 2 - N_m = 6 N"}
+
+
+def _range(want, L_x, L_y, z1, z2, dr, name, warns):
+    """A g(r) range below half the box that leaves a core slab a third of the bulk."""
+    cap = min(0.5 * min(L_x, L_y), (z2 - z1) / 3.0)
+    if want < cap:
+        return want
+    got = dr * math.floor((cap - 1e-9) / dr)
+    if got <= 1.0:
+        warns.append(f"no g(r): the bulk slab [{z1:.3g}, {z2:.3g}] is too thin for g(r) beyond contact "
+                     f"(it needs more than 3 d); lower analysis.margin_bottom and analysis.margin_top")
+        return None
+    warns.append(f"analysis.{name} = {want:g} d cut to {got:g} d (half the box is {0.5 * min(L_x, L_y):g} d, "
+                 f"a third of the bulk slab {(z2 - z1) / 3:.3g} d)")
+    return got
+
+
+
+def _profile(pk, reg):
+    """Per-height-bin z with and without rattlers (mobile spheres) on the phi(z) grid."""
+    edges = reg["edges"]
+    zc = pk.x[:, 2]
+    k = np.floor((zc - edges[0]) / (edges[1] - edges[0])).astype(np.int64)
+    nb = len(edges) - 1
+    ok = pk.mobile & (k >= 0) & (k < nb)
+    n_all = np.bincount(k[ok], minlength=nb)
+    z_all = np.bincount(k[ok], weights=pk.counts[ok], minlength=nb)
+    ok_nr = ok & pk.kept
+    n_nr = np.bincount(k[ok_nr], minlength=nb)
+    z_nr = np.bincount(k[ok_nr], weights=pk.counts_nr[ok_nr], minlength=nb)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return n_all, z_all / n_all, z_nr / n_nr
+
