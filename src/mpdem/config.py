@@ -196,6 +196,13 @@ SCHEMA = (
     _k("analysis", "alpha_windows", (1e-3, 1e-2, 5e-2),
        "edges of the alpha windows reported side by side: each [e_i, e_i+1] and the whole [e_0, e_last] "
        "(docs/model.md 6.5)", list, restart=True, physics=False),
+    _k("analysis", "depth_windows", (10.0, 30.0, 5.0, 15.0, 15.0, 25.0),
+       "fixed windows of depth below the free surface h [d], as pairs (top, bottom): [10, 30, 5, 15] is "
+       "10-30 d and 5-15 d; z, phi and alpha on each, with jackknife errors (docs/model.md 6.10)",
+       list, restart=True, physics=False),
+    _k("analysis", "jackknife_columns", 4,
+       "lateral columns along x and along y of the jackknife errors (k x k columns, k >= 2; docs/model.md 6.10)",
+       int, restart=True, physics=False),
     _k("analysis", "zeta_bins", 50,
        "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
     _k("analysis", "mobilised", 0.99,
@@ -592,6 +599,10 @@ def resolve(raw):
     w = vals["analysis.alpha_windows"]
     need("analysis.alpha_windows", len(w) >= 2 and all(0 < a < b <= 1 for a, b in zip(w, w[1:])),
          "at least two increasing edges in (0, 1]")
+    dw = vals["analysis.depth_windows"]
+    need("analysis.depth_windows", len(dw) % 2 == 0 and all(0 <= t < b for t, b in zip(dw[::2], dw[1::2])),
+         "pairs (top, bottom) of depths below the surface, 0 <= top < bottom")
+    need("analysis.jackknife_columns", vals["analysis.jackknife_columns"] >= 2, "jackknife_columns >= 2")
     need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
     need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")
     need("stop.force_ratio", 0 < vals["stop.force_ratio"] < 1, "0 < force_ratio < 1")

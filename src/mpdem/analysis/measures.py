@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import backbone, bands, bulk, contacts, fits, gofr, mobilisation, nearcontact, order
+from . import backbone, bands, bulk, contacts, fits, gofr, jackknife, mobilisation, nearcontact, order
 
 
 @dataclass
@@ -206,6 +206,42 @@ def force_ratios(m):
         m.tables["zeta"] = fr
 
 
+def depth_windows(m):
+    """z, z without rattlers, phi and alpha on fixed windows of depth below the free surface, with
+    jackknife errors over lateral columns (6.10); a window deeper than the slab's bottom margin is
+    not measured (``complete`` false): piles of any height are compared at the same depths."""
+    a, pk, h = m.cfg.analysis, m.pk, m.reg["h"]
+    k = a.jackknife_columns
+    K = k * k
+    col = jackknife.columns(pk.x, pk.L_x, pk.L_y, k)
+    zm, mob_col = pk.x[pk.mobile, 2], col[pk.mobile]
+    lo, hi = fits.fit_window(a.fit_xi_hi, a.fit_xi_lo)
+    out = []
+    for d_lo, d_hi in zip(a.depth_windows[::2], a.depth_windows[1::2]):
+        z1, z2 = h - d_hi, h - d_lo
+        if z1 < m.z1:
+            # deeper than the slab's bottom margin: the bed's layering (or the bed itself) would enter
+            out.append({"depth_lo": d_lo, "depth_hi": d_hi, "z1": z1, "z2": z2, "complete": False})
+            continue
+        rows = pk.in_slab(z1, z2)
+        kept = rows & pk.kept
+        st = pk.measure(z1, z2)
+        z, z_err = jackknife.mean(pk.counts[rows], col[rows], K)
+        z_nr, z_nr_err = jackknife.mean(pk.counts_nr[kept], col[kept], K)
+        # each column's share of the slab's volume [d^3] over its equal share of the slab
+        vol = np.bincount(mob_col, weights=bulk.slab_volume(zm, z1, z2), minlength=K)
+        phi, phi_err = jackknife.ratio(vol, np.full(K, pk.L_x * pk.L_y * (z2 - z1) / K))
+        refs = rows[pk.mobile]
+        xi, w = nearcontact.gaps(pk.x[pk.mobile], refs, pk.L_x, pk.L_y, hi)
+        fit = nearcontact.window_stats(xi, lo, hi, w)
+        out.append({"depth_lo": d_lo, "depth_hi": d_hi, "z1": z1, "z2": z2, "complete": True, "n": int(rows.sum()),
+                    "z": st["z"], "z_err": z_err, "z_no_rattlers": st["z_no_rattlers"], "z_no_rattlers_err": z_nr_err,
+                    "rattler_fraction": st["rattler_fraction"], "phi": st["phi"], "phi_err": phi_err,
+                    "overlap_median": st["overlap_median"], "alpha": fit["alpha"], "alpha_err": fit["alpha_err"],
+                    "alpha_n": fit["n"]})
+    m.summary["depth_windows"] = {"columns": K, "windows": out}
+
+
 @dataclass(frozen=True)
 class Measure:
     """One measurement of a packing: ``run(sample)`` adds to the sample's summary and tables."""
@@ -216,7 +252,7 @@ class Measure:
 
 MEASURES = tuple(Measure(f.__name__, f, f.__doc__.split("\n")[0]) for f in (
     slab, backbone_z, isostatic_count, halved_margins, crystal_order, depth_bands, force_distribution, alpha,
-    radial_distribution, force_ratios))
+    radial_distribution, force_ratios, depth_windows))
 
 
 def measure(arrays, attrs, cfg):

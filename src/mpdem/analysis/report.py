@@ -212,14 +212,18 @@ def describe(s):
     zt = (f"; P(zeta): {s['zeta']['n_contacts']} bulk contacts, "
           f"{100 * s['zeta']['mobilised_fraction']:.1f}% fully mobilised" if s.get("zeta") else "")
     iso = s.get("isostatic") or {}
-    zi = (f"; generalized isostatic 4 + 2 n_m / 3 = {iso['z_iso']:.3f}" if "n_m" in iso else "")
+    zi = (f"; generalized isostatic 4 + n_m / 3 = {iso['z_iso']:.3f}" if "n_m" in iso else "")
+    wins = [w for w in (s.get("depth_windows") or {}).get("windows", []) if w["complete"]]
+    dw = ("\nz at depths below the surface (jackknife errors): "
+          + ", ".join(f"{w['depth_lo']:g}-{w['depth_hi']:g} d {w['z']:.3f} +- {w['z_err']:.3f}" for w in wins)
+          if wins else "")
     return (f"bulk z in [{s['z1']:.2f}, {s['z2']:.2f}] ({s['n_bulk']} particles): z = {s['z']:.3f}, "
             f"without rattlers ({s['rattlers']} rule) {s['z_no_rattlers']:.3f} "
             f"({100 * s['rattler_fraction']:.1f}% rattlers), backbone z = {s['backbone']['z']:.3f}{zi}, "
             f"phi = {s['phi']:.4f}\n"
             f"margins halved: z = {s['halved_margins']['z']:.3f}, phi = {s['halved_margins']['phi']:.4f}; "
             f"crystal-like {100 * s['order']['crystal_fraction']:.1f}%\n"
-            f"{al}{zt}")
+            f"{al}{zt}{dw}")
 
 
 __all__ = ["analyze", "locate", "measure", "file_config", "AnalysisError", "StateFileError"]

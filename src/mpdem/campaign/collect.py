@@ -34,7 +34,7 @@ import numpy as np
 from ..io import rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
-from . import paper, pooled
+from . import depth, paper, pooled
 from .comparison import comparisons, write_readme
 from .figures import make_figures
 from ..analysis.report import PACKING, SUMMARY, AnalysisError
@@ -407,6 +407,10 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
     os.makedirs(out, exist_ok=True)
     write_runs_csv(os.path.join(out, "runs.csv"), sets)
     write_sets_csv(os.path.join(out, "sets.csv"), sets)
+    windows = depth.rows(sets)
+    depth.write_csv(os.path.join(out, "depth.csv"), windows)
+    for line in depth.lines(windows):
+        log(f"collect: {line}")
     fit_res = make_fits(sets)
     write_json(os.path.join(out, "fits.json"), {"source": paper.SOURCE, **fit_res})
     for kind in ("eq7", "eq9", "overlap"):
@@ -422,15 +426,15 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
     rows = comparisons(sets, fit_res)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,
             "n_runs": n_runs, "n_sets": len(sets)}
-    write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped)
+    write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows)
     res = {**info, "sets": {s.id: {"params": {SHORT[k]: v for k, v in s.params.items()}, "seeds": s.seeds,
                                    "runs": [r.path for r in s.runs]} for s in sets},
            "skipped": skipped, "comparisons": rows,
            "figures": {k: v for k, v in figs.items() if not k.startswith("_")}, "figure_notes": figs["_notes"],
-           "files": ["runs.csv", "sets.csv", "fits.json", "README.md", "collect.json"]
+           "files": ["runs.csv", "sets.csv", "depth.csv", "fits.json", "README.md", "collect.json"]
            + [p for k, f in figs.items() if not k.startswith("_") and f["made"] for p in f["files"]]}
     write_json(os.path.join(out, "collect.json"), res)
     made = [k for k, f in res["figures"].items() if f["made"]]
-    log(f"collect: wrote {out}/ (runs.csv, sets.csv, fits.json, README.md, collect.json; "
+    log(f"collect: wrote {out}/ (runs.csv, sets.csv, depth.csv, fits.json, README.md, collect.json; "
         f"figures {', '.join(made) or 'none'})")
     return res

@@ -158,7 +158,7 @@ def _fam_text(f, drop=()):
     return ", ".join(f"{k} = {fmt_kn(f[k]) if k == 'k_n' else f[k]}" for k in keys)
 
 
-def write_readme(path, info, sets, fit_res, rows, figs, skipped):
+def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=()):
     """OUT/README.md: sets, seeds, numbers with errors next to the paper's, fits, figures, skipped runs."""
     L = ["# mpdem collect: the paper's tables and figures", "",
          f"Made by `mpdem collect` on {info['date']} from {info['n_runs']} run(s) in {info['n_sets']} parameter "
@@ -191,6 +191,7 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
     else:
         L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of docs/model.md 7).", ""]
     L += gravity_sections(sets, fit_res)
+    L += _depth_section(windows)
     L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
           "(fit weights 1/σ², σ = the family's pooled seed-to-seed scatter / √(seeds of the set); "
           "the free fit, then with α_n fixed: 1/2 at μ = 0, the paper's 1/4 with friction):", ""]
@@ -214,6 +215,24 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped):
     L += ["", "## Skipped", ""]
     L += [_table(["run", "reason"], [[f"`{s['path']}`", s["reason"]] for s in skipped])] if skipped else ["None."]
     rundir.write_atomic(path, "\n".join(L) + "\n")
+
+
+def _depth_section(windows):
+    """z and phi on fixed depth windows below the surface (``depth.csv``; docs/model.md 6.10)."""
+    have = [r for r in windows if math.isfinite(r["mean"])]
+    if not have:
+        return []
+    L = ["## z and φ at fixed depths below the surface (`depth.csv`)", "",
+         "The slab of docs/model.md 6.1 follows each pile's height; these windows are the same depths in every "
+         "pile. Errors: the seed scatter pooled over the sets of one N and μ, over √(seeds of the set); and the "
+         "jackknife over each pile's 4 × 4 lateral columns, combined over its seeds (independent of the seeds). "
+         "A run analysed before the windows existed has none (`mpdem analyze` again).", ""]
+    L += [_table(["set", "μ", "N", "window [d]", "quantity", "mean", "± pooled seeds", "± jackknife", "seeds"],
+                 [[r["set"], f"{r['mu']:g}", r["N"], r["window"], "z" if r["quantity"] == "z" else "φ",
+                   f"{r['mean']:.{3 if r['quantity'] == 'z' else 4}f}",
+                   *(f"{r[k]:.{3 if r['quantity'] == 'z' else 4}f}" if math.isfinite(r[k]) else "—"
+                     for k in ("pooled_sem", "jackknife")), r["n_seeds"]] for r in have]), ""]
+    return L
 
 
 def _fit_lines(e, kind):

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import PARAM_KEYS
+from . import depth
 
 SHORT = {k: k.split(".", 1)[1] for k in PARAM_KEYS}   # contact.mu -> mu, run.seed -> seed, ...
 # k_t, gamma_n, gamma_t and dt follow k_n in a stiffness sweep (docs/model.md 3, 4.2)
@@ -82,6 +83,7 @@ def quantities(s):
              # from n_m (4 + n_m / 3, physics.md 6.2): summaries written before 2026-11-26 hold 4 + 2 n_m / 3
              z_iso=4.0 + num(iso["n_m"]) / 3.0 if "n_m" in iso else NAN,
              crystal_fraction=num(od.get("crystal_fraction")))
+    q.update(depth.window_quantities(s, num))
     return q
 
 
