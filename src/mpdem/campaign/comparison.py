@@ -225,7 +225,8 @@ def _depth_section(windows):
     L = ["## z and φ at fixed depths below the surface (`depth.csv`)", "",
          "The slab of docs/model.md 6.1 follows each pile's height; these windows are the same depths in every "
          "pile. Errors: the seed scatter pooled over the sets of one N and μ, over √(seeds of the set); and the "
-         "jackknife over each pile's 4 × 4 lateral columns, combined over its seeds (independent of the seeds). "
+         "jackknife over each pile's 4 × 4 lateral columns, combined over its seeds: independent of the seeds, and an "
+         "upper bound (a pile's columns are anticorrelated; docs/model.md 6.10). "
          "A run analysed before the windows existed has none (`mpdem analyze` again).", ""]
     L += [_table(["set", "μ", "N", "window [d]", "quantity", "mean", "± pooled seeds", "± jackknife", "seeds"],
                  [[r["set"], f"{r['mu']:g}", r["N"], r["window"], "z" if r["quantity"] == "z" else "φ",
