@@ -120,3 +120,23 @@ def test_collect_pools_the_seed_scatter_over_sets_of_one_N_and_mu_and_combines_t
     rc = rows[("S03", "z", "10-30")]
     assert math.isnan(rc["pooled_sem"]) and rc["jackknife"] == pytest.approx(0.03)
     assert "S01 (mu = 0, N = 20000) z at 10-30 d: 6.120 +- 0.016" in depth.lines(list(rows.values()))[0]
+
+
+def test_the_backbone_is_reported_at_each_cut_and_the_default_cut_is_the_backbone(tmp_path):
+    """``backbone_cuts`` (docs/model.md 6.10) on a committed pile: at each cut the backbone of
+    ``backbone.of_packing``; the 1 % cut is the summary's backbone; a higher cut keeps no more."""
+    from pathlib import Path
+    from mpdem.analysis import backbone, bulk, contacts
+    from mpdem.io import packing
+    src = Path(__file__).parents[1] / "analysis/results/paper/runs/dev/mu0.5_eps0.88_kn2e5_phi0.13_s1_max_steps1e7"
+    s, _ = report.analyze(str(src / "packing.npz"), out=str(tmp_path / "a"), plots=False, log=lambda m: None)
+    cuts = s["backbone_cuts"]
+    assert [c["force_fraction"] for c in cuts] == [0.001, 0.01, 0.05]
+    assert cuts[1]["z"] == s["backbone"]["z"]
+    assert cuts[0]["z"] >= cuts[1]["z"] >= cuts[2]["z"] and cuts[0]["rattler_fraction"] <= cuts[2]["rattler_fraction"]
+    arrays, attrs = packing.read(str(src / "packing.npz"))
+    pk = bulk.Packing(arrays["x"], arrays["fixed"], attrs["L_x"], attrs["L_y"], 0.5)
+    cf = contacts.contact_forces(pk, arrays, 2e5, 0.5, "hooke")
+    bb = backbone.of_packing(pk, cf, s["h"], 2.5, 0.05)
+    rows = pk.in_slab(s["z1"], s["z2"]) & bb["kept"]
+    assert cuts[2]["z"] == float(bb["counts"][rows].mean())

@@ -169,6 +169,9 @@ SCHEMA = (
     _k("analysis", "force_fraction", 0.01,
        "the backbone's force cut: a contact whose normal force is below this fraction of the mean of its "
        "depth band carries no load", restart=True, physics=False),
+    _k("analysis", "backbone_cuts", (0.001, 0.01, 0.05),
+       "force cuts (fractions of the depth band's mean normal force) at which the backbone's z is also reported "
+       "(docs/model.md 6.10)", list, restart=True, physics=False),
     _k("analysis", "band_width", 2.5,
        "depth bands below the free surface of the depth profile, P(f) and the backbone's force cut [d]",
        restart=True, physics=False),
@@ -602,6 +605,8 @@ def resolve(raw):
     dw = vals["analysis.depth_windows"]
     need("analysis.depth_windows", len(dw) % 2 == 0 and all(0 <= t < b for t, b in zip(dw[::2], dw[1::2])),
          "pairs (top, bottom) of depths below the surface, 0 <= top < bottom")
+    need("analysis.backbone_cuts", all(0 <= c < 1 for c in vals["analysis.backbone_cuts"]),
+         "fractions 0 <= cut < 1")
     need("analysis.jackknife_columns", vals["analysis.jackknife_columns"] >= 2, "jackknife_columns >= 2")
     need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
     need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")

@@ -110,6 +110,19 @@ def backbone_z(m):
         "P_z": bulk.histogram_z(bb["counts"][bk]).tolist()}
 
 
+def backbone_cuts(m):
+    """z of the backbone at several force cuts (6.10): how much of z - z_backbone is the cut's own."""
+    a, pk = m.cfg.analysis, m.pk
+    out = []
+    for cut in a.backbone_cuts:
+        bb = backbone.of_packing(pk, m.cf, m.reg["h"], a.band_width, cut)
+        bk = m.bulk_rows & bb["kept"]
+        out.append({"force_fraction": cut, "z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
+                    "rattler_fraction": float(1.0 - bk.sum() / max(m.bulk_rows.sum(), 1)),
+                    "weak_fraction": float(bb["weak"][m.in_slab].mean()) if m.in_slab.any() else math.nan})
+    m.summary["backbone_cuts"] = out
+
+
 def isostatic_count(m):
     """The generalized isostatic count of a frictional packing (6.2; ``isostatic``)."""
     m.summary["isostatic"] = isostatic(m.pk, m.cf, m.bb["live"], m.bb["kept"], m.bulk_rows, m.cfg.contact.mu,
@@ -251,8 +264,8 @@ class Measure:
 
 
 MEASURES = tuple(Measure(f.__name__, f, f.__doc__.split("\n")[0]) for f in (
-    slab, backbone_z, isostatic_count, halved_margins, crystal_order, depth_bands, force_distribution, alpha,
-    radial_distribution, force_ratios, depth_windows))
+    slab, backbone_z, backbone_cuts, isostatic_count, halved_margins, crystal_order, depth_bands,
+    force_distribution, alpha, radial_distribution, force_ratios, depth_windows))
 
 
 def measure(arrays, attrs, cfg):
