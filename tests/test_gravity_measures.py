@@ -139,6 +139,33 @@ def test_alpha_from_gaps_drawn_from_a_known_power_law_and_its_error_is_calibrate
     assert est[:, 0].std() == pytest.approx(est[:, 1].mean(), rel=0.15)
 
 
+def test_the_power_law_goodness_of_fit_keeps_a_power_law_and_rejects_a_broken_one():
+    """``window_stats``'s KS test (docs/model.md 6.5): gaps of one power law pass (the p of a fitted
+    law is conservative: fewer than 5 % of draws below 0.05); gaps whose slope changes from 0.3 to 0.7
+    at xi = 1e-2 (a density continuous there) fail on the whole window and pass on each half."""
+    rng = np.random.default_rng(12)
+    a, m, b = 1e-3, 1e-2, 5e-2
+    ps = [nearcontact.window_stats(draw_gaps(rng, 800, 0.5, a, b), a, b)["ks_p"] for _ in range(200)]
+    assert np.mean(np.array(ps) < 0.05) < 0.05 and np.median(ps) > 0.3
+    # the two pieces' masses for a density continuous at m: c1 m^-0.3 = c2 m^-0.7
+    lo_mass = (m ** 0.7 - a ** 0.7) / 0.7
+    hi_mass = m ** 0.4 * (b ** 0.3 - m ** 0.3) / 0.3
+    n_lo = rng.binomial(6000, lo_mass / (lo_mass + hi_mass))
+    xi = np.concatenate([draw_gaps(rng, n_lo, 0.3, a, m), draw_gaps(rng, 6000 - n_lo, 0.7, m, b)])
+    whole = nearcontact.window_stats(xi, a, b)
+    assert whole["ks_p"] < 1e-4 and whole["ks"] > 0.02
+    assert nearcontact.window_stats(xi, a, m)["ks_p"] > 1e-3 and nearcontact.window_stats(xi, m, b)["ks_p"] > 1e-3
+    assert math.isnan(nearcontact.window_stats(xi[:5], a, b)["ks_p"])
+    # the CDF is the likelihood's density xi^-alpha (1 + xi)^2 integrated, also where a term is a log
+    from scipy.integrate import quad
+    for al in (0.5, 1.0, 2.0, 3.0):
+        whole = quad(lambda t: t ** -al * (1 + t) ** 2, a, b, limit=200)[0]
+        part = quad(lambda t: t ** -al * (1 + t) ** 2, a, 7e-3, limit=200)[0]
+        assert nearcontact.power_law_cdf(7e-3, al, a, b) == pytest.approx(part / whole, rel=1e-9)
+        assert nearcontact.power_law_cdf(b, al, a, b) == pytest.approx(1.0)
+        assert nearcontact.power_law_cdf(a, al, a, b) == 0
+
+
 def test_pooled_seeds_are_the_estimate_of_all_their_gaps_and_bootstrap_scatters():
     rng = np.random.default_rng(4)
     a, b = 1e-2, 5e-2
