@@ -148,11 +148,15 @@ class Figures:
                     color="grey", va="bottom")
 
     def _legend(self, ax):
+        """The axes' legend below them, outside the data (``plots.save`` keeps it in the figure): two
+        columns when long and the axes are the figure's only ones (side by side, each its own column)."""
         h, lab = ax.get_legend_handles_labels()
         seen = {}
         for hh, ll in zip(h, lab):
             seen.setdefault(ll, hh)
-        ax.legend(seen.values(), seen.keys(), fontsize=7)
+        if seen:
+            ax.legend(seen.values(), seen.keys(), fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16),
+                      ncol=2 if len(seen) > 5 and len(ax.figure.axes) == 1 else 1, frameon=False)
 
     def _file(self, name):
         return os.path.join(self.out, name)
