@@ -65,10 +65,6 @@ class Sample:
     def z2(self):
         return self.reg["z2"]
 
-    @property
-    def L(self):
-        return self.pk.L_x, self.pk.L_y
-
 
 def sample(arrays, attrs, cfg):
     """The ``Sample`` of a state: the packing, its slab, contact forces and backbone."""
@@ -97,29 +93,31 @@ def slab(m):
                              "z_bed": pk.z_bed})
 
 
+def _backbone_numbers(m, bb):
+    """z, rattler and weak-contact fractions of the backbone ``bb`` in the slab."""
+    bk = m.bulk_rows & bb["kept"]
+    return {"z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
+            "rattler_fraction": float(1.0 - bk.sum() / max(m.bulk_rows.sum(), 1)),
+            "weak_fraction": float(bb["weak"][m.in_slab].mean()) if m.in_slab.any() else math.nan}
+
+
 def backbone_z(m):
     """z of the force backbone and its rattlers (6.3)."""
     a, bb, cf = m.cfg.analysis, m.bb, m.cf
-    bk = m.bulk_rows & bb["kept"]
-    m.summary["backbone"] = {
-        "z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
-        "rattler_fraction": float(1.0 - bk.sum() / max(m.bulk_rows.sum(), 1)),
-        "weak_fraction": float(bb["weak"][m.in_slab].mean()) if m.in_slab.any() else math.nan,
-        "force_fraction": a.force_fraction, "band_width": a.band_width,
-        "forces_from_file": float(cf.from_file.mean()) if len(cf.from_file) else math.nan,
-        "P_z": bulk.histogram_z(bb["counts"][bk]).tolist()}
+    m.summary["backbone"] = dict(
+        _backbone_numbers(m, bb), force_fraction=a.force_fraction, band_width=a.band_width,
+        forces_from_file=float(cf.from_file.mean()) if len(cf.from_file) else math.nan,
+        P_z=bulk.histogram_z(bb["counts"][m.bulk_rows & bb["kept"]]).tolist())
 
 
 def backbone_cuts(m):
     """z of the backbone at several force cuts (6.10): how much of z - z_backbone is the cut's own."""
-    a, pk = m.cfg.analysis, m.pk
+    a = m.cfg.analysis
     out = []
     for cut in a.backbone_cuts:
-        bb = backbone.of_packing(pk, m.cf, m.reg["h"], a.band_width, cut)
-        bk = m.bulk_rows & bb["kept"]
-        out.append({"force_fraction": cut, "z": float(bb["counts"][bk].mean()) if bk.any() else math.nan,
-                    "rattler_fraction": float(1.0 - bk.sum() / max(m.bulk_rows.sum(), 1)),
-                    "weak_fraction": float(bb["weak"][m.in_slab].mean()) if m.in_slab.any() else math.nan})
+        # the run's own cut is the backbone already made
+        bb = m.bb if cut == a.force_fraction else backbone.of_packing(m.pk, m.cf, m.reg["h"], a.band_width, cut)
+        out.append(dict(force_fraction=cut, **_backbone_numbers(m, bb)))
     m.summary["backbone_cuts"] = out
 
 
