@@ -7,7 +7,15 @@
 # scipy, h5py and mpi4py (an MPI library only for RANKS > 1); writes its logs and a summary to $OUT
 # (default ./gpu_check_out) and prints the summary table last. About 5 minutes on an H100.
 #   bash tools/gpu_check.sh [TABLE]        TABLE: the bench's landed20k.txt.gz (no timings of it without)
-#   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes)
+#   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes):
+#       the config of a committed CPU run (REF, default the paper-size mu = 0.5 seed 1), its digest against that run's
+#   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
+#       bench (the GPU on the 20k table and its tiles; BENCH_CPU=1 the CPU engine too), digests (CPU against GPU
+#       on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a stiffening rung), pour (with
+#       POUR_MINUTES), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
+#       compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput and stall sections of the
+#       fused steps and the list build, where `ncu` is found)
+#   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -22,14 +30,19 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 SUM=$OUT/summary.txt
 : > "$SUM"
 say() { echo "$*" | tee -a "$SUM"; }
-w=$OUT/work
-rm -rf "$w"; mkdir -p "$w"
+PARTS=${PARTS:-bench digests pour switch pytest}
+has() { case " $PARTS " in *" $1 "*) return 0;; esac; return 1; }
+w=${WORK:-$OUT/work}
+[ "${KEEP_WORK:-0}" = 1 ] || rm -rf "$w"
+mkdir -p "$w"
 if [ "$SIZE" = small ]; then
     EX=(--set pour.N=40 --set box.L_x=4 --set box.L_y=4 --set pour.K0=5 --set contact.k_n=2e3); EXSTEPS=200
     LSTEPS=100; BSTEPS=20; TSTEPS=5; TILE=1x1; POUR=(--set pour.N=60 --set box.L_x=4 --set box.L_y=4); PSTEPS=100
+    STIFF=(--k_n 2e4 --set run.max_steps=100 --set stiffen.ramp_time=0.02 --set stiffen.update_interval=0.005)
 else
     EX=(); EXSTEPS=30000; LSTEPS=2000; BSTEPS=2000; TSTEPS=200; TILE=7x7
     POUR=(--set pour.N=20000 --set box.L_x=20 --set box.L_y=20); PSTEPS=20000
+    STIFF=(--k_n 2e6 --set run.max_steps=3000 --set stiffen.ramp_time=0.05)
 fi
 
 say "gpu_check $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
@@ -38,11 +51,7 @@ say "python: $($PY -c 'import sys, numpy, numba; print(sys.version.split()[0], "
 $PY -c 'import importlib.metadata as m; print("numba-cuda", m.version("numba-cuda"))' 2>/dev/null | tee -a "$SUM"
 
 t0=$SECONDS
-# 1. the engine tests with the kernels compiled for the GPU (the pour and no-GPU tests need MPI and none)
-MPDEM_REAL_GPU=1 $PY -m pytest -q -p no:cacheprovider tests/test_gpu_engine.py -k "not pour and not no_gpu" \
-    > "$OUT/pytest.log" 2>&1
-say "pytest tests/test_gpu_engine.py on the GPU: $(tail -1 "$OUT/pytest.log") ($((SECONDS - t0)) s)"
-
+digest() { $PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$1/summary.json" 2>/dev/null; }
 run() {  # name device steps sets...: a run; prints its digest and seconds
     local name=$1 dev=$2 steps=$3; shift 3
     local t=$SECONDS
@@ -50,8 +59,7 @@ run() {  # name device steps sets...: a run; prints its digest and seconds
         --set output.progress_every=100000 "$@" > "$w/$name.log" 2>&1
     local rc=$?
     local dg
-    dg=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/$name/summary.json" 2>/dev/null \
-         || echo "failed(rc=$rc)")
+    dg=$(digest "$w/$name" || echo "failed(rc=$rc)")
     echo "$dg $((SECONDS - t))"
 }
 compare() {  # label sets...: the same run on the CPU and on the GPU
@@ -61,64 +69,103 @@ compare() {  # label sets...: the same run on the CPU and on the GPU
     local v=DIFFER; [ "$dc" = "$dg" ] && v=equal
     say "digest $label ($steps steps): cpu ${dc:0:16} (${sc} s) gpu ${dg:0:16} (${sg} s): $v"
 }
+# 1. timings
+if has bench; then
+    if [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
+        devs=(gpu); [ "${BENCH_CPU:-0}" = 1 ] && devs+=(cpu cpu16)
+        for dev in "${devs[@]}"; do
+            opt=(--device ${dev%16}); [ $dev = cpu16 ] && opt+=(--threads 16)
+            $PY -m mpdem bench --table "$TABLE" "${opt[@]}" --steps $BSTEPS > "$OUT/bench-$dev.log" 2>&1
+            say "bench 20k $dev: $(grep -h 'rank(s)' "$OUT/bench-$dev.log" | head -1 | cut -c1-160)"
+            say "    $(tail -1 "$OUT/bench-$dev.log")"
+        done
+        grep -h "bench: " "$OUT/bench-gpu.log" | sed -n '3,9p' | tee -a "$SUM"
+        $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
+        say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
+    else
+        say "bench: no table at $TABLE"
+    fi
+fi
 # 2. the digests, CPU against GPU
-compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
-compare example-mu0 $EXSTEPS "${EX[@]}" --set contact.mu=0
-LMP=(--set 'run.initial_file="tests/data/lammps_sphere.data"' --set 'run.fixed_types=[2]' --set contact.gamma_t=20)
-compare lammps-hooke $LSTEPS "${LMP[@]}" --set contact.mu=0.5
-compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
-# 3. a restart that switches device: the first half on the CPU, the rest on the GPU
-half=$((EXSTEPS / 2))
-$PY -m mpdem run --out "$w/switch" --force --quiet --device cpu --set run.max_steps=$half \
-    --set output.checkpoint_every=$half "${EX[@]}" --set contact.mu=0.5 > "$w/switch.log" 2>&1
-$PY -m mpdem restart "$w/switch" --device gpu --set run.max_steps=$EXSTEPS --quiet >> "$w/switch.log" 2>&1
-ds=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/switch/summary.json" 2>/dev/null)
-ref=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/example-mu0.5-cpu/summary.json" 2>/dev/null)
-v=DIFFER; [ -n "$ds" ] && [ "$ds" = "$ref" ] && v=equal
-say "digest restart cpu -> gpu at step $half: ${ds:0:16} against the straight cpu ${ref:0:16}: $v"
-# 4. run to run on the GPU
-read -r d2 s2 < <(run example-mu0.5-gpu2 gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5)
-d1=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/example-mu0.5-gpu/summary.json" 2>/dev/null)
-v=DIFFER; [ "$d1" = "$d2" ] && v=equal
-say "digest gpu run to run: ${d1:0:16} ${d2:0:16}: $v"
-# 5. two ranks, each with the GPU engine (here both on the one GPU), against one CPU rank
-if command -v mpiexec > /dev/null; then
-    mpiexec -n 2 $PY -m mpdem run --out "$w/two" --force --quiet --device gpu --set run.max_steps=$EXSTEPS \
-        "${EX[@]}" --set contact.mu=0.5 > "$w/two.log" 2>&1
-    dt=$($PY -c "import json,sys; print(json.load(open(sys.argv[1]))['digest'])" "$w/two/summary.json" 2>/dev/null)
-    v=DIFFER; [ -n "$dt" ] && [ "$dt" = "$ref" ] && v=equal
-    say "digest 2 ranks on the gpu: ${dt:0:16} against 1 cpu rank ${ref:0:16}: $v"
-else
-    say "digest 2 ranks on the gpu: no mpiexec here"
-fi
-say "checks done in $((SECONDS - t0)) s"
-
-# 6. timings
-if [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
-    for dev in gpu cpu cpu16; do
-        opt=(--device ${dev%16}); [ $dev = cpu16 ] && opt+=(--threads 16)
-        $PY -m mpdem bench --table "$TABLE" "${opt[@]}" --steps $BSTEPS > "$OUT/bench-$dev.log" 2>&1
-        say "bench 20k $dev: $(grep -h 'rank(s)' "$OUT/bench-$dev.log" | head -1 | cut -c1-160)"
-        say "    $(tail -1 "$OUT/bench-$dev.log")"
+if has digests; then
+    compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
+    compare example-mu0 $EXSTEPS "${EX[@]}" --set contact.mu=0
+    LMP=(--set 'run.initial_file="tests/data/lammps_sphere.data"' --set 'run.fixed_types=[2]' --set contact.gamma_t=20)
+    compare lammps-hooke $LSTEPS "${LMP[@]}" --set contact.mu=0.5
+    compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
+    # a stiffening rung of that pile (physics.md 6.6: the ramp's laws, the history rescaled) on both devices
+    for dev in cpu gpu; do
+        $PY -m mpdem stiffen "$w/example-mu0.5-cpu" "${STIFF[@]}" --out "$w/stiff-$dev" --force --quiet --device $dev \
+            > "$w/stiff-$dev.log" 2>&1
     done
-    grep -h "bench: " "$OUT/bench-gpu.log" | sed -n '3,9p' | tee -a "$SUM"
-    $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
-    say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
-else
-    say "bench: no table at $TABLE"
+    dc=$(digest "$w/stiff-cpu"); dg=$(digest "$w/stiff-gpu")
+    v=DIFFER; [ -n "$dc" ] && [ "$dc" = "$dg" ] && v=equal
+    say "digest stiffened ${STIFF[*]:0:2}: cpu ${dc:0:16} gpu ${dg:0:16}: $v"
+    say "digests done at $((SECONDS - t0)) s"
 fi
-t=$SECONDS
-$PY -m mpdem run --out "$w/pour" --force --quiet --device gpu --set run.max_steps=$PSTEPS "${POUR[@]}" \
-    --set contact.mu=0.5 --set output.progress_every=100000 > "$w/pour.log" 2>&1
-say "paper-size pour on the gpu: $PSTEPS steps in $((SECONDS - t)) s (bed making and set-up included); thermo's last step,rebuilds,loop seconds: $(tail -1 "$w/pour/thermo.csv" | cut -d, -f1,10,11)"
-# POUR_MINUTES=M: the paper-size pour from its start to the stop rule, or M minutes of it (the issue's target: 5)
-if [ "${POUR_MINUTES:-0}" -gt 0 ]; then
+# 3. POUR_MINUTES=M: a committed CPU run's pour (REF: its config.toml and summary.json) from its start to its stop
+# rule on the GPU, or M minutes of it; the issue's target for the paper size: 5 minutes. Converged, its digest is
+# compared with the CPU run's.
+if has pour && [ "${POUR_MINUTES:-0}" -gt 0 ]; then
+    REF=${REF:-analysis/results/paper/runs/size/mu0.5_eps0.88_kn2e5_phi0.13_s1_max_steps2e7}
     t=$SECONDS
-    $PY -m mpdem run --out "$w/whole" --force --quiet --device gpu --set run.max_steps=10000000 "${POUR[@]}" \
-        --set contact.mu=0.5 --set output.progress_every=1000000 --walltime "00:$(printf %02d "$POUR_MINUTES"):00" \
-        > "$w/whole.log" 2>&1
+    $PY -m mpdem run "$REF/config.toml" --out "$w/whole" --force --quiet --device gpu \
+        --set output.progress_every=1000000 --walltime "00:$(printf %02d "$POUR_MINUTES"):00" > "$w/whole.log" 2>&1
     rc=$?
-    say "paper-size pour to the stop rule on the gpu: exit status $rc (0 converged, 75 the time ran out) after $((SECONDS - t)) s; thermo's last step,E_k,rebuilds,loop seconds: $(tail -1 "$w/whole/thermo.csv" | cut -d, -f1,3,10,11)"
+    dw=$(digest "$w/whole"); dr=$(digest "$REF")
+    v=DIFFER; [ -n "$dw" ] && [ "$dw" = "$dr" ] && v=equal
+    say "pour to the stop rule on the gpu ($REF): exit status $rc (0 converged, 75 the time ran out) after $((SECONDS - t)) s; thermo's last step,E_k,rebuilds,loop seconds: $(tail -1 "$w/whole/thermo.csv" | cut -d, -f1,3,10,11)"
+    say "    digest ${dw:0:16} against the CPU run's ${dr:0:16} ($(grep -o '"steps": [0-9]*' "$REF/summary.json")): $v"
+    tail -3 "$w/whole.log" | tee -a "$SUM"
+fi
+# 4. a restart that switches device, run to run, two ranks
+if has switch; then
+    # a restart that switches device: the first half on the CPU, the rest on the GPU
+    half=$((EXSTEPS / 2))
+    $PY -m mpdem run --out "$w/switch" --force --quiet --device cpu --set run.max_steps=$half \
+        --set output.checkpoint_every=$half "${EX[@]}" --set contact.mu=0.5 > "$w/switch.log" 2>&1
+    $PY -m mpdem restart "$w/switch" --device gpu --set run.max_steps=$EXSTEPS --quiet >> "$w/switch.log" 2>&1
+    ds=$(digest "$w/switch")
+    ref=$(digest "$w/example-mu0.5-cpu")
+    v=DIFFER; [ -n "$ds" ] && [ "$ds" = "$ref" ] && v=equal
+    say "digest restart cpu -> gpu at step $half: ${ds:0:16} against the straight cpu ${ref:0:16}: $v"
+    # run to run on the GPU
+    read -r d2 s2 < <(run example-mu0.5-gpu2 gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5)
+    d1=$(digest "$w/example-mu0.5-gpu")
+    v=DIFFER; [ "$d1" = "$d2" ] && v=equal
+    say "digest gpu run to run: ${d1:0:16} ${d2:0:16}: $v"
+    # two ranks, each with the GPU engine (here both on the one GPU), against one CPU rank
+    if command -v mpiexec > /dev/null; then
+        mpiexec -n 2 $PY -m mpdem run --out "$w/two" --force --quiet --device gpu --set run.max_steps=$EXSTEPS \
+            "${EX[@]}" --set contact.mu=0.5 > "$w/two.log" 2>&1
+        dt=$(digest "$w/two")
+        v=DIFFER; [ -n "$dt" ] && [ "$dt" = "$ref" ] && v=equal
+        say "digest 2 ranks on the gpu: ${dt:0:16} against 1 cpu rank ${ref:0:16}: $v"
+    else
+        say "digest 2 ranks on the gpu: no mpiexec here"
+    fi
+    say "switch checks done at $((SECONDS - t0)) s"
+fi
+# 5. the engine tests with the kernels compiled for the GPU (the pour and no-GPU tests need MPI and none)
+if has pytest; then
+    MPDEM_REAL_GPU=1 $PY -m pytest -q -p no:cacheprovider tests/test_gpu_engine.py -k "not pour and not no_gpu" \
+        > "$OUT/pytest.log" 2>&1
+    say "pytest tests/test_gpu_engine.py on the GPU: $(tail -1 "$OUT/pytest.log") ($((SECONDS - t0)) s)"
+fi
+# 6. PARTS=profile: Nsight Compute on the fused steps and the GPU list build of a short bench (launch, occupancy,
+# throughput, stalls); the first four launches are the bench's warm-up on a tiny pile
+if has profile; then
+    NCU=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu /usr/local/cuda/bin/ncu 2>/dev/null | head -1)
+    if [ -n "$NCU" ] && [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
+        t=$SECONDS
+        "$NCU" --clock-control none --target-processes all -k 'regex:advance|count_partners|write_partners|carry_history' \
+            --launch-count ${NCU_LAUNCHES:-12} --section LaunchStats --section Occupancy --section SpeedOfLight \
+            --section WarpStateStats --section MemoryWorkloadAnalysis \
+            $PY -m mpdem bench --table "$TABLE" --device gpu --steps ${NCU_STEPS:-300} > "$OUT/ncu.txt" 2>&1
+        say "profile: $OUT/ncu.txt (rc $?, $((SECONDS - t)) s)"
+    else
+        say "profile: no ncu or no table"
+    fi
 fi
 say "gpu_check done in $((SECONDS - t0)) s"
 echo "---- summary ($SUM)"

@@ -1,7 +1,8 @@
-"""Command line: ``python -m mpdem run|restart|analyze|collect|sweep|info|export|bench``.
+"""Command line: ``python -m mpdem run|restart|stiffen|analyze|collect|sweep|info|export|bench``.
 
     python -m mpdem run [CONFIG.toml] [--set section.key=value ...] [--out DIR] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem restart RUN_DIR|STATE_FILE [--set ...] [--walltime HH:MM:SS] [--threads T]
+    python -m mpdem stiffen RUN_DIR --k_n K [--out DIR] [--set ...] [--walltime HH:MM:SS] [--threads T]
     python -m mpdem analyze RUN_DIR|STATE_FILE [--out DIR] [--set analysis.key=value ...] [--series]
     python -m mpdem collect RUN_DIR ... [--out DIR]
     python -m mpdem sweep TABLE ... --out DIR [--config FILE] [--jobs J] [--ranks R] [--threads T] [--set ...]
@@ -106,6 +107,36 @@ def cmd_run(args, net):
     r = api.run(cfg, args.out or default_out(), threads=None, force=args.force, quiet=args.quiet,
                 walltime=args.walltime, walltime_margin=args.walltime_margin, net=net, t_start=T_START,
                 signals=SIGNALS)
+    return r.exit_status
+
+
+def stiffen_config(run, k_n, sets):
+    """The config of a rung that stiffens finished run ``run`` to ``k_n`` (``mpdem stiffen``): the run's
+    own keys (the derived ones derived again at the new k_n), contact.k_n = ``k_n``, stiffen.k_n_from
+    = the run's k_n, run.initial_file = RUN/final.h5, then ``sets``."""
+    from . import config
+    from .errors import InputError
+    from .io import rundir
+    final = rundir.final_path(run)
+    if not os.path.exists(final):
+        raise InputError(f"{run}: no final.h5; stiffen accepts a finished run's directory")
+    with open(os.path.join(run, "config.toml")) as fh:
+        raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
+    was = config.resolve(raw).contact.k_n
+    ours = [f"contact.k_n={k_n!r}", f"stiffen.k_n_from={was!r}", f"run.initial_file={config.toml_value(final)}"]
+    return config.load(None, ours + list(sets), base=raw)
+
+
+def cmd_stiffen(args, net):
+    from . import api, config
+    from .errors import AgreedError, InputError
+    try:
+        cfg = stiffen_config(args.run, args.k_n, args.set + device_items(args))
+    except (config.ConfigError, InputError, OSError) as e:
+        raise AgreedError(str(e)) from None
+    out = args.out or f"{os.path.normpath(args.run)}-kn{args.k_n:g}"
+    r = api.run(cfg, out, threads=None, force=args.force, quiet=args.quiet, walltime=args.walltime,
+                walltime_margin=args.walltime_margin, net=net, t_start=T_START, signals=SIGNALS)
     return r.exit_status
 
 
@@ -229,7 +260,7 @@ def threads_wanted(args):
     """numba threads the command asks for: --threads, else 1 for run, restart and the table
     bench; None (numba's default) for the other commands and bench --io/--analysis."""
     n = getattr(args, "threads", None)
-    if n is None and (args.cmd in ("run", "restart") or (args.cmd == "bench" and args.table is not None)):
+    if n is None and (args.cmd in ("run", "restart", "stiffen") or (args.cmd == "bench" and args.table is not None)):
         n = 1
     return n
 
@@ -251,7 +282,17 @@ def parser():
     rs.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="change run.max_steps, stop.*, checks.*, decomp.*, engine.*, output.* or analysis.*")
     rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
-    for q in (r, rs):
+    sf = sub.add_parser("stiffen", help="a new run: a finished run's pile stiffened to --k_n through the ramp "
+                                        "(physics.md 6.6), then settled by the stop rule")
+    sf.add_argument("run", metavar="RUN_DIR", help="a finished run (its config.toml and final.h5)")
+    sf.add_argument("--k_n", type=float, required=True, metavar="K",
+                    help="the new contact.k_n [m g / d], at most ten times the run's")
+    sf.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="override a value of the new run's config (run.max_steps, stiffen.ramp_time, ...)")
+    sf.add_argument("--out", help="run directory (default RUN_DIR-knK)")
+    sf.add_argument("--force", action="store_true", help="reuse an --out that holds a run")
+    sf.add_argument("--quiet", action="store_true", help="progress to the log file only")
+    for q in (r, rs, sf):
         q.add_argument("--device", choices=("cpu", "gpu"), default=None,
                        help="what steps the particles (engine.device; default the config's, cpu)")
         q.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
@@ -395,7 +436,7 @@ def _main(argv):
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
     from .errors import MpdemError
-    handlers = {"run": cmd_run, "restart": cmd_restart, "info": cmd_info, "export": cmd_export,
+    handlers = {"run": cmd_run, "restart": cmd_restart, "stiffen": cmd_stiffen, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, net)

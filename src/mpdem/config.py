@@ -105,6 +105,15 @@ SCHEMA = (
     _k("integration", "near_skin", 0.03,
        "the force kernel's reach beyond contact [d] (<= skin; no effect on results): the list entries"
        " within 1 + near_skin, filtered again when a particle moved near_skin/2", physics=False),
+    _k("stiffen", "k_n_from", 0.0,
+       "stiffen a settled pile (physics.md 6.6): the k_n [m g / d] that run.initial_file was settled at, from "
+       "which k_n rises geometrically to contact.k_n over stiffen.ramp_time (k_t, gamma_n from epsilon and "
+       "gamma_t following, each Delta s rescaled by k_t old / new), after which the stop rule runs; at most a "
+       "decade a rung; 0 = no ramp (`mpdem stiffen RUN --k_n K` sets it)"),
+    _k("stiffen", "ramp_time", 10.0, "duration of the stiffening ramp [tau]"),
+    _k("stiffen", "update_interval", 0.01,
+       "the ramp's law changes this often [tau] (rounded to whole steps; between changes a GPU runs its steps "
+       "in one launch)"),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "force_ratio", 0.01,
@@ -563,6 +572,15 @@ def resolve(raw):
     if gamma_n * dt > 0.5:
         raise ConfigError(f"integration.dt = {dt:g}: gamma_n dt = {gamma_n * dt:.3g}; accepted gamma_n dt <= 0.5")
 
+    k_from = vals["stiffen.k_n_from"]
+    need("stiffen.k_n_from", k_from == 0 or k_from > 0 and 1 < k_n / k_from <= 10 * (1 + 1e-12),
+         f"0 (no ramp) or a stiffness below contact.k_n = {k_n:g} by at most a decade (a rung; several rungs "
+         f"for more)")
+    need("stiffen.ramp_time", vals["stiffen.ramp_time"] > 0, "ramp_time > 0")
+    need("stiffen.update_interval", 0 < vals["stiffen.update_interval"] <= vals["stiffen.ramp_time"],
+         "0 < update_interval <= ramp_time")
+    if k_from > 0 and not vals["run.initial_file"]:
+        raise ConfigError(f"stiffen.k_n_from = {k_from:g} needs run.initial_file: the pile settled at that k_n")
     if vals["stop.E_stop"] is None:
         vals["stop.E_stop"] = 1e-8 * (k_n / 2e5) ** -0.75
         derived.add("stop.E_stop")

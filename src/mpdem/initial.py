@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import build, state
+from . import build, state, stiffen
 from .errors import InputError
 from .io import tables
 from .io import checkpoint, lammps
@@ -152,6 +152,8 @@ def initial_state(cfg, net, log, lammps_table=None):
     """
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     if cfg.run.initial_file:
+        # a settled pile met by a stiffer spring needs the ramp (physics.md 6.6)
+        stiffen.check_initial(cfg, cfg.run.initial_file)
         p = particles(cfg.run.initial_file, cfg, lammps_table=lammps_table, log=log)
         fixed, x = p["fixed"], p["x"]
         b = build.Bed(x[fixed == 1].copy(), note=f"from {cfg.run.initial_file}")

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .. import initial, memory, threads
+from .. import initial, memory, stiffen, threads
 from ..io import tables
 from ..io import checkpoint
 from . import summary
@@ -180,6 +180,9 @@ class Run:
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
         self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block)
+        # the stiffening ramp's laws (``stiffen``), None without one; the engine's law is the step's
+        self.ramp = stiffen.Ramp.from_config(cfg, self.physics.law)
+        self._law_at(self.state.step)
         self.status = None          # "converged", "max_steps" or "interrupted"
         self.t0 = time.perf_counter()   # the loop's clock (started again when the loop starts)
         self.wall = 0.0             # the loop's wall time [s]
@@ -214,6 +217,17 @@ class Run:
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
                  f"E_stop = {cfg.stop.E_stop:.3g} ({cfg.stop.rule}), max_steps = {cfg.run.max_steps}, "
                  f"seed = {cfg.run.seed}, ranks = {self.domain.size}")
+        if self.ramp:
+            self.log(self.ramp.describe(p.dt))
+
+    def _law_at(self, step):
+        """Give the engine the law of the force evaluation at ``step`` (the ramp's; the config's
+        without one or past it). A new Physics only when the law changes."""
+        if self.ramp is None:
+            return
+        law = self.ramp.law(step)
+        if law != self.engine.phys.law:
+            self.engine.phys = self.physics.with_law(law)
 
     # -- the loop --
     def run(self):
@@ -234,11 +248,16 @@ class Run:
             quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
                 if quiet_runs:
-                    # the steps before the next that something reads after, in one go (the GPU engine)
+                    # the steps before the next that something reads after, in one go (the GPU engine),
+                    # all of one law
                     s0 = st.step
                     quiet = self._quiet_steps(s0, max_steps, progress)
+                    if self.ramp:
+                        quiet = min(quiet, self.ramp.room(s0))
+                        self._law_at(s0 + 1)
                     for k, q in enumerate(eng.run_quiet(quiet, self._flags_now())):
                         self.checks(q, s0 + k + 1)
+                self._law_at(st.step + 1)
                 # the step's second half-kick joins the next step's first pass; whatever reads the
                 # rows below (the stop sample, a state file) has the engine apply it first
                 # a stop sample after the step reads every pair's force of its evaluation
@@ -305,6 +324,10 @@ class Run:
         et, er = self.engine.kinetic()
         self.stop.add(et, er, N, *self.engine.force_ratio())
         self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total())
+        if self.ramp and self.ramp.active(self.state.step):
+            # on the ramp the pile is not yet the one to settle: the rule's window starts at its end
+            self.stop.samples.clear()
+            return False
         return self.stop.satisfied()
 
     def _interrupt(self, sig):
@@ -343,7 +366,8 @@ class Run:
         """Write a state file of ``kind`` (collective); snapshots and the final state carry the contact list."""
         local = checkpoint.gather_state(self.state)
         if kind != "checkpoint":
-            local.update(contact_pairs(self.state, self.physics))
+            # the forces of the law in use (the stiffening ramp's on the ramp)
+            local.update(contact_pairs(self.state, self.engine.phys))
         try:
             checkpoint.write(path, local, self._attrs(kind), self.domain.net)
         except WriteError as e:     # raised on every rank: say where the run can go on from

@@ -3,7 +3,7 @@ and the methods both engines run alike (``EngineBase``)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -49,6 +49,10 @@ class Physics:
         """Physics of the law's values by the names of ``kernels.law.make_law`` (k_n, k_t, gamma_n,
         gamma_t, mu, dt, gravity, incline, model, limit_damping, rescale_history) and the numerics."""
         return cls(make_law(**law), skin, near_skin, floor, wall, tuple(planes))
+
+    def with_law(self, law):
+        """The same numerics and boundaries with another ``Law`` (the stiffening ramp's, ``stiffen``)."""
+        return replace(self, law=law)
 
     @classmethod
     def from_config(cls, cfg):
@@ -125,10 +129,13 @@ class EngineBase:
 
     def plane_arrays(self):
         """The kernels' arrays of the planes of ``phys`` (``planes.arrays`` of ``planes.of_physics``):
-        made again when ``phys`` is replaced (bed making and tests swap in a floor), else kept."""
+        made again when ``phys`` is replaced by one with other boundaries (bed making and tests swap
+        in a floor), else kept (the same object: a law swapped in by the ramp copies nothing)."""
+        p = self.phys
+        key = (p.floor, p.wall, p.planes)
         made = getattr(self, "_planes", None)
-        if made is None or made[0] is not self.phys:
-            made = self._planes = (self.phys, planes.arrays(planes.of_physics(self.phys)))
+        if made is None or made[0] != key:
+            made = self._planes = (key, planes.arrays(planes.of_physics(p)))
         return made[1]
 
     def contacts(self):

@@ -45,7 +45,10 @@ class Law(NamedTuple):
     [sqrt(g/d)]; mu : Coulomb coefficient; g_x, g_y, g_z : the gravity vector [g] (the force on a
     sphere of mass 1, where each row's force sum starts); dt : time step [tau];
     model : MODEL_HOOKE or MODEL_HERTZ; limit_damping, rescale_history : the
-    options of docs/model.md 2.2 and 2.4 (off in the reference model).
+    options of docs/model.md 2.2 and 2.4 (off in the reference model); ds_scale : the factor on
+    each stored Delta s before an evaluation, k_t of the previous evaluation / this one's (1.0 but
+    at a step of the stiffening ramp, ``stiffen``: F_t = -k_t Delta s stays continuous; x * 1.0
+    is x to the bit).
     """
     k_n: float
     k_t: float
@@ -59,6 +62,7 @@ class Law(NamedTuple):
     model: int
     limit_damping: bool
     rescale_history: bool
+    ds_scale: float = 1.0
 
 
 def gravity_vector(gravity, incline):
@@ -70,13 +74,13 @@ def gravity_vector(gravity, incline):
 
 
 def make_law(k_n, k_t, gamma_n, gamma_t, mu, dt, gravity=1.0, incline=0.0, model="hooke",
-             limit_damping=False, rescale_history=False):
+             limit_damping=False, rescale_history=False, ds_scale=1.0):
     """The kernels' ``Law`` from the values as the config names them: ``model`` a name of
     ``models.MODELS``, gravity of magnitude ``gravity`` [g] tilted by ``incline`` degrees about y
     (``gravity_vector``)."""
     return Law(float(k_n), float(k_t), float(gamma_n), float(gamma_t), float(mu),
                *gravity_vector(float(gravity), float(incline)), float(dt), MODELS[model].kernel,
-               bool(limit_damping), bool(rescale_history))
+               bool(limit_damping), bool(rescale_history), float(ds_scale))
 
 
 @njit(cache=True, inline="always")
@@ -143,7 +147,8 @@ def tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
     Parameters
     ----------
     ds : (3,) tuple of float
-        Delta s before this step [d] (zeros for a new contact).
+        Delta s before this step [d] (zeros for a new contact), as stored: times ``law.ds_scale``
+        first.
     vt : (3,) tuple of float
         Tangential relative velocity at the contact point [sqrt(g d)].
     nrm : (3,) tuple of float
@@ -164,6 +169,11 @@ def tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
     vtx, vty, vtz = vt
     nx, ny, nz = nrm
     k_t, gamma_t, mu, dt = law.k_t, law.gamma_t, law.mu, law.dt
+    # the spring the history was stored with, to this evaluation's k_t (1.0 but on the stiffening ramp)
+    q = law.ds_scale
+    sx = sx * q
+    sy = sy * q
+    sz = sz * q
     rescale_history = law.rescale_history
     if increment:
         sx += vtx * dt
@@ -180,10 +190,10 @@ def tangential(ds, vt, nrm, scale, meff, fn_mag, law, increment):
     if rescale_history:
         s_new = math.sqrt(sx * sx + sy * sy + sz * sz)
         if s_new > 0.0 and s_old > 0.0:
-            q = s_old / s_new
-            sx *= q
-            sy *= q
-            sz *= q
+            r = s_old / s_new
+            sx *= r
+            sy *= r
+            sz *= r
     if law.model == MODEL_HERTZ:
         ftx = -scale * (k_t * sx + meff * gamma_t * vtx)
         fty = -scale * (k_t * sy + meff * gamma_t * vty)
