@@ -10,9 +10,9 @@
 #   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes):
 #       the config of a committed CPU run (REF, default the paper-size mu = 0.5 seed 1), its digest against that run's
 #   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
-#       bench (the GPU on the 20k table and its tiles; BENCH_CPU=1 the CPU engine too), digests (CPU against GPU
-#       on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a stiffening rung), pour (with
-#       POUR_MINUTES), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
+#       bench (the GPU on the 20k table and its tiles; BENCH_CPU=1 the CPU engine too), pour (with POUR_MINUTES),
+#       digests (CPU against GPU on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a
+#       stiffening rung), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
 #       compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput and stall sections of the
 #       fused steps and the list build, where `ncu` is found)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
@@ -86,7 +86,22 @@ if has bench; then
         say "bench: no table at $TABLE"
     fi
 fi
-# 2. the digests, CPU against GPU
+# 2. POUR_MINUTES=M: a committed CPU run's pour (REF: its config.toml and summary.json) from its start to its stop
+# rule on the GPU, or M minutes of it; the issue's target for the paper size: 5 minutes. Converged, its digest is
+# compared with the CPU run's.
+if has pour && [ "${POUR_MINUTES:-0}" -gt 0 ]; then
+    REF=${REF:-analysis/results/paper/runs/size/mu0.5_eps0.88_kn2e5_phi0.13_s1_max_steps2e7}
+    t=$SECONDS
+    $PY -m mpdem run "$REF/config.toml" --out "$w/whole" --force --quiet --device gpu \
+        --set output.progress_every=1000000 --walltime "00:$(printf %02d "$POUR_MINUTES"):00" > "$w/whole.log" 2>&1
+    rc=$?
+    dw=$(digest "$w/whole"); dr=$(digest "$REF")
+    v=DIFFER; [ -n "$dw" ] && [ "$dw" = "$dr" ] && v=equal
+    say "pour to the stop rule on the gpu ($REF): exit status $rc (0 converged, 75 the time ran out) after $((SECONDS - t)) s; thermo's last step,E_k,rebuilds,loop seconds: $(tail -1 "$w/whole/thermo.csv" | cut -d, -f1,3,10,11)"
+    say "    digest ${dw:0:16} against the CPU run's ${dr:0:16} ($(grep -o '"steps": [0-9]*' "$REF/summary.json")): $v"
+    tail -3 "$w/whole.log" | tee -a "$SUM"
+fi
+# 3. the digests, CPU against GPU
 if has digests; then
     compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
     compare example-mu0 $EXSTEPS "${EX[@]}" --set contact.mu=0
@@ -102,21 +117,6 @@ if has digests; then
     v=DIFFER; [ -n "$dc" ] && [ "$dc" = "$dg" ] && v=equal
     say "digest stiffened ${STIFF[*]:0:2}: cpu ${dc:0:16} gpu ${dg:0:16}: $v"
     say "digests done at $((SECONDS - t0)) s"
-fi
-# 3. POUR_MINUTES=M: a committed CPU run's pour (REF: its config.toml and summary.json) from its start to its stop
-# rule on the GPU, or M minutes of it; the issue's target for the paper size: 5 minutes. Converged, its digest is
-# compared with the CPU run's.
-if has pour && [ "${POUR_MINUTES:-0}" -gt 0 ]; then
-    REF=${REF:-analysis/results/paper/runs/size/mu0.5_eps0.88_kn2e5_phi0.13_s1_max_steps2e7}
-    t=$SECONDS
-    $PY -m mpdem run "$REF/config.toml" --out "$w/whole" --force --quiet --device gpu \
-        --set output.progress_every=1000000 --walltime "00:$(printf %02d "$POUR_MINUTES"):00" > "$w/whole.log" 2>&1
-    rc=$?
-    dw=$(digest "$w/whole"); dr=$(digest "$REF")
-    v=DIFFER; [ -n "$dw" ] && [ "$dw" = "$dr" ] && v=equal
-    say "pour to the stop rule on the gpu ($REF): exit status $rc (0 converged, 75 the time ran out) after $((SECONDS - t)) s; thermo's last step,E_k,rebuilds,loop seconds: $(tail -1 "$w/whole/thermo.csv" | cut -d, -f1,3,10,11)"
-    say "    digest ${dw:0:16} against the CPU run's ${dr:0:16} ($(grep -o '"steps": [0-9]*' "$REF/summary.json")): $v"
-    tail -3 "$w/whole.log" | tee -a "$SUM"
 fi
 # 4. a restart that switches device, run to run, two ranks
 if has switch; then
