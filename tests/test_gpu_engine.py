@@ -97,6 +97,39 @@ def test_steps_in_one_launch_give_the_steps_bits(case):
     assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
 
 
+def test_a_law_that_changes_between_steps_gives_the_cpu_bits():
+    """The stiffening ramp's laws (``stiffen``): a stiffer law every few steps, its first step
+    rescaling each stored Delta s (``Law.ds_scale``), the steps between in one launch (``run_quiet``)
+    on the GPU and one by one on the CPU: the same bits."""
+    phys = CASES["mu0.5-gamma_t"]
+    x, v, omega, fixed, L = tight_lattice(m=5)
+    engines = []
+    for engine, grid in ((cpu.Engine, {}), (gpu.Engine, GRIDS[0])):
+        st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
+        eng = engine(st, phys, Domain(None), **grid)
+        eng.start()
+        law = phys.law
+        for tread in range(4):
+            k = law.k_n * 1.5
+            new = law._replace(k_n=k, k_t=2 * k / 7, gamma_n=gamma_n_from_epsilon(0.88, k))
+            eng.phys = phys.with_law(new._replace(ds_scale=law.k_t / new.k_t))
+            eng.step(defer_kick=True)
+            eng.phys = phys.with_law(new)
+            if engine is gpu.Engine:
+                eng.run_quiet(5)
+            else:
+                for _ in range(5):
+                    eng.step(defer_kick=True)
+            law = new
+        eng.step(keep_pairs=True)
+        engines.append((eng, st))
+    (want, st_c), (got, st_g) = engines
+    a, b = checkpoint.gather_state(st_c), checkpoint.gather_state(st_g)
+    assert int(a["count"].sum()) > 100 and np.any(a["ds"] != 0.0), "a frictional pile in contact"
+    assert checkpoint.digest(a) == checkpoint.digest(b)
+    assert got.force_ratio() == want.force_ratio() and got.kinetic() == want.kinetic()
+
+
 def test_lists_built_on_the_gpu_are_the_cpu_build():
     """A rebuild on the GPU (``kernels.gpu.lists``) gives every row the partners of the host's
     ``build_neighbours``, sorted by id, and carries each entry's history and stamp."""

@@ -142,7 +142,8 @@ def test_a_settled_pile_met_by_a_stiffer_spring_without_the_ramp_is_refused(soft
     assert "stiffen.k_n_from = 20000" in p.stderr and not (tmp_path / "cli" / "thermo.csv").exists()
 
 
-def test_a_stiffened_pile_keeps_its_contacts_carries_its_weight_on_smaller_overlaps_and_ends_static(soft, stiffened):
+def test_a_stiffened_pile_keeps_its_contacts_carries_its_weight_on_smaller_overlaps_and_ends_static(soft, stiffened,
+                                                                                                    tmp_path):
     before, delta_soft = pairs_and_overlaps(soft / "final.h5")
     after, delta_stiff = pairs_and_overlaps(stiffened / "final.h5")
     kept = len(before & after) / len(before)
@@ -155,6 +156,11 @@ def test_a_stiffened_pile_keeps_its_contacts_carries_its_weight_on_smaller_overl
     rows = np.loadtxt(stiffened / "thermo.csv", delimiter=",", skiprows=1)
     end = int(log.split("over ")[1].split(" steps")[0])
     assert rows[-1, 0] > end, "the stop rule only holds after the ramp"
+    # what the ramp is for: a jump (a ramp of one step) shakes the pile far more
+    mpdem.run(stiffen_config(str(soft), 2e5, ["stiffen.ramp_time=1e-4", "stiffen.update_interval=1e-4",
+                                              "run.max_steps=3000"]), tmp_path / "jump")
+    jump = np.loadtxt(tmp_path / "jump" / "thermo.csv", delimiter=",", skiprows=1)
+    assert jump[:, 2].max() > 20 * rows[:, 2].max()
 
 
 def test_a_restart_inside_the_ramp_goes_on_bit_for_bit(soft, tmp_path):
