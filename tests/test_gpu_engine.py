@@ -97,28 +97,6 @@ def test_steps_in_one_launch_give_the_steps_bits(case):
     assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
 
 
-@pytest.mark.parametrize("case,team", [("mu0", 2), ("hertz-wall", 4), ("mu0.5-gamma_t", 4)])
-def test_threads_sharing_a_row_give_the_cpu_bits(case, team):
-    """``row_threads``: a row's contacts computed by several threads, summed by one in partner-id
-    order: the CPU engine's bits, in single steps (with their kept pairs) and in one launch."""
-    phys = CASES[case]
-    want, st_c = stepped(cpu.Engine, phys, 30)
-    got, st_g = stepped(gpu.Engine, phys, 30, dict(block=2 * team, blocks=2, row_threads=team))
-    assert got.n_rebuilds >= 3
-    a, b = checkpoint.gather_state(st_c), checkpoint.gather_state(st_g)
-    assert int(a["count"].sum()) > 100
-    assert checkpoint.digest(a) == checkpoint.digest(b)
-    assert got.force_ratio() == want.force_ratio() and got.contacts() == want.contacts()
-    assert got.last_overlap == want.last_overlap
-    x, v, omega, fixed, L = tight_lattice(m=5)
-    st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
-    eng = gpu.Engine(st, phys, Domain(None), block=team, blocks=2, row_threads=team)
-    eng.start()
-    eng.run_quiet(29)
-    eng.step(keep_pairs=True)
-    assert checkpoint.digest(checkpoint.gather_state(st)) == checkpoint.digest(a)
-
-
 def test_a_law_that_changes_between_steps_gives_the_cpu_bits():
     """The stiffening ramp's laws (``stiffen``): a stiffer law every few steps, its first step
     rescaling each stored Delta s (``Law.ds_scale``), the steps between in one launch (``run_quiet``)

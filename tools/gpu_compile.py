@@ -48,7 +48,7 @@ def _control(a, b, c, out):
 def cases():
     """Each kernel with arguments of the types the GPU engine passes (values do not matter)."""
     n = 8
-    law = Law(2e5, 4e5 / 7, 40.0, 10.0, 0.5, 0.0, 0.0, -1.0, 1e-4, MODEL_HERTZ, False, True, 1.0)
+    law = Law(2e5, 4e5 / 7, 40.0, 10.0, 0.5, 0.0, 0.0, -1.0, 1e-4, MODEL_HERTZ, False, True)
     x, fixed, ids = np.zeros((n, 3)), np.zeros(n, np.uint8), np.zeros(n, np.int64)
     start, nbr = np.zeros(n + 1, np.int64), np.zeros(4, np.int32)
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))
@@ -60,9 +60,9 @@ def cases():
         "step.kick_drift": (step.kick_drift, (n, x, x, x, x, x, fixed, x, 1e-4, *box, True, red)),
         "step.kick": (step.kick, (n, x, x, x, x, fixed, 1e-4)),
         "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, planes, kinds,
-                                      5, *box, law, True, 4, red)),
+                                      5, *box, law, True, red)),
         "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds,
-                                        5, *box, law, True, 0.1, 4, 4, rec)),
+                                        5, *box, law, True, 0.1, 4, rec)),
         "lists.z_range": (lists.z_range, (n, x, np.zeros(2))),
         "lists.zero": (lists.zero, (n, cells)),
         "lists.bin_rows": (lists.bin_rows, (n, x, 3, 3, 3, 1.0, 1.0, 0.0, 1.2, cells, cells)),

@@ -145,10 +145,6 @@ SCHEMA = (
     _k("engine", "gpu_block", 128,
        "threads per block of the GPU engine's kernels (a power of two from 32 to 1024); no effect on results",
        int, restart=True, physics=False),
-    _k("engine", "gpu_row_threads", 1,
-       "threads of the GPU engine's force pass that share a row's contacts (a power of two up to 32 and "
-       "engine.gpu_block), its sum kept in partner-id order; no effect on results", int, restart=True,
-       physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
@@ -508,8 +504,6 @@ def resolve(raw):
 
     block = vals["engine.gpu_block"]
     need("engine.gpu_block", 32 <= block <= 1024 and block & (block - 1) == 0, "a power of two from 32 to 1024")
-    team = vals["engine.gpu_row_threads"]
-    need("engine.gpu_row_threads", 1 <= team <= 32 and team & (team - 1) == 0, "a power of two from 1 to 32")
     k_n = vals["contact.k_n"]
     need("contact.k_n", k_n > 0, "k_n > 0")
     if not 1e3 <= k_n <= 1e10:

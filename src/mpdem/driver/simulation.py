@@ -179,8 +179,7 @@ class Run:
         self.snapshots.restore(rec.snapshots)
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
-        self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block,
-                                  cfg.engine.gpu_row_threads)
+        self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block)
         # the stiffening ramp's laws (``stiffen``), None without one; the engine's law is the step's
         self.ramp = stiffen.Ramp.from_config(cfg, self.physics.law)
         self._law_at(self.state.step)

@@ -49,10 +49,9 @@ def require(device):
         gpu_require()
 
 
-def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_row_threads=1):
-    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block`` and
-    ``gpu_row_threads``: the GPU engine's threads per block and per row of the force pass
-    (``engine.gpu_block``, ``engine.gpu_row_threads``; no effect on results)."""
+def make_engine(state, physics, domain, device="cpu", gpu_block=128):
+    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``: the GPU
+    engine's threads per block (``engine.gpu_block``; no effect on results)."""
     if device == "gpu":
-        return engine_class(device)(state, physics, domain, block=gpu_block, row_threads=gpu_row_threads)
+        return engine_class(device)(state, physics, domain, block=gpu_block)
     return engine_class(device)(state, physics, domain)

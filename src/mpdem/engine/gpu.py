@@ -81,10 +81,6 @@ class Engine(EngineBase):
         for 32 at least); no effect on results.
     blocks : int or None
         Blocks a launch at most (each thread then takes several rows); None for one row a thread.
-    row_threads : int
-        Threads that share a row's contacts in the force pass (1, or a power of two up to 32 and
-        ``block``; ``engine.gpu_row_threads``), the row's sum kept in partner-id order: no effect on
-        results.
         The tests under numba's simulator use a few threads: it runs each as a Python thread.
 
     Attributes
@@ -95,17 +91,14 @@ class Engine(EngineBase):
         ``domain.comm_seconds``.
     """
 
-    def __init__(self, state, physics, domain, block=128, blocks=None, row_threads=1):
+    def __init__(self, state, physics, domain, block=128, blocks=None):
         runtime, self.k, self.kl = _kernels()
         self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
-        if not (1 <= row_threads <= min(32, block) and row_threads & (row_threads - 1) == 0):
-            raise ValueError(f"row_threads = {row_threads}: accepted a power of two up to 32 and the block ({block})")
-        self.team = int(row_threads)
         if self._simulator and blocks is None:
             # numba's simulator runs every thread as a Python thread: a few threads, each many rows
-            block, blocks = max(2, self.team), 2
+            block, blocks = 2, 2
         # at most this many blocks a launch (None: one row a thread); the kernels take any grid
         self.blocks = blocks
         self.state, self.phys, self.domain = state, physics, domain
@@ -144,9 +137,8 @@ class Engine(EngineBase):
         state.sync = self.sync_state
 
     # -- between host and GPU --
-    def _grid(self, rows, team=1):
-        """(blocks, threads a block) of a launch with ``team`` threads a row."""
-        blocks = (max(rows, 1) * team + self.block - 1) // self.block
+    def _grid(self, rows):
+        blocks = (max(rows, 1) + self.block - 1) // self.block
         return (blocks if self.blocks is None else min(blocks, self.blocks)), self.block
 
     def _launch(self, name, *args, grid=None):
@@ -371,25 +363,18 @@ class Engine(EngineBase):
         With ``keep_pairs`` every entry's force stays on the GPU for ``force_ratio``."""
         t = time.perf_counter()
         s, d, k = self.state, self._dev, self.k
-        if keep_pairs or self.team > 1:
-            self._pair_room()
+        if keep_pairs and d["pair"].shape[0] < max(self._k, 1):
+            d["pair"] = self.cuda.device_array((max(self._k, 1), 6))
         self._pairs_kept = keep_pairs
         self._epoch += 1
         planes_d, kinds_d = self._device_planes()
         self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
                      d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs, d["wall_ds"], planes_d, kinds_d,
-                     self._epoch, *make_box(s.L_x, s.L_y), self.law, increment, self.team, self._red,
-                     grid=self._grid(s.n_own, self.team))
+                     self._epoch, *make_box(s.L_x, s.L_y), self.law, increment, self._red)
         red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
         return float(red[k.RED_OVERLAP]), int(red[k.RED_CONTACTS])
-
-    def _pair_room(self):
-        """``pair`` with a row for every list entry (kept forces, or the row sums' scratch)."""
-        d = self._dev
-        if d["pair"].shape[0] < max(self._k, 1):
-            d["pair"] = self.cuda.device_array((max(self._k, 1), 6))
 
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
         """One velocity-Verlet step; returns a new StepInfo (reduced over ranks). As the CPU
@@ -443,11 +428,9 @@ class Engine(EngineBase):
         while len(infos) < n:
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
-            if self.team > 1:
-                self._pair_room()
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], d["pair"], d["wall_ds"], planes_d, kinds_d, self._epoch,
-                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self.team, self._rec)
+                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
             self._launch("advance", *args, grid=self._cooperative_grid(args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
@@ -489,7 +472,7 @@ class Engine(EngineBase):
                 except (AttributeError, StopIteration):
                     # one block a multiprocessor is resident whatever the kernel's resources
                     self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
-        blocks, block = self._grid(args[0], self.team)
+        blocks, block = self._grid(args[0])
         return min(blocks, self._coop_blocks), block
 
     def complete(self):

@@ -132,6 +132,9 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     deepest = 0.0
     contacts = 0
     friction = law.mu > 0.0
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
     fx = law.g_x
     fy = law.g_y
     fz = law.g_z
@@ -139,20 +142,48 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     ty = 0.0
     tz = 0.0
     for e in range(start[i], start[i + 1]):
-        delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x, v, omega, fixed, nbr, hist, stamp, now, before, L_x,
-                                                       L_y, hx, hy, law, increment)
-        if delta < 0.0:
+        j = nbr[e]
+        dx = min_image(xi - x[j, 0], L_x, hx)
+        dy = min_image(yi - x[j, 1], L_y, hy)
+        dz = zi - x[j, 2]
+        r2 = norm2(dx, dy, dz)
+        if not r2 < 1.0:
             if keep:
                 for a in range(6):
                     pair[e, a] = 0.0
             continue
         contacts += 1
+        delta, nx, ny, nz = approach(dx, dy, dz, r2)
         if delta > deepest:
             deepest = delta
+        meff = 1.0 if fixed[j] else 0.5
+        vrx = v[i, 0] - v[j, 0]
+        vry = v[i, 1] - v[j, 1]
+        vrz = v[i, 2] - v[j, 2]
+        vn = dot(vrx, vry, vrz, nx, ny, nz)
+        fn, scale = normal(delta, vn, meff, law)
         if friction:
+            wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
+            vtx, vty, vtz = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
+            was = stamp[e] == before
+            sx, sy, sz, ftx, fty, ftz = tangential(
+                (hist[e, 0] if was else 0.0, hist[e, 1] if was else 0.0, hist[e, 2] if was else 0.0),
+                (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
+            # + 0.0 stores a zero as +0.0 whichever way it was reached
+            hist[e, 0] = sx + 0.0
+            hist[e, 1] = sy + 0.0
+            hist[e, 2] = sz + 0.0
+            cfx, cfy, cfz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
+            ctx, cty, ctz = contact_torque(nx, ny, nz, ftx, fty, ftz)
             tx = add(tx, ctx)
             ty = add(ty, cty)
             tz = add(tz, ctz)
+        else:
+            cfx, cfy, cfz = normal_force(fn, nx, ny, nz)
+            ctx = 0.0
+            cty = 0.0
+            ctz = 0.0
+        stamp[e] = now
         fx = add(fx, cfx)
         fy = add(fy, cfy)
         fz = add(fz, cfz)
@@ -163,20 +194,6 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
             pair[e, 3] = ctx
             pair[e, 4] = cty
             pair[e, 5] = ctz
-    deepest = _planes_of_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, fx, fy, fz, tx, ty, tz,
-                             deepest)
-    return deepest, contacts
-
-
-@device
-def _planes_of_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, fx, fy, fz, tx, ty, tz,
-                   deepest):
-    """Row i's contacts with the planes added to its sums of the pairs (``fx`` .. ``tz``, gravity
-    included), written to f and torque; returns the deepest overlap of the row with the planes'
-    (the floor's left out) and ``deepest`` [d]."""
-    xi = x[i, 0]
-    yi = x[i, 1]
-    zi = x[i, 2]
     for k in range(len(kinds)):
         kind = kinds[k]
         rough = kind == PLANE_ROUGH
@@ -206,78 +223,12 @@ def _planes_of_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, incre
     torque[i, 0] = tx
     torque[i, 1] = ty
     torque[i, 2] = tz
-    return deepest
-
-
-@device
-def _contact(i, e, x, v, omega, fixed, nbr, hist, stamp, now, before, L_x, L_y, hx, hy, law, increment):
-    """List entry e of row i (mobile): in contact, its overlap [d], force on i [m g] and torque on i
-    [m g d] (zeros without friction), its Delta s into hist[e] and stamp[e] = now; out of contact
-    overlap -1.0, nothing written."""
-    j = nbr[e]
-    dx = min_image(x[i, 0] - x[j, 0], L_x, hx)
-    dy = min_image(x[i, 1] - x[j, 1], L_y, hy)
-    dz = x[i, 2] - x[j, 2]
-    r2 = norm2(dx, dy, dz)
-    if not r2 < 1.0:
-        return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    delta, nx, ny, nz = approach(dx, dy, dz, r2)
-    meff = 1.0 if fixed[j] else 0.5
-    vrx = v[i, 0] - v[j, 0]
-    vry = v[i, 1] - v[j, 1]
-    vrz = v[i, 2] - v[j, 2]
-    vn = dot(vrx, vry, vrz, nx, ny, nz)
-    fn, scale = normal(delta, vn, meff, law)
-    if law.mu > 0.0:
-        wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
-        vtx, vty, vtz = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
-        was = stamp[e] == before
-        sx, sy, sz, ftx, fty, ftz = tangential(
-            (hist[e, 0] if was else 0.0, hist[e, 1] if was else 0.0, hist[e, 2] if was else 0.0),
-            (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
-        # + 0.0 stores a zero as +0.0 whichever way it was reached
-        hist[e, 0] = sx + 0.0
-        hist[e, 1] = sy + 0.0
-        hist[e, 2] = sz + 0.0
-        cfx, cfy, cfz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
-        ctx, cty, ctz = contact_torque(nx, ny, nz, ftx, fty, ftz)
-    else:
-        cfx, cfy, cfz = normal_force(fn, nx, ny, nz)
-        ctx = 0.0
-        cty = 0.0
-        ctz = 0.0
-    stamp[e] = now
-    return delta, cfx, cfy, cfz, ctx, cty, ctz
-
-
-@device
-def _row_total(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds, now, law, increment):
-    """Row i's force and torque from its entries' ``pair`` rows of this evaluation (stamp ``now``),
-    summed in entry (partner-id) order as ``_force_row`` sums them, then the planes; returns the
-    deepest overlap with a plane [d] (0.0 for none)."""
-    fx = law.g_x
-    fy = law.g_y
-    fz = law.g_z
-    tx = 0.0
-    ty = 0.0
-    tz = 0.0
-    friction = law.mu > 0.0
-    for e in range(start[i], start[i + 1]):
-        if stamp[e] == now:
-            if friction:
-                tx = add(tx, pair[e, 3])
-                ty = add(ty, pair[e, 4])
-                tz = add(tz, pair[e, 5])
-            fx = add(fx, pair[e, 0])
-            fy = add(fy, pair[e, 1])
-            fz = add(fz, pair[e, 2])
-    return _planes_of_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, fx, fy, fz, tx, ty, tz,
-                          0.0)
+    return deepest, contacts
 
 
 @cuda.jit
 def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
-           epoch, L_x, L_y, hx, hy, law, increment, team, red):
+           epoch, L_x, L_y, hx, hy, law, increment, red):
     """Forces (gravity included) and torques on the owned rows, the contact history in place.
 
     As ``kernels.forces.contact_forces``, then ``plane_forces`` over ``planes`` and ``kinds`` (the
@@ -292,14 +243,11 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         Each entry's Delta s [d] (the row's view) and the evaluation it was last in contact
         (mod 2**32); a contact whose stamp is not ``epoch - 1`` starts from zero.
     pair : (K, 6) float64, out when ``keep``
-        Each entry's contact force on the row [m g] and torque [m g d] (zeros out of contact); with
-        ``team`` > 1 the entries in contact whether or not ``keep`` (scratch of the row sums).
+        Each entry's contact force on the row [m g] and torque [m g d] (zeros out of contact).
     wall_ds : (n_own, 3) float64
         Each row's Delta s with the rough plane [d] (read and written only with one).
     planes : (P, 4) float64, kinds : (P,) int64
         The planes' normals and offsets [d] and kinds (``law.PLANE_*``).
-    team : int
-        Threads a row (1, or a power of two dividing the block; no effect on results).
     red : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
         owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
     """
@@ -312,64 +260,27 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         red[RED_BAD] = NEUTRAL[RED_BAD]
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, team, red, room, iroom)
+                 increment, red, room, iroom)
 
 
 @device_cuda
 def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
-                 now, before, L_x, L_y, hx, hy, law, increment, team, red, room, iroom):
+                 now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
     """This thread's rows of ``forces`` (i, i + threads, ...) with the stamps ``now`` and ``before``,
     their reductions into ``red``'s slots RED_OVERLAP and RED_CONTACTS (every thread of the block
-    calls it). With ``team`` > 1 (a power of two dividing the block) that many threads share a row,
-    and ``pair`` holds every entry (it must have a row for each)."""
+    calls it)."""
     deepest = 0.0
     contacts = 0
-    if team == 1:
-        for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
-            if fixed[i]:
-                for a in range(3):
-                    f[i, a] = 0.0
-                    torque[i, a] = 0.0
-                continue
-            d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                              kinds, now, before, L_x, L_y, hx, hy, law, increment)
-            deepest = max(deepest, d)
-            contacts += c
-    else:
-        # ``team`` threads a row: each computes every team-th entry into ``pair``; after the block's
-        # barrier the row's first sums them in entry order (the same bits). Every thread of the block
-        # runs the same rounds, so that all meet at each barrier.
-        t = cuda.grid(1)
-        lane = t % team
-        teams = cuda.gridsize(1) // team
-        for r in range((n_own + teams - 1) // teams):
-            i = t // team + r * teams
-            if i < n_own and not fixed[i]:
-                for e in range(start[i] + lane, start[i + 1], team):
-                    d, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x, v, omega, fixed, nbr, hist, stamp, now,
-                                                               before, L_x, L_y, hx, hy, law, increment)
-                    if d < 0.0:
-                        if keep:
-                            for a in range(6):
-                                pair[e, a] = 0.0
-                    else:
-                        contacts += 1
-                        deepest = max(deepest, d)
-                        pair[e, 0] = cfx
-                        pair[e, 1] = cfy
-                        pair[e, 2] = cfz
-                        pair[e, 3] = ctx
-                        pair[e, 4] = cty
-                        pair[e, 5] = ctz
-            cuda.syncthreads()
-            if lane == 0 and i < n_own:
-                if fixed[i]:
-                    for a in range(3):
-                        f[i, a] = 0.0
-                        torque[i, a] = 0.0
-                else:
-                    deepest = max(deepest, _row_total(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes,
-                                                      kinds, now, law, increment))
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if fixed[i]:
+            for a in range(3):
+                f[i, a] = 0.0
+                torque[i, a] = 0.0
+            continue
+        d, c = _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
+                          kinds, now, before, L_x, L_y, hx, hy, law, increment)
+        deepest = max(deepest, d)
+        contacts += c
     max_into(red, RED_OVERLAP, deepest, room)
     sum_into(red, RED_CONTACTS, contacts, iroom)
 
@@ -392,7 +303,7 @@ def _go_on(red, half_skin, room):
 
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, team, rec):
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -402,8 +313,8 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     must be rebuilt first) or a position is not finite, the forces of evaluation ``epoch + s + 1``.
     A step that needs a rebuild ends the launch after its drift: the rows of steps 0..s-1 are
     whole, step s has drifted, and its ``rec[s]`` says why (the caller finishes it). ``rec`` is
-    (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. ``team``: threads a row of the
-    forces (``forces``). The same arithmetic as the step's two kernels, so the same bits.
+    (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. The same arithmetic as the
+    step's two kernels, so the same bits.
     """
     grid = cuda.cg.this_grid()
     room = cuda.shared.array(BLOCK_MAX, np.float64)
@@ -424,5 +335,5 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
             break
         _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes, kinds,
                      np.uint32((epoch + s + 1) & 0xFFFFFFFF), np.uint32((epoch + s) & 0xFFFFFFFF), L_x, L_y, hx, hy,
-                     law, True, team, rec[s], room, iroom)
+                     law, True, rec[s], room, iroom)
         grid.sync()
