@@ -472,3 +472,28 @@ def test_the_isostatic_count_comes_from_n_m_in_old_and_new_summaries():
     new = {"isostatic": {"n_m": 0.3, "z_iso": 4.1}}
     assert quantities(old)["z_iso"] == quantities(new)["z_iso"] == pytest.approx(4.1)
     assert math.isnan(quantities({"isostatic": {"z_iso": 6.0}})["z_iso"])
+
+
+def test_the_rungs_of_a_stiffening_ladder_are_one_family_apart_from_the_poured_piles(tmp_path):
+    """A stiffened rung (``stiffen.k_n_from``, a physics key outside the params) is its own set, and
+    across k_n the rungs of a ladder (each a decade above the last) are one family: the rise
+    k_n / k_n_from enters the family as the other quantities that follow k_n do."""
+    from mpdem.campaign.runs import AnalysedRun, families
+    rng = np.random.default_rng(12)
+    root = tmp_path / "runs"
+    for k_n, z in ((2e5, 6.10), (2e6, 6.05), (2e7, 6.03)):
+        for seed in (1, 2):
+            make_run(root / f"poured_kn{k_n:g}_s{seed}", params(mu=0, k_n=k_n, seed=seed), z + 0.001 * seed, 0.63,
+                     0.5, rng)
+    for k_n in (2e6, 2e7):
+        d = root / f"stiffened_kn{k_n:g}_s1"
+        s = make_run(d, params(mu=0, k_n=k_n, seed=1), 6.07, 0.63, 0.5, rng)
+        s["physics"] = {"stiffen.k_n_from": k_n / 10}
+        (d / "analysis/summary.json").write_text(json.dumps(s))
+    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    sets, _ = co.group(runs)
+    assert len(sets) == 5
+    fams = families(sets, "contact.k_n")
+    assert sorted(len(m) for _, m in fams) == [2, 3]
+    ladder = [(f, m) for f, m in fams if len(m) == 2][0]
+    assert ladder[0]["stiffened x"] == 10.0 and [s.params["contact.k_n"] for s in ladder[1]] == [2e6, 2e7]

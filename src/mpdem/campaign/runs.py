@@ -113,7 +113,10 @@ def family_key(params, vary, extra=None):
 
     For ``contact.k_n`` the parameters that follow k_n enter as the scale-free
     k_t/k_n, gamma_n/sqrt(k_n) and gamma_t/gamma_n (10 significant digits) and
-    dt is left out. ``extra`` (a Set's ``extra``) enters as it is, by full key name.
+    dt is left out, and so does a stiffened pile's ``stiffen.k_n_from``, as the
+    rung's rise k_n / k_n_from (the rungs of one ladder are one family, apart from
+    the poured piles). ``extra`` (a Set's ``extra``) enters as it is otherwise, by
+    full key name.
 
     Returns
     -------
@@ -121,11 +124,15 @@ def family_key(params, vary, extra=None):
     """
     skip = {"run.seed", vary} | (set(FOLLOW_K_N) if vary == "contact.k_n" else set())
     key = [(SHORT[k], params[k]) for k in PARAM_KEYS if k not in skip]
+    extra = dict(extra or {})
     if vary == "contact.k_n":
         k, g_n, g_t = params["contact.k_n"], params["contact.gamma_n"], params["contact.gamma_t"]
         key += [("k_t/k_n", _sig(params["contact.k_t"] / k)), ("gamma_n/sqrt(k_n)", _sig(g_n / math.sqrt(k))),
                 ("gamma_t/gamma_n", _sig(g_t / g_n) if g_n else g_t)]
-    return tuple(key + sorted((extra or {}).items()))
+        k_from = extra.pop("stiffen.k_n_from", 0.0)
+        if k_from:
+            key.append(("stiffened x", _sig(k / k_from)))
+    return tuple(key + sorted(extra.items()))
 
 
 def families(sets, vary):

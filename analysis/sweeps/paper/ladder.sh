@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# A stiffening ladder (physics.md 6.6, `mpdem stiffen`): a pile poured at k_n = 2e5, then stiffened tenfold
+# rung by rung to TOP, each rung through the ramp (stiffen.ramp_time, default 10 tau) and settled by the stop rule.
+# Each rung is its own run directory OUT/kn<K>; run again, the script skips the rungs that converged and restarts
+# one that stopped early from its newest checkpoint. A rung that ends at run.max_steps without converging ends
+# the ladder (exit 3).
+#   bash analysis/sweeps/paper/ladder.sh MU SEED OUT [TOP] [CONFIG]
+#   bash analysis/sweeps/paper/ladder.sh 0 4 analysis/results/paper/runs/ladder-dev/mu0_s4 2e8 analysis/sweeps/dev/dev.toml
+# The committed rungs of analysis/results/paper keep their summary.json, config.toml and packing.npz;
+# final.h5 (needed by the next rung) stays in the run directory, not in git.
+set -uo pipefail
+mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
+PY=${PY:-.venv/bin/python}
+mkdir -p "$out"
+status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
+rung() {  # dir max_steps command...: the rung, unless it converged; a restart where it has a checkpoint
+    local dir=$1 cap=$2; shift 2
+    case "$(status "$dir")" in
+        converged) echo "ladder: $dir converged before"; return 0 ;;
+        max_steps) echo "ladder: $dir ended at its cap without converging: the ladder stops here"; return 3 ;;
+    esac
+    if ls "$dir"/checkpoints/ckpt-*.h5 > /dev/null 2>&1; then
+        "$PY" -m mpdem restart "$dir" --quiet
+    else
+        "$@" --out "$dir" --force --quiet --set run.max_steps="$cap"
+    fi
+    local rc=$?
+    echo "ladder: $dir exit status $rc"
+    return $rc
+}
+# the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt)
+rung "$out/kn2e5" 1e7 "$PY" -m mpdem run "$cfg" --set contact.mu="$mu" --set run.seed="$seed" \
+    --set output.checkpoint_seconds=600 || exit $?
+prev=$out/kn2e5
+for k in 2e6 2e7 2e8 2e9; do
+    rung "$out/kn$k" "$("$PY" -c "print(f'{5e6 * ($k / 2e5) ** 0.5:.3g}')")" \
+        "$PY" -m mpdem stiffen "$prev" --k_n "$k" || exit $?
+    prev=$out/kn$k
+    [ "$k" = "$top" ] && break
+done
+echo "ladder: $out done to k_n = $top"
