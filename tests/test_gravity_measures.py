@@ -305,3 +305,31 @@ def test_overlap_fit_recovers_z_c_with_a_bootstrap_error_over_runs():
     assert abs(f["A"] - 12.0) < 4 * f["A_err"]
     with pytest.raises(ValueError, match="at least 3"):
         fits.fit_overlap([1e-5, 2e-5], [6.1, 6.2], [0, 0])
+
+
+def test_the_collapse_of_z_against_the_overlap_across_k_n_is_tested():
+    """Bands of three k_n on one curve z = 6 + 12 sqrt(delta): the F test keeps the one curve
+    (its p is uniform: a fifth of the draws below 0.2); an offset of 0.02 at one k_n, some six
+    times the error of a difference of two k_n's means (0.01 sqrt(2 / 16)), is found, and that k_n's bands sit above the one curve."""
+    rng = np.random.default_rng(8)
+    ps = []
+    for draw in range(200):
+        delta, z, run, k_n = [], [], [], []
+        for r, k in enumerate((2e5, 2e5, 2e6, 2e6, 2e7, 2e7)):
+            d = np.logspace(-5, -4, 8) * 2e5 / k
+            delta.append(d)
+            z.append(6.0 + 12.0 * np.sqrt(d) + 0.01 * rng.standard_normal(8))
+            run.append(np.full(8, r))
+            k_n.append(np.full(8, k))
+        f = fits.fit_overlap(*(np.concatenate(a) for a in (delta, z, run)), n_boot=2, level=np.concatenate(k_n))
+        ps.append(f["collapse"]["p"])
+    assert 0.1 < np.mean(np.array(ps) < 0.2) < 0.3
+    c = f["collapse"]
+    assert c["status"] == "tested" and c["levels"] == [2e5, 2e6, 2e7] and c["dof"] == [2, 44]
+    z = np.concatenate(z) + 0.02 * (np.concatenate(k_n) == 2e7)
+    shifted = fits.fit_overlap(np.concatenate(delta), z, np.concatenate(run), n_boot=2, level=np.concatenate(k_n))
+    assert shifted["collapse"]["p"] < 1e-3
+    r, e = shifted["collapse"]["residual"], shifted["collapse"]["residual_err"]
+    assert r[2] - r[0] > 0.01 and r[2] > 3 * e[2] and abs(sum(r)) < 0.005   # the shifted k_n sits above the curve
+    one = fits.fit_overlap(np.concatenate(delta), z, np.concatenate(run), n_boot=2, level=np.full(len(z), 2e5))
+    assert one["collapse"]["status"] == "not tested"

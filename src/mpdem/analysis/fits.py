@@ -12,6 +12,7 @@ import math
 import numpy as np
 from scipy.optimize import curve_fit
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import f as f_dist
 
 K_REF = 2e5    # k_n of the paper's softest runs; eq. 7 is fitted in k_n / K_REF
 
@@ -113,7 +114,7 @@ def fit_eq7_fixed(k_n, z, sigma, alpha_n=0.5):
             "n_points": int(len(k_n)), "weighted": True}
 
 
-def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5):
+def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5, level=None):
     """z - z_c = A (delta / d)^exponent over depth bands of many runs (docs/model.md 6.6).
 
     Parameters
@@ -121,16 +122,20 @@ def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5):
     delta : (K,) mean overlap of each band [d]; z : (K,) its z
     group : (K,) the run each band comes from: the error is a bootstrap over runs
     exponent : 1/2 for Hookean contacts
+    level : (K,) or None
+        The k_n of each band's run: with two levels or more, whether the bands of all
+        levels collapse on the one curve (``collapse``).
 
     Returns
     -------
     dict: z_c, A (least squares, every band weighted alike), z_c_err and A_err
     (standard deviations over runs resampled with replacement), n_bands, n_runs,
-    rms (residual), delta_min, delta_max
+    rms (residual), delta_min, delta_max, and with ``level`` the ``collapse`` test
     """
     delta, z, group = np.asarray(delta, float), np.asarray(z, float), np.asarray(group)
     ok = np.isfinite(delta) & np.isfinite(z) & (delta > 0)
     delta, z, group = delta[ok], z[ok], group[ok]
+    level = None if level is None else np.asarray(level, float)[ok]
     runs = np.unique(group)
     if len(z) < 3:
         raise ValueError(f"{len(z)} bands: the overlap fit needs at least 3")
@@ -154,7 +159,39 @@ def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5):
         if len(boot) > 1:
             b = np.array(boot)
             out["z_c_err"], out["A_err"] = float(b[:, 0].std(ddof=1)), float(b[:, 1].std(ddof=1))
+    if level is not None:
+        out["collapse"] = collapse(xs, z, level)
     return out
+
+
+def collapse(xs, z, level):
+    """Whether bands at several levels (k_n) lie on one line z = z_c + A xs: the F test of the one
+    line against a line of the same slope with an offset of its own for each level (nested least
+    squares; the residual scatter is estimated from the data, the bands taken as independent).
+
+    Returns
+    -------
+    dict: levels, F, dof (numerator, denominator), p (of F this large with one line), and each
+    level's mean residual from the one line with its standard error (``residual``,
+    ``residual_err``; the units of z), or status "not tested" with why
+    """
+    levels = np.unique(level)
+    g, n = len(levels), len(z)
+    if g < 2 or n - g - 1 < 1:
+        return {"status": "not tested", "reason": f"{g} levels and {n} bands (needs 2 levels and {g + 2} bands)",
+                "levels": levels.tolist()}
+    one = np.stack([np.ones(n), xs], axis=1)
+    each = np.concatenate([xs[:, None]] + [(level == v).astype(float)[:, None] for v in levels], axis=1)
+    res = z - one @ np.linalg.lstsq(one, z, rcond=None)[0]
+    rss_one = float(np.sum(res ** 2))
+    rss_each = float(np.sum((z - each @ np.linalg.lstsq(each, z, rcond=None)[0]) ** 2))
+    d1, d2 = g - 1, n - g - 1
+    F = ((rss_one - rss_each) / d1) / (rss_each / d2) if rss_each > 0 else math.inf
+    mean = [float(res[level == v].mean()) for v in levels]
+    err = [float(res[level == v].std(ddof=1) / math.sqrt((level == v).sum())) if (level == v).sum() > 1 else math.nan
+           for v in levels]
+    return {"status": "tested", "levels": levels.tolist(), "F": float(F), "dof": [d1, d2],
+            "p": float(f_dist.sf(F, d1, d2)), "residual": mean, "residual_err": err}
 
 
 def fit_eq7(k_n, z, sigma=None):

@@ -152,6 +152,15 @@ def _table(head, rows):
     return "\n".join(out)
 
 
+def _collapse_text(e):
+    """The collapse test of an overlap fit in words."""
+    c = e.get("collapse")
+    if not c or c.get("status") != "tested":
+        return "collapse not tested (one k_n)" if c else "collapse not tested"
+    res = ", ".join(f"{fmt_kn(k)} {fmt_pm(r, e, 3)}" for k, r, e in zip(c["levels"], c["residual"], c["residual_err"]))
+    return f"collapse F = {c['F']:.2f} ({c['dof'][0]}, {c['dof'][1]} dof), p = {c['p']:.2g}; mean residuals {res}"
+
+
 def _fam_text(f, drop=()):
     keys = [k for k in ("mu", "epsilon", "k_n", "phi_i", "N", "L_x", "model", "gamma_t/gamma_n", "gamma_t", "K0")
             if k in f and k not in drop]
@@ -325,12 +334,14 @@ def gravity_sections(sets, fit_res):
     L += ["## z against the overlap (docs/model.md 6.6)", "",
           "z − z_c = A (δ/d)^(1/2) fitted over the depth bands inside the bulk of every run of a family (all k_n), "
           "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs. At μ = 0 isostaticity "
-          "says z_c = 6.", ""]
+          "says z_c = 6. The collapse: the F test of the one curve against one of the same slope offset for each "
+          "k_n (p small: the k_n do not collapse; bands taken as independent), and each k_n's mean residual from "
+          "the one curve.", ""]
     ov = [e for e in fit_res.get("overlap", []) if e["status"] == "fitted"]
     L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)}, "
           f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs, δ/d from "
-          f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}" for e in ov] or \
-        ["- no family with depth profiles of 2 runs or more"]
+          f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}; {_collapse_text(e)}"
+          for e in ov] or ["- no family with depth profiles of 2 runs or more"]
     pf = _by_id(fit_res.get("P_f", []))
     L += ["", "## Normal forces P(f) (docs/model.md 6.10)", "",
           "f = F_n / the mean F_n of its depth band, bulk contacts, seeds pooled: the fraction with f < 0.1 and the "

@@ -95,14 +95,15 @@ def set_depth(s):
 
 
 def overlap_fit(members):
-    """z - z_c = A (delta / d)^(1/2) over the bulk depth bands of every run of a family's sets.
+    """z - z_c = A (delta / d)^(1/2) over the bulk depth bands of every run of a family's sets, and
+    whether the bands of its k_n collapse on that one curve (``fits.collapse``).
 
     Returns
     -------
     dict with the fit (``fits.fit_overlap``) and the sets and runs used, or
     status "not fitted" with the reason.
     """
-    delta, z, grp, used = [], [], [], []
+    delta, z, grp, k_n, used = [], [], [], [], []
     for s in members:
         for r in _have(s, "bands"):
             b = r.s["bands"]
@@ -111,13 +112,14 @@ def overlap_fit(members):
                     delta.append(b["overlap_mean"][k])
                     z.append(b["z"][k])
                     grp.append(len(used))
+                    k_n.append(s.params["contact.k_n"])
             used.append(r.path)
     e = {"sets": [s.id for s in members], "runs": used}
     if len(used) < 2 or len(z) < 3:
         e.update(status="not fitted", reason=f"{len(used)} runs with depth profiles and {len(z)} bulk bands "
                                              f"(the fit needs 2 runs and 3 bands)")
         return e
-    e.update(status="fitted", **fits.fit_overlap(delta, z, grp))
+    e.update(status="fitted", **fits.fit_overlap(delta, z, grp, level=k_n))
     return e
 
 
