@@ -14,7 +14,8 @@
 #       digests (CPU against GPU on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a
 #       stiffening rung), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
 #       compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput and stall sections of the
-#       fused steps and the list build, where `ncu` is found)
+#       fused steps and the list build, where `ncu` is found), anatomy (tools/gpu_anatomy.py: a fused step with
+#       the rows and over no rows, blocks of 128 and 256)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
@@ -166,6 +167,12 @@ if has profile; then
     else
         say "profile: no ncu or no table"
     fi
+fi
+# 7. PARTS=anatomy: what a fused step costs with the rows and without (tools/gpu_anatomy.py)
+if has anatomy && [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
+    for b in 128 256; do
+        $PY tools/gpu_anatomy.py "$TABLE" 1000 $b 2>&1 | grep "^gpu_anatomy" | tee -a "$SUM"
+    done
 fi
 say "gpu_check done in $((SECONDS - t0)) s"
 echo "---- summary ($SUM)"
