@@ -6,11 +6,14 @@
 # the ladder (exit 3).
 #   bash analysis/sweeps/paper/ladder.sh MU SEED OUT [TOP] [CONFIG]
 #   bash analysis/sweeps/paper/ladder.sh 0 4 analysis/results/paper/runs/ladder-dev/mu0_s4 2e8 analysis/sweeps/dev/dev.toml
+# DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
+# before that much wall time (exit 75: run the script again to go on).
 # The committed rungs of analysis/results/paper keep their summary.json, config.toml and packing.npz;
 # final.h5 (needed by the next rung) stays in the run directory, not in git.
 set -uo pipefail
 mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
 PY=${PY:-.venv/bin/python}
+opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"})
 mkdir -p "$out"
 status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
 rung() {  # dir max_steps command...: the rung, unless it converged; a restart where it has a checkpoint
@@ -20,9 +23,9 @@ rung() {  # dir max_steps command...: the rung, unless it converged; a restart w
         max_steps) echo "ladder: $dir ended at its cap without converging: the ladder stops here"; return 3 ;;
     esac
     if ls "$dir"/checkpoints/ckpt-*.h5 > /dev/null 2>&1; then
-        "$PY" -m mpdem restart "$dir" --quiet
+        "$PY" -m mpdem restart "$dir" "${opts[@]}"
     else
-        "$@" --out "$dir" --force --quiet --set run.max_steps="$cap"
+        "$@" --out "$dir" --force "${opts[@]}" --set run.max_steps="$cap"
     fi
     local rc=$?
     echo "ladder: $dir exit status $rc"
