@@ -172,3 +172,10 @@ def test_a_restart_inside_the_ramp_goes_on_bit_for_bit(soft, tmp_path):
     assert first.status == "max_steps"
     again = mpdem.restart(tmp_path / "split", set_items=["run.max_steps=12345"])
     assert again.digest == straight.digest
+
+
+def test_the_command_line_names_a_rise_past_a_decade(soft, tmp_path):
+    p = cli("stiffen", soft, "--k_n", "5e5", "--out", tmp_path / "x", check=1)
+    assert "--k_n 500000" in p.stderr and "up to 200000" in p.stderr and not (tmp_path / "x").exists()
+    p = cli("stiffen", tmp_path / "nothing", "--k_n", "2e5", check=1)
+    assert "no final.h5" in p.stderr

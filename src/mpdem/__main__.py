@@ -123,6 +123,9 @@ def stiffen_config(run, k_n, sets):
     with open(os.path.join(run, "config.toml")) as fh:
         raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
     was = config.resolve(raw).contact.k_n
+    if not 1 < k_n / was <= 10 * (1 + 1e-12):
+        raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "
+                         f"times (up to {10 * was:g}; stiffen the result again for more)")
     ours = [f"contact.k_n={k_n!r}", f"stiffen.k_n_from={was!r}", f"run.initial_file={config.toml_value(final)}"]
     return config.load(None, ours + list(sets), base=raw)
 
