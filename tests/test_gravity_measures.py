@@ -310,7 +310,8 @@ def test_overlap_fit_recovers_z_c_with_a_bootstrap_error_over_runs():
 def test_the_collapse_of_z_against_the_overlap_across_k_n_is_tested():
     """Bands of three k_n on one curve z = 6 + 12 sqrt(delta): the F test keeps the one curve
     (its p is uniform: a fifth of the draws below 0.2); an offset of 0.02 at one k_n, some six
-    times the error of a difference of two k_n's means (0.01 sqrt(2 / 16)), is found, and that k_n's bands sit above the one curve."""
+    times the error of a difference of two k_n's means (0.01 sqrt(2 / 16)), is found, and that
+    k_n's bands sit above the one curve."""
     rng = np.random.default_rng(8)
     ps = []
     for draw in range(200):
