@@ -497,3 +497,26 @@ def test_the_rungs_of_a_stiffening_ladder_are_one_family_apart_from_the_poured_p
     assert sorted(len(m) for _, m in fams) == [2, 3]
     ladder = [(f, m) for f, m in fams if len(m) == 2][0]
     assert ladder[0]["stiffened x"] == 10.0 and [s.params["contact.k_n"] for s in ladder[1]] == [2e6, 2e7]
+
+
+def test_a_run_on_another_bed_is_another_sample(tmp_path):
+    """``bed.seed`` apart from run.seed: one pour seed on two beds is two samples of the set; the
+    same pair of seeds again is the same sample (a duplicate). Summaries written before bed.seed
+    (no ``bed_seed``) are on the bed of their run.seed."""
+    rng = np.random.default_rng(13)
+    root = tmp_path / "runs"
+    for name, bed in (("s1", None), ("s1_bed7", 7), ("s1_bed7_again", 7), ("s1_bed1", 1), ("s10", None)):
+        seed = 10 if name == "s10" else 1
+        s = make_run(root / name, params(mu=0, seed=seed), 6.1, 0.64, 0.5, rng)
+        if bed is not None:
+            s["bed_seed"] = bed
+        else:
+            s.pop("bed_seed", None)
+        (root / name / "analysis/summary.json").write_text(json.dumps(s))
+    from mpdem.campaign.runs import AnalysedRun
+    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    sets, skipped = co.group(runs)
+    assert len(sets) == 1 and len(sets[0].runs) == 3
+    assert [os.path.basename(r.path) for r in sets[0].runs] == ["s1", "s1_bed7", "s10"]
+    reasons = sorted(os.path.basename(s["path"]) + ": " + s["reason"] for s in skipped)
+    assert len(reasons) == 2 and "duplicate: seed 1 (bed seed 1)" in reasons[0] and "bed seed 7" in reasons[1]

@@ -24,6 +24,11 @@ from .state import State
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
 
 
+def bed_seed(cfg):
+    """The seed of the bed's random stream: ``bed.seed``, or ``run.seed`` where it is -1."""
+    return cfg.bed.seed if cfg.bed.seed >= 0 else cfg.run.seed
+
+
 def rng(seed, purpose):
     """The random stream of one purpose (bed, pour, velocity) for a seed."""
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, purpose])))
@@ -99,7 +104,7 @@ def make_bed(cfg, progress=None):
     """
     b, L_x, L_y = cfg.bed, cfg.box.L_x, cfg.box.L_y
     n = max(1, round(b.settle_density * L_x * L_y))
-    gen = rng(cfg.run.seed, STREAM_BED)
+    gen = rng(bed_seed(cfg), STREAM_BED)
     h = insertion_height(n, L_x, L_y, 0.3)
     x = insert_random(gen, n, L_x, L_y, 0.5, 0.5 + h)
     k_n = b.settle_k_n

@@ -81,6 +81,9 @@ SCHEMA = (
     _k("contact", "history", "project",
        "tangential history update: project onto the tangent plane, or project and rescale to keep |Delta s|",
        str, ("project", "rotate")),
+    _k("bed", "seed", -1,
+       "random seed of the bed (-1: run.seed); set apart from run.seed, beds and pours are sampled apart (two runs "
+       "of one run.seed on two beds are two samples)", int, physics=False),
     _k("bed", "file", "",
        "read the bed (frozen spheres) from this text table or HDF5 file instead of building it", str),
     _k("bed", "wall", False,
@@ -597,6 +600,7 @@ def resolve(raw):
     need("output.checkpoint_keep", vals["output.checkpoint_keep"] >= 1, "checkpoint_keep >= 1")
     need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
     need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
+    need("bed.seed", vals["bed.seed"] >= -1, "-1 (run.seed) or a seed >= 0")
     need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")
     need("bed.gap", vals["bed.gap"] >= 0, "gap >= 0")
     need("bed.settle_density", 0 < vals["bed.settle_density"] <= 50, "0 < settle_density <= 50")

@@ -151,6 +151,8 @@ def summarise(arrays, attrs, cfg, source):
          # the parameter set (config.PARAM_KEYS, what the across-runs tables group by) and the physics
          "params": {k: cfg.values[k] for k in config.PARAM_KEYS},
          "physics": {k: cfg.values[k] for k in config.PHYSICS_KEYS},
+         # the sample: the pour's seed is params' run.seed; the bed's (bed.seed, or run.seed)
+         "bed_seed": cfg.bed.seed if cfg.bed.seed >= 0 else cfg.run.seed,
          "settings": {k: v for k, v in cfg.values.items() if k.startswith("analysis.")}, **s}
     return s, tables
 

@@ -219,13 +219,15 @@ def group(runs):
     for key in sorted(by_key, key=lambda k: (_set_order(dict(k[0])), repr(k[1]))):
         kept = {}
         for r in by_key[key]:
-            seed = r.params["run.seed"]
+            # the sample: the pour's seed and the bed's (summaries before bed.seed: the run's seed)
+            seed = (r.params["run.seed"], r.s.get("bed_seed", r.params["run.seed"]))
             if seed in kept:
-                skipped.append({"path": r.path, "reason": f"duplicate: seed {seed} of this parameter set is "
-                                                          f"{kept[seed].path} (the same sample)"})
+                skipped.append({"path": r.path, "reason": f"duplicate: seed {seed[0]} (bed seed {seed[1]}) of this "
+                                                          f"parameter set is {kept[seed].path} (the same sample)"})
             else:
                 kept[seed] = r
-        sets.append(Set("", dict(key[0]), [kept[k] for k in sorted(kept, key=_order)], _extra(key[1])))
+        samples = sorted(kept, key=lambda k: (_order(k[0]), _order(k[1])))
+        sets.append(Set("", dict(key[0]), [kept[k] for k in samples], _extra(key[1])))
     width = max(2, len(str(len(sets))))
     for i, s in enumerate(sets, 1):
         s.id = f"S{i:0{width}d}"
