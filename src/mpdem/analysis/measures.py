@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import backbone, bands, bulk, contacts, fits, gofr, jackknife, mobilisation, nearcontact, order
+from . import backbone, bands, bulk, contacts, fits, flow, gofr, jackknife, mobilisation, nearcontact, order
 
 
 @dataclass
@@ -253,6 +253,24 @@ def depth_windows(m):
     m.summary["depth_windows"] = {"columns": K, "windows": out}
 
 
+def flow_profile(m):
+    """Mean velocity, granular temperature and flux of the mobile spheres along z (a flow, issue 42)."""
+    if "v" not in m.arrays:
+        m.summary["flow"] = None
+        m.summary["flow_note"] = "no velocities in the file (a packing.npz keeps positions and contact forces)"
+        return
+    mob = m.pk.mobile
+    v = np.asarray(m.arrays["v"], float)[mob]
+    edges = m.reg["edges"]
+    fp = flow.profile(m.pk.x[mob, 2], v, edges)
+    m.tables["flow"] = dict(fp, edges=edges, phi=m.reg["phi_z"])
+    T = fp["T"][np.isfinite(fp["T"])]
+    m.summary["flow"] = {"v_x_mean": float(v[:, 0].mean()) if len(v) else math.nan,
+                         "flux": flow.flux(v[:, 0], m.pk.L_x, m.pk.L_y),
+                         "T_mean": float(np.sum((v - v.mean(axis=0)) ** 2) / (3 * len(v))) if len(v) else math.nan,
+                         "T_max_bin": float(T.max()) if len(T) else math.nan}
+
+
 @dataclass(frozen=True)
 class Measure:
     """One measurement of a packing: ``run(sample)`` adds to the sample's summary and tables."""
@@ -263,7 +281,7 @@ class Measure:
 
 MEASURES = tuple(Measure(f.__name__, f, f.__doc__.split("\n")[0]) for f in (
     slab, backbone_z, backbone_cuts, isostatic_count, halved_margins, crystal_order, depth_bands,
-    force_distribution, alpha, radial_distribution, force_ratios, depth_windows))
+    force_distribution, alpha, radial_distribution, force_ratios, depth_windows, flow_profile))
 
 
 def measure(arrays, attrs, cfg):

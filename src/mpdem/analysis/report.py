@@ -110,6 +110,10 @@ def write_tables(out, s, t):
             cols += [z["count_ratio"], z["P_ratio"]]
             head += ["count_ratio", "P_ratio"]
         _csv(os.path.join(out, "zeta.csv"), head, cols)
+    if "flow" in t:
+        f = t["flow"]
+        _csv(os.path.join(out, "flow.csv"), ["z_lo", "z_hi", "n", "phi", "v_x", "v_y", "v_z", "T"],
+             [f["edges"][:-1], f["edges"][1:], f["n"], f["phi"], f["v_x"], f["v_y"], f["v_z"], f["T"]])
     b = s["bands"]
     cols = ["depth_lo", "depth_hi", "z_lo", "z_hi", "in_bulk", "n_particles", "z", "z_backbone", "rattler_fraction",
             "phi", "overlap_mean", "overlap_median", "F_n_mean", "sigma_zz", "crystal_fraction", "n_contacts"]

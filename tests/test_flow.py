@@ -1,0 +1,50 @@
+"""The chute diagnostics (``analysis.flow``, issue 42) against known fields: a Bagnold profile of
+v_x over height, an isotropic thermal spread, and the flux as the integral of phi v_x."""
+import math
+
+import numpy as np
+import pytest
+
+from mpdem.analysis import flow
+
+
+def bagnold(z, h, A=2.0):
+    """The chute paper's steady profile, v_x = A (h^(3/2) - (h - z)^(3/2)) [sqrt(g d)], z above the bed."""
+    return A * (h ** 1.5 - np.clip(h - z, 0, None) ** 1.5)
+
+
+def test_the_profile_recovers_a_bagnold_flow_and_its_temperature():
+    rng = np.random.default_rng(3)
+    h, n = 20.0, 200_000
+    z = rng.uniform(0, h, n)
+    sigma = 0.3
+    v = np.stack([bagnold(z, h), np.zeros(n), np.zeros(n)], axis=1) + sigma * rng.standard_normal((n, 3))
+    edges = np.linspace(0, h, 41)
+    p = flow.profile(z, v, edges)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    # a bin's mean of a smooth profile is its average over the bin, up to the noise and the spread of
+    # the profile over the bin (its slope times the width over sqrt(12)) among the bin's spheres
+    want = np.array([bagnold(np.linspace(a, b, 201), h).mean() for a, b in zip(edges[:-1], edges[1:])])
+    slope = 1.5 * 2.0 * np.sqrt(np.clip(h - mid, 0, None))
+    w = h / 40
+    err = np.sqrt(sigma ** 2 + slope ** 2 * w ** 2 / 12) / np.sqrt(p["n"])
+    assert np.all(np.abs(p["v_x"] - want) < 5 * err)
+    assert np.all(np.abs(p["v_y"]) < 5 * err) and np.all(np.abs(p["v_z"]) < 5 * err)
+    assert p["n"].sum() == n and np.all(p["v_x"][1:] > p["v_x"][:-1] - 5 * err[1:])
+    # the temperature: sigma^2 plus a third of the profile's spread inside a bin (x alone spreads)
+    assert np.allclose(p["T"], sigma ** 2 + slope ** 2 * w ** 2 / 12 / 3, rtol=0.05)
+
+
+def test_the_flux_is_the_integral_of_phi_v_x():
+    """A slab of spheres at packing fraction phi moving at u: flux phi u h per unit width."""
+    L, h, u, phi = 10.0, 4.0, 0.7, 0.55
+    n = int(round(phi * L * L * h / (math.pi / 6)))
+    v = np.zeros((n, 3))
+    v[:, 0] = u
+    assert flow.flux(v[:, 0], L, L) == pytest.approx(phi * u * h, rel=1e-3)
+
+
+def test_empty_and_single_bins_are_nan_not_errors():
+    p = flow.profile([0.5, 2.5], [[1.0, 0, 0], [2.0, 0, 0]], np.array([0.0, 1.0, 2.0, 3.0]))
+    assert list(p["n"]) == [1, 0, 1] and math.isnan(p["v_x"][1]) and p["v_x"][2] == 2.0
+    assert np.all(np.isnan(p["T"]))
