@@ -12,7 +12,6 @@ import pytest
 
 import mpdem
 from mpdem import stiffen
-from mpdem.__main__ import stiffen_config
 from mpdem.config import ConfigError, gamma_n_from_epsilon, restitution
 from mpdem.errors import InputError
 from mpdem.io import checkpoint
@@ -42,7 +41,7 @@ def soft(tmp_path_factory):
 def stiffened(soft, tmp_path_factory):
     """The soft pile stiffened tenfold through the ramp: its run directory."""
     out = tmp_path_factory.mktemp("stiff") / "run"
-    r = mpdem.run(stiffen_config(str(soft), 2e5, RAMP), out)
+    r = mpdem.run(stiffen.rung_config(str(soft), 2e5, RAMP), out)
     assert r.status == "converged", "a stiffened pile must settle by the stop rule"
     return out
 
@@ -157,7 +156,7 @@ def test_a_stiffened_pile_keeps_its_contacts_carries_its_weight_on_smaller_overl
     end = int(log.split("over ")[1].split(" steps")[0])
     assert rows[-1, 0] > end, "the stop rule only holds after the ramp"
     # what the ramp is for: a jump (a ramp of one step) shakes the pile far more
-    mpdem.run(stiffen_config(str(soft), 2e5, ["stiffen.ramp_time=1e-4", "stiffen.update_interval=1e-4",
+    mpdem.run(stiffen.rung_config(str(soft), 2e5, ["stiffen.ramp_time=1e-4", "stiffen.update_interval=1e-4",
                                               "run.max_steps=3000"]), tmp_path / "jump")
     jump = np.loadtxt(tmp_path / "jump" / "thermo.csv", delimiter=",", skiprows=1)
     assert jump[:, 2].max() > 20 * rows[:, 2].max()
@@ -165,8 +164,8 @@ def test_a_stiffened_pile_keeps_its_contacts_carries_its_weight_on_smaller_overl
 
 def test_a_restart_inside_the_ramp_goes_on_bit_for_bit(soft, tmp_path):
     short = RAMP + ["run.max_steps=12345", "output.checkpoint_every=6789"]
-    straight = mpdem.run(stiffen_config(str(soft), 2e5, short), tmp_path / "straight")
-    first = mpdem.run(stiffen_config(str(soft), 2e5, short[:-2] + ["run.max_steps=6789",
+    straight = mpdem.run(stiffen.rung_config(str(soft), 2e5, short), tmp_path / "straight")
+    first = mpdem.run(stiffen.rung_config(str(soft), 2e5, short[:-2] + ["run.max_steps=6789",
                                                                      "output.checkpoint_every=6789"]),
                       tmp_path / "split")
     assert first.status == "max_steps"

@@ -110,31 +110,11 @@ def cmd_run(args, net):
     return r.exit_status
 
 
-def stiffen_config(run, k_n, sets):
-    """The config of a rung that stiffens finished run ``run`` to ``k_n`` (``mpdem stiffen``): the run's
-    own keys (the derived ones derived again at the new k_n), contact.k_n = ``k_n``, stiffen.k_n_from
-    = the run's k_n, run.initial_file = RUN/final.h5, then ``sets``."""
-    from . import config
-    from .errors import InputError
-    from .io import rundir
-    final = rundir.final_path(run)
-    if not os.path.exists(final):
-        raise InputError(f"{run}: no final.h5; stiffen accepts a finished run's directory")
-    with open(os.path.join(run, "config.toml")) as fh:
-        raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
-    was = config.resolve(raw).contact.k_n
-    if not 1 < k_n / was <= 10 * (1 + 1e-12):
-        raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "
-                         f"times (up to {10 * was:g}; stiffen the result again for more)")
-    ours = [f"contact.k_n={k_n!r}", f"stiffen.k_n_from={was!r}", f"run.initial_file={config.toml_value(final)}"]
-    return config.load(None, ours + list(sets), base=raw)
-
-
 def cmd_stiffen(args, net):
-    from . import api, config
+    from . import api, config, stiffen
     from .errors import AgreedError, InputError
     try:
-        cfg = stiffen_config(args.run, args.k_n, args.set + device_items(args))
+        cfg = stiffen.rung_config(args.run, args.k_n, args.set + device_items(args))
     except (config.ConfigError, InputError, OSError) as e:
         raise AgreedError(str(e)) from None
     out = args.out or f"{os.path.normpath(args.run)}-kn{args.k_n:g}"

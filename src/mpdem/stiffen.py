@@ -22,10 +22,11 @@ same laws, and every rank and engine computes the same ones on the host (Python 
 from __future__ import annotations
 
 import math
+import os
 
 from . import config
 from .errors import InputError
-from .io import checkpoint
+from .io import checkpoint, rundir
 
 # the largest rise of one rung: a decade (physics.md 6.6); 1e-12 for the rounding of k_n / k_n_from
 MAX_RATIO = 10.0 * (1.0 + 1e-12)
@@ -144,3 +145,28 @@ def check_initial(cfg, path):
                          f"and its overlaps met at once by the stiffer spring would launch the pile; set "
                          f"stiffen.k_n_from = {was:g} (a ramp over stiffen.ramp_time, at most a decade a rung) "
                          f"or use `mpdem stiffen`")
+
+
+def rung_config(run, k_n, sets=()):
+    """The config of a rung that stiffens the finished run ``run`` to ``k_n`` (``mpdem stiffen``): the
+    run's own keys (those derived from k_n derived again), contact.k_n = ``k_n``, stiffen.k_n_from =
+    the run's k_n, run.initial_file = RUN/final.h5, then ``sets`` (``--set`` texts).
+
+    Raises
+    ------
+    InputError
+        No final.h5 in ``run``, or ``k_n`` not above the run's by at most ten times (naming --k_n).
+    ConfigError
+        From the config's own checks.
+    """
+    final = rundir.final_path(run)
+    if not os.path.exists(final):
+        raise InputError(f"{run}: no final.h5; stiffen accepts a finished run's directory")
+    with open(os.path.join(run, "config.toml")) as fh:
+        raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
+    was = config.resolve(raw).contact.k_n
+    if not 1 < k_n / was <= MAX_RATIO:
+        raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "
+                         f"times (up to {10 * was:g}; stiffen the result again for more)")
+    ours = [f"contact.k_n={k_n!r}", f"stiffen.k_n_from={was!r}", f"run.initial_file={config.toml_value(final)}"]
+    return config.load(None, ours + list(sets), base=raw)

@@ -8,7 +8,8 @@
 #   bash analysis/sweeps/paper/ladder.sh 0 4 analysis/results/paper/runs/ladder-dev/mu0_s4 2e8 analysis/sweeps/dev/dev.toml
 # DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
 # before that much wall time (exit 75: run the script again to go on).
-# The committed rungs of analysis/results/paper keep their summary.json, config.toml and packing.npz;
+# Each converged rung is analysed (mpdem analyze --packing). The committed rungs of analysis/results/paper keep
+# their summary.json, config.toml, analysis/ and packing.npz;
 # final.h5 (needed by the next rung) stays in the run directory, not in git.
 set -uo pipefail
 mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
@@ -16,10 +17,13 @@ PY=${PY:-.venv/bin/python}
 opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"})
 mkdir -p "$out"
 status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
+analyse() {  # dir: its analysis and packing.npz (what git keeps of a rung), once
+    [ -f "$1/analysis/summary.json" ] || "$PY" -m mpdem analyze "$1" --no-plots --quiet --packing
+}
 rung() {  # dir max_steps command...: the rung, unless it converged; a restart where it has a checkpoint
     local dir=$1 cap=$2; shift 2
     case "$(status "$dir")" in
-        converged) echo "ladder: $dir converged before"; return 0 ;;
+        converged) echo "ladder: $dir converged before"; analyse "$dir"; return 0 ;;
         max_steps) echo "ladder: $dir ended at its cap without converging: the ladder stops here"; return 3 ;;
     esac
     if ls "$dir"/checkpoints/ckpt-*.h5 > /dev/null 2>&1; then
@@ -29,6 +33,7 @@ rung() {  # dir max_steps command...: the rung, unless it converged; a restart w
     fi
     local rc=$?
     echo "ladder: $dir exit status $rc"
+    [ $rc -eq 0 ] && analyse "$dir"
     return $rc
 }
 # the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt)
