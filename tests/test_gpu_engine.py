@@ -267,3 +267,17 @@ def test_no_gpu_ends_a_run_in_one_line(tmp_path):
     assert "engine.device = 'gpu'" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
     # refused before any work: no bed was made, no state file written
     assert not list(tmp_path.glob("r/*.h5")) and not (tmp_path / "r" / "bed.txt").exists()
+
+
+def test_a_stiffening_rung_on_the_gpu_is_the_cpu_rung(tmp_path):
+    """``mpdem stiffen --device gpu``: the ramp's laws in the GPU's launches (each within one tread,
+    a tread's first step, the ramp's end included, a step of its own), the CPU's digest. The progress
+    line falls on the step before the ramp's end (64 here: treads of 16 steps), so a launch starts
+    there."""
+    pour(tmp_path / "soft", "run.max_steps=200", "contact.mu=0.5")
+    rung = ["--k_n", "2e4", "--set", "run.max_steps=100", "--set", "stiffen.ramp_time=0.02",
+            "--set", "stiffen.update_interval=0.005", "--set", "output.progress_every=63", "--quiet"]
+    for dev in ("cpu", "gpu"):
+        mpdem("stiffen", tmp_path / "soft", *rung, "--device", dev, "--out", tmp_path / dev, check=3)
+    assert "over 64 steps" in (tmp_path / "gpu" / "log.txt").read_text()
+    assert summary_digest(tmp_path / "gpu") == summary_digest(tmp_path / "cpu")

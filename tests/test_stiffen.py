@@ -90,7 +90,9 @@ def test_the_ramp_rises_geometrically_and_ends_on_the_configs_law():
     product = math.prod(r.law(m * r.tread).ds_scale for m in range(1, r.treads + 1))
     assert product * law.k_t == pytest.approx(2 * 2e5 / 7, rel=1e-12)
     # steps that share one law: none at a tread's first step, the rest of the tread otherwise
-    assert r.room(r.tread - 1) == 0 and r.room(0) == r.tread - 1 and r.room(r.end - 1) > 10 ** 15
+    assert r.room(r.tread - 1) == 0 and r.room(0) == r.tread - 1 and r.room(r.end) > 10 ** 15
+    # the ramp's last step (the end's rescaling) is a step of its own, from wherever a launch starts
+    assert r.room(r.end - 1) == 0 and r.law(r.end).ds_scale != 1.0 and r.room(r.end - 2) == 1
     assert {r.law(s) for s in range(1, r.tread)} == {r.law(1)}
 
 

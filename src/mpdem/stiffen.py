@@ -105,9 +105,9 @@ class Ramp:
         """Steps after ``step`` that share the law of ``step + 1`` (none if that is a tread's first
         step, whose law rescales the history); unbounded (a large number) past the ramp."""
         first = step + 1
-        if first >= self.end:
+        if first > self.end:
             return 1 << 62
-        if first % self.tread == 0:
+        if first % self.tread == 0:     # the ramp's end too: its first step rescales the history
             return 0
         return (first // self.tread + 1) * self.tread - first
 
