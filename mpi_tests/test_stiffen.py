@@ -1,4 +1,4 @@
-"""A stiffening rung (``mpdem stiffen``, physics.md 6.6: the ramp's laws step by step, the history
+"""A stiffening rung (``mpdem stiffen``, docs/model.md 6.6: the ramp's laws step by step, the history
 rescaled at each tread) on every rank count gives the one-rank digest."""
 import os
 

@@ -224,7 +224,7 @@ def test_force_ratios_histogram_and_mobilised_fraction():
 
 
 def test_the_generalized_isostatic_count_removes_one_degree_of_freedom_per_mobilised_contact():
-    """physics.md 6.2: with N_m fully mobilised contacts among N spheres, 3 N z / 2 - N_m = 6 N, so
+    """docs/model.md 6.2: with N_m fully mobilised contacts among N spheres, 3 N z / 2 - N_m = 6 N, so
     z_iso = 4 + 2 N_m / (3 N) = 4 + n_m / 3 with n_m = 2 N_m / N counted per sphere as z is."""
     from types import SimpleNamespace
     x, L = simple_cubic(4, 4, SQUEEZE)

@@ -466,7 +466,7 @@ def test_figures_in_several_formats(tree, tmp_path):
 
 def test_the_isostatic_count_comes_from_n_m_in_old_and_new_summaries():
     """Summaries written before 2026-11-26 hold z_iso = 4 + 2 n_m / 3 (each mobilised contact counted
-    twice); the tables take 4 + n_m / 3 from the stored n_m (physics.md 6.2), whichever was written."""
+    twice); the tables take 4 + n_m / 3 from the stored n_m (docs/model.md 6.2), whichever was written."""
     from mpdem.campaign.runs import quantities
     old = {"isostatic": {"n_m": 0.3, "z_iso": 4.2}}
     new = {"isostatic": {"n_m": 0.3, "z_iso": 4.1}}

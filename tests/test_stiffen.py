@@ -1,4 +1,4 @@
-"""Stiffening a settled pile (physics.md 6.6, ``mpdem.stiffen``): the ramp's laws, the tangential
+"""Stiffening a settled pile (docs/model.md 6.6, ``mpdem.stiffen``): the ramp's laws, the tangential
 force kept through a rescaled history, the refusals, and a pile stiffened tenfold that keeps its
 contacts, carries its weight on overlaps ten times smaller and ends static, restart-exact.
 

@@ -109,7 +109,7 @@ if has digests; then
     LMP=(--set 'run.initial_file="tests/data/lammps_sphere.data"' --set 'run.fixed_types=[2]' --set contact.gamma_t=20)
     compare lammps-hooke $LSTEPS "${LMP[@]}" --set contact.mu=0.5
     compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
-    # a stiffening rung of that pile (physics.md 6.6: the ramp's laws, the history rescaled) on both devices
+    # a stiffening rung of that pile (docs/model.md 6.6: the ramp's laws, the history rescaled) on both devices
     for dev in cpu gpu; do
         $PY -m mpdem stiffen "$w/example-mu0.5-cpu" "${STIFF[@]}" --out "$w/stiff-$dev" --force --quiet --device $dev \
             > "$w/stiff-$dev.log" 2>&1

@@ -266,7 +266,7 @@ def parser():
                     help="change run.max_steps, stop.*, checks.*, decomp.*, engine.*, output.* or analysis.*")
     rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
     sf = sub.add_parser("stiffen", help="a new run: a finished run's pile stiffened to --k_n through the ramp "
-                                        "(physics.md 6.6), then settled by the stop rule")
+                                        "(docs/model.md 6.6), then settled by the stop rule")
     sf.add_argument("run", metavar="RUN_DIR", help="a finished run (its config.toml and final.h5)")
     sf.add_argument("--k_n", type=float, required=True, metavar="K",
                     help="the new contact.k_n [m g / d], at most ten times the run's")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import gamma_n_from_epsilon
+from .config import bed_seed, gamma_n_from_epsilon
 from .decomp import Domain
 from .engine.base import Physics
 from .engine.cpu import Engine
@@ -22,11 +22,6 @@ from .kernels.particle import VOLUME as SPHERE_VOLUME
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
-
-
-def bed_seed(cfg):
-    """The seed of the bed's random stream: ``bed.seed``, or ``run.seed`` where it is -1."""
-    return cfg.bed.seed if cfg.bed.seed >= 0 else cfg.run.seed
 
 
 def rng(seed, purpose):

@@ -109,7 +109,7 @@ SCHEMA = (
        "the force kernel's reach beyond contact [d] (<= skin; no effect on results): the list entries"
        " within 1 + near_skin, filtered again when a particle moved near_skin/2", physics=False),
     _k("stiffen", "k_n_from", 0.0,
-       "stiffen a settled pile (physics.md 6.6): the k_n [m g / d] that run.initial_file was settled at, from "
+       "stiffen a settled pile (docs/model.md 6.6): the k_n [m g / d] that run.initial_file was settled at, from "
        "which k_n rises geometrically to contact.k_n over stiffen.ramp_time (k_t, gamma_n from epsilon and "
        "gamma_t following, each Delta s rescaled by k_t old / new), after which the stop rule runs; at most a "
        "decade a rung; 0 = no ramp (`mpdem stiffen RUN --k_n K` sets it)"),
@@ -239,6 +239,16 @@ RETIRED = {"integration.contact_slots": "unused since the contact history moved 
 SECTIONS = tuple(dict.fromkeys(k.section for k in SCHEMA))
 KEYS = MappingProxyType({f"{k.section}.{k.name}": k for k in SCHEMA})
 # the flags of SCHEMA as tuples of 'section.key' names (schema order; PARAM_KEYS in column order)
+# the largest rise of one stiffening rung, k_n / stiffen.k_n_from: a decade (docs/model.md 6.6); 1e-12 for the
+# rounding of the quotient
+MAX_RISE = 10.0 * (1.0 + 1e-12)
+
+
+def bed_seed(cfg):
+    """The seed of the bed's random stream: ``bed.seed``, or ``run.seed`` where it is -1."""
+    return cfg.bed.seed if cfg.bed.seed >= 0 else cfg.run.seed
+
+
 RESTART_KEYS = tuple(name for name, k in KEYS.items() if k.restart)
 PHYSICS_KEYS = tuple(name for name, k in KEYS.items() if k.physics)
 PARAM_KEYS = tuple(sorted((name for name, k in KEYS.items() if k.param), key=lambda name: KEYS[name].param))
@@ -576,7 +586,7 @@ def resolve(raw):
         raise ConfigError(f"integration.dt = {dt:g}: gamma_n dt = {gamma_n * dt:.3g}; accepted gamma_n dt <= 0.5")
 
     k_from = vals["stiffen.k_n_from"]
-    need("stiffen.k_n_from", k_from == 0 or k_from > 0 and 1 < k_n / k_from <= 10 * (1 + 1e-12),
+    need("stiffen.k_n_from", k_from == 0 or k_from > 0 and 1 < k_n / k_from <= MAX_RISE,
          f"0 (no ramp) or a stiffness below contact.k_n = {k_n:g} by at most a decade (a rung; several rungs "
          f"for more)")
     need("stiffen.ramp_time", vals["stiffen.ramp_time"] > 0, "ramp_time > 0")
@@ -661,5 +671,5 @@ def reference_markdown():
 
 __all__ = ["Config", "ConfigError", "load", "resolve", "parse_set", "SCHEMA",
            "RESTART_KEYS", "PHYSICS_KEYS", "PARAM_KEYS", "key_summary",
-           "gamma_n_from_epsilon", "restitution", "collision_time",
+           "gamma_n_from_epsilon", "restitution", "collision_time", "MAX_RISE", "bed_seed",
            "reference_markdown"]

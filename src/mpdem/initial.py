@@ -152,7 +152,7 @@ def initial_state(cfg, net, log, lammps_table=None):
     """
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     if cfg.run.initial_file:
-        # a settled pile met by a stiffer spring needs the ramp (physics.md 6.6)
+        # a settled pile met by a stiffer spring needs the ramp (docs/model.md 6.6)
         stiffen.check_initial(cfg, cfg.run.initial_file)
         p = particles(cfg.run.initial_file, cfg, lammps_table=lammps_table, log=log)
         fixed, x = p["fixed"], p["x"]

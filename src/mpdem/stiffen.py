@@ -1,4 +1,4 @@
-"""Stiffening a settled pile (physics.md 6.6): a new run from a pile settled at a softer spring, with
+"""Stiffening a settled pile (docs/model.md 6.6): a new run from a pile settled at a softer spring, with
 k_n raised smoothly from that stiffness to the config's before the pile relaxes by the stop rule.
 
 The stored overlaps are those of the softer spring: met at once by the stiffer one, they would hold
@@ -27,10 +27,6 @@ import os
 from . import config
 from .errors import InputError
 from .io import checkpoint, rundir
-
-# the largest rise of one rung: a decade (physics.md 6.6); 1e-12 for the rounding of k_n / k_n_from
-MAX_RATIO = 10.0 * (1.0 + 1e-12)
-
 
 class Ramp:
     """The laws of a stiffening run, step by step.
@@ -165,7 +161,7 @@ def rung_config(run, k_n, sets=()):
     with open(os.path.join(run, "config.toml")) as fh:
         raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
     was = config.resolve(raw).contact.k_n
-    if not 1 < k_n / was <= MAX_RATIO:
+    if not 1 < k_n / was <= config.MAX_RISE:
         raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "
                          f"times (up to {10 * was:g}; stiffen the result again for more)")
     ours = [f"contact.k_n={k_n!r}", f"stiffen.k_n_from={was!r}", f"run.initial_file={config.toml_value(final)}"]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A stiffening ladder (physics.md 6.6, `mpdem stiffen`): a pile poured at k_n = 2e5, then stiffened tenfold
+# A stiffening ladder (docs/model.md 6.6, `mpdem stiffen`): a pile poured at k_n = 2e5, then stiffened tenfold
 # rung by rung to TOP, each rung through the ramp (stiffen.ramp_time, default 10 tau) and settled by the stop rule.
 # Each rung is its own run directory OUT/kn<K>; run again, the script skips the rungs that converged and restarts
 # one that stopped early from its newest checkpoint. A rung that ends at run.max_steps without converging ends

@@ -156,7 +156,7 @@ def summarise(arrays, attrs, cfg, source):
          "params": {k: cfg.values[k] for k in config.PARAM_KEYS},
          "physics": {k: cfg.values[k] for k in config.PHYSICS_KEYS},
          # the sample: the pour's seed is params' run.seed; the bed's (bed.seed, or run.seed)
-         "bed_seed": cfg.bed.seed if cfg.bed.seed >= 0 else cfg.run.seed,
+         "bed_seed": config.bed_seed(cfg),
          "settings": {k: v for k, v in cfg.values.items() if k.startswith("analysis.")}, **s}
     return s, tables
 

@@ -80,7 +80,7 @@ def quantities(s):
     bb, iso, od = s.get("backbone") or {}, s.get("isostatic") or {}, s.get("order") or {}
     q.update(mobilised_fraction=num(zt.get("mobilised_fraction")), z_halved=num(hm.get("z")),
              phi_halved=num(hm.get("phi")), z_backbone=num(bb.get("z")),
-             # from n_m (4 + n_m / 3, physics.md 6.2): summaries written before 2026-11-26 hold 4 + 2 n_m / 3
+             # from n_m (4 + n_m / 3, docs/model.md 6.2): summaries written before 2026-11-26 hold 4 + 2 n_m / 3
              z_iso=4.0 + num(iso["n_m"]) / 3.0 if "n_m" in iso else NAN,
              crystal_fraction=num(od.get("crystal_fraction")))
     q.update(depth.window_quantities(s, num))
