@@ -120,6 +120,7 @@ if [[ -n $table ]]; then
       k_n) k=contact.k_n t=kn ;;
       phi_i) k=pour.phi_i t=phi ;;
       seed) k=run.seed t=s ;;
+      bed.seed) k=bed.seed t=bed ;;
       *.*) k=${hdr[i]} t=${hdr[i]#*.} ;;
       *) die "$table: unknown column '${hdr[i]}' (mu epsilon k_n phi_i seed, or section.key)" ;;
     esac

@@ -15,7 +15,7 @@
 #       stiffening rung), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
 #       compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput and stall sections of the
 #       fused steps and the list build, where `ncu` is found), anatomy (tools/gpu_anatomy.py: a fused step with
-#       the rows and over no rows, blocks of 128 and 256)
+#       the rows and over no rows, blocks of 128 and 256), rows (ROWS: sweep tables run on the GPU, below)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
@@ -171,7 +171,30 @@ fi
 # 7. PARTS=anatomy: what a fused step costs with the rows and without (tools/gpu_anatomy.py)
 if has anatomy && [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
     for b in 128 256; do
-        $PY tools/gpu_anatomy.py "$TABLE" 1000 $b 2>&1 | grep "^gpu_anatomy" | tee -a "$SUM"
+        timeout "${ANATOMY_SECONDS:-90}" $PY tools/gpu_anatomy.py "$TABLE" 1000 $b 2>&1 | grep "^gpu_anatomy" | tee -a "$SUM"
+    done
+fi
+# 8. PARTS=rows: the rows of sweep tables (ROWS, under ROWS_CONFIG; ROWS_SET="key=value ..." beside them) on the GPU,
+# one after the other, until ROWS_SECONDS (default 400) are spent; then the sweep stops them with a checkpoint. Each
+# row's directory comes back as $OUT/<row>.tgz (at most 8 files come back from the device: keep the rows few): its
+# run and analysis files with final.h5, or, where it did not finish, its newest checkpoint to go on from with
+# `mpdem sweep` or `mpdem restart` on any machine (the digest does not depend on the device).
+if has rows && [ -n "${ROWS:-}" ]; then
+    t=$SECONDS
+    rs=(); for kv in ${ROWS_SET:-}; do rs+=(--set "$kv"); done
+    # shellcheck disable=SC2086  # ROWS: several tables
+    timeout -s TERM --kill-after=120 "${ROWS_SECONDS:-400}" $PY -m mpdem sweep $ROWS ${ROWS_CONFIG:+--config "$ROWS_CONFIG"} \
+        --out "$w/rows" --set engine.device=gpu "${rs[@]}" --jobs 1 --no-collect --progress 60 > "$OUT/rows.log" 2>&1
+    say "rows ($ROWS): sweep exit status $? after $((SECONDS - t)) s"
+    grep "^sweep: " "$OUT/rows.log" | tail -n 12 | tee -a "$SUM"
+    for d in "$w"/rows/*/; do
+        n=$(basename "$d")
+        ck=$(ls "$d"checkpoints/ckpt-*.h5 2>/dev/null | sort | tail -1)
+        for c in "$d"checkpoints/ckpt-*.h5; do   # the newest checkpoint alone, and none once the run has its final.h5
+            [ -f "$c" ] && { [ -f "$d/final.h5" ] || [ "$c" != "$ck" ]; } && rm -f "$c"
+        done
+        tar -czf "$OUT/$n.tgz" -C "$w/rows" "$n"
+        say "    $n: $(tail -1 "$d/thermo.csv" 2>/dev/null | cut -d, -f1,3) $(ls "$d" | tr '\n' ' ')"
     done
 fi
 say "gpu_check done in $((SECONDS - t0)) s"

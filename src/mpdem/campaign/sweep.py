@@ -32,7 +32,8 @@ from ..errors import EXIT_RESTART, SweepError
 
 # table column -> (config key, the short name used in run directory names)
 COLUMNS = {"mu": ("contact.mu", "mu"), "epsilon": ("contact.epsilon", "eps"), "k_n": ("contact.k_n", "kn"),
-           "phi_i": ("pour.phi_i", "phi"), "seed": ("run.seed", "s")}
+           "phi_i": ("pour.phi_i", "phi"), "seed": ("run.seed", "s"),
+           "bed.seed": ("bed.seed", "bed")}     # "s1_bed101", not "s1_seed101"
 VALUE = re.compile(r"^[A-Za-z0-9.+-]+$")
 SUMMARY = os.path.join("analysis", "summary.json")
 
