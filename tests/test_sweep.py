@@ -98,6 +98,20 @@ def test_the_paper_tables():
     assert sum(v["contact.mu"] == 0.5 for v in size) == 2
 
 
+def test_a_restart_takes_the_sweeps_device(tmp_path):
+    """A row begun on a GPU machine (its config says engine.device = "gpu") goes on elsewhere when the
+    sweep is given engine.device: the restart is told the device; without it the run keeps its own."""
+    row = sweep.Row("t.tsv", 1, ["contact.mu=0.5", "run.seed=1"], "mu0.5_s1")
+    (tmp_path / row.name / "checkpoints").mkdir(parents=True)
+    (tmp_path / row.name / "checkpoints" / "ckpt-00000.h5").write_bytes(b"")
+    stage, argv = sweep.Sweep([row], str(tmp_path), sets=["engine.device=cpu"]).command(row)
+    assert stage == "run" and argv[argv.index("restart") + 2:argv.index("restart") + 4] == ["--device", "cpu"]
+    _, argv = sweep.Sweep([row], str(tmp_path), sets=['engine.device="gpu"', "contact.mu=0"]).command(row)
+    assert argv[argv.index("--device") + 1] == "gpu"
+    _, argv = sweep.Sweep([row], str(tmp_path)).command(row)
+    assert "restart" in argv and "--device" not in argv
+
+
 @pytest.mark.parametrize("text, match", [
     ("mu\tcolour\n0.5\tred\n", "unknown column 'colour'"),
     ("mu\tcontact.k_x\n0.5\t1\n", "column 'contact.k_x' is no config key"),

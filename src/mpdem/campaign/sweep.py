@@ -197,7 +197,9 @@ class Sweep:
             return "analyze", [sys.executable, "-m", "mpdem", "analyze", d, "--no-plots", "--quiet", "--packing"]
         threads = ["--threads", str(self.threads), "--quiet"]
         if rundir.checkpoints(d):
-            return "run", self.mpdem() + ["restart", d] + threads
+            # a restart keeps its run's config; the sweep's engine.device (if set) moves it, e.g. from a GPU to the CPU
+            dev = [s.split("=", 1)[1].strip("\"'") for s in self.sets if s.split("=", 1)[0].strip() == "engine.device"]
+            return "run", self.mpdem() + ["restart", d] + (["--device", dev[-1]] if dev else []) + threads
         argv = self.mpdem() + ["run"] + ([self.config_path] if self.config_path else []) + ["--out", d]
         for s in self.sets + row.sets:
             argv += ["--set", s]
