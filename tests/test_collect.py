@@ -520,3 +520,22 @@ def test_a_run_on_another_bed_is_another_sample(tmp_path):
     assert [os.path.basename(r.path) for r in sets[0].runs] == ["s1", "s1_bed7", "s10"]
     reasons = sorted(os.path.basename(s["path"]) + ": " + s["reason"] for s in skipped)
     assert len(reasons) == 2 and "duplicate: seed 1 (bed seed 1)" in reasons[0] and "bed seed 7" in reasons[1]
+
+
+def test_a_set_apart_by_a_parameter_outside_the_columns_says_so(tmp_path):
+    """Two sets equal in every column of the tables but gamma_t (gamma_n / 2 against 0): the comparison
+    rows and the note under the sets table name the one with tangential damping, not the other."""
+    rng = np.random.default_rng(5)
+    root = tmp_path / "runs"
+    for g_t, tag in ((0.0, ""), (25.7, "_gt")):
+        for seed in (1, 2):
+            p = params(mu=0.5, seed=seed)
+            p["contact.gamma_t"] = g_t
+            make_run(root / f"mu0.5_s{seed}{tag}", p, 4.85 - g_t / 1000, 0.61, 0.6, rng)
+    out = tmp_path / "out"
+    co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
+    text = (out / "README.md").read_text().splitlines()
+    ratio = f"gamma_t = {25.7 / params(mu=0.5)['contact.gamma_n']:.4g} gamma_n"
+    z_rows = [ln for ln in text if ln.startswith("| z | mu = 0.5")]
+    assert len(z_rows) == 2 and sum(ratio in ln for ln in z_rows) == 1, z_rows
+    assert len([ln for ln in text if ln.startswith("- S") and ratio in ln]) == 1

@@ -33,16 +33,31 @@ def _size_note(s):
     return f"; N = {N}, {L_x:g}d x {L_y:g}d box (paper: {paper.REFERENCE['N']}, {paper.REFERENCE['L']:g}d)"
 
 
+def _off_columns(s):
+    """A set's parameters that the tables' columns do not show, where away from their defaults: the
+    tangential damping (as a fraction of gamma_n), the contact model, the pour's kinetic energy."""
+    out = {}
+    g_t, g_n = s.params.get("contact.gamma_t", 0.0), s.params.get("contact.gamma_n", 0.0)
+    if g_t:
+        out["gamma_t"] = f"{g_t / g_n:.4g} gamma_n" if g_n else f"{g_t:g}"
+    if s.params.get("contact.model", "hooke") != "hooke":
+        out["model"] = s.params["contact.model"]
+    if s.params.get("pour.K0", 0.0):
+        out["K0"] = f"{s.params['pour.K0']:g}"
+    return out
+
+
 def _extras(s):
-    """A set's settings away from their defaults outside the parameter columns (``Set.extra``), as text."""
-    return ", ".join(f"{k} = {v}" for k, v in sorted(s.extra.items()))
+    """A set's settings away from their defaults outside the tables' columns (``Set.extra`` and the
+    parameters of ``_off_columns``), as text; empty when there are none."""
+    return ", ".join(f"{k} = {v}" for k, v in sorted({**_off_columns(s), **s.extra}.items()))
 
 
 def _cond(s, alpha=False):
     base = f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}"
     if alpha:
         base += f", k_n = {fmt_kn(s.p('k_n'))}, phi_i = {s.p('phi_i'):g}"
-    return base + (f", {_extras(s)}" if s.extra else "") + _size_note(s)
+    return base + (f", {_extras(s)}" if _extras(s) else "") + _size_note(s)
 
 
 def _verdict(value, accept):
@@ -185,7 +200,7 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=()):
                          fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
                          fmt_pm(*s.stat("rattler_fraction")[:2], 3, len(s.runs))] for s in sets]), ""]
     # settings outside the columns (e.g. the stop rule) that a set ran with away from their defaults
-    other = [f"- {s.id}: run with {_extras(s)} (not the default; docs/config.md)" for s in sets if s.extra]
+    other = [f"- {s.id}: run with {_extras(s)} (not the default; docs/config.md)" for s in sets if _extras(s)]
     L += other + ([""] if other else [])
     L += ["## Comparison with the paper", ""]
     if rows:
