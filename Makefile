@@ -4,6 +4,10 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
+# pytest workers of test-serial and test-validation (pytest-xdist; a test file stays on one worker):
+# the cores, at most 4
+TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
+XDIST  = -n $(TEST_JOBS) --dist loadfile
 
 .PHONY: setup run test test-fast lint test-serial test-mpi test-validation test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
 
@@ -32,7 +36,7 @@ test-gpu-compile:
 
 # the default selection: pyproject.toml's addopts deselect -m validation
 test-serial:
-	$(PY) -m pytest -q -rs tests
+	$(PY) -m pytest -q -rs $(XDIST) tests
 
 test-mpi:
 	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \
@@ -42,9 +46,11 @@ test-mpi:
 	  done; \
 	else echo "== no mpi_tests yet"; fi
 
-# the long runs alone (physics to convergence, real Slurm jobs); MPI ones, if any is marked, on 2 ranks
+# the long runs alone (physics to convergence, real Slurm jobs); MPI ones, if any is marked, on 2 ranks.
+# The real-Slurm tests run by themselves after the rest: their 2-rank job chain needs both cores to meet its deadline.
 test-validation:
-	$(PY) -m pytest -q -rs -m validation tests
+	$(PY) -m pytest -q -rs $(XDIST) -m "validation and not slurm" tests
+	$(PY) -m pytest -q -rs -m "validation and slurm" tests
 	@if grep -qs "mark.validation" mpi_tests/test_*.py; then \
 	  echo "== mpi_tests -m validation under mpiexec -n 2"; \
 	  timeout 1800 $(MPIEXEC) -n 2 $(PY) -m pytest -q --color=no -p no:cacheprovider -m validation mpi_tests || exit 1; \

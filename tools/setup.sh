@@ -25,6 +25,8 @@ cache=${MPDEM_WHEEL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mpdem-wheels}
 
 # Pinned versions verified together (shared/stack.md).
 NUMPY=2.4.6; NUMBA=0.68.1; LLVMLITE=0.50.0; SCIPY=1.17.1; PYTEST=9.2.0
+# the tests' files spread over the cores (make test-serial, test-validation)
+XDIST=3.8.0; EXECNET=2.1.2
 CYTHON=3.3.1; SETUPTOOLS=84.2.1; PKGCONFIG=1.6.0; PACKAGING=26.3
 MPI4PY=4.1.2; H5PY=3.16.0
 # the linter of `make lint` (part of `make test`)
@@ -98,7 +100,7 @@ fi
 mpi_version=$("$mpiexec_real" --version 2>&1 | head -n 1 | tr -c 'A-Za-z0-9.' '_')
 hdf5_version=$(pkg-config --modversion "$h5pc")
 key="py$("$python" -c 'import sys; print("%d%d" % sys.version_info[:2])')-$flavour-$mpi_version-hdf5_$hdf5_version"
-stamp_text="$key wrapper=2 numpy=$NUMPY numba=$NUMBA scipy=$SCIPY pytest=$PYTEST ruff=$RUFF mpi4py=$MPI4PY h5py=$H5PY matplotlib=$MATPLOTLIB"
+stamp_text="$key wrapper=2 numpy=$NUMPY numba=$NUMBA scipy=$SCIPY pytest=$PYTEST xdist=$XDIST ruff=$RUFF mpi4py=$MPI4PY h5py=$H5PY matplotlib=$MATPLOTLIB"
 
 # ---- 2. virtual environment ----------------------------------------------
 if [ -f "$venv/.mpdem-setup" ] && [ "$(cat "$venv/.mpdem-setup")" = "$stamp_text" ] \
@@ -110,7 +112,7 @@ fi
 pip=("$venv/bin/python" -m pip --disable-pip-version-check -q)
 "${pip[@]}" install "setuptools==$SETUPTOOLS" "cython==$CYTHON" "pkgconfig==$PKGCONFIG" \
   "packaging==$PACKAGING" "numpy==$NUMPY" "llvmlite==$LLVMLITE" "numba==$NUMBA" \
-  "scipy==$SCIPY" "pytest==$PYTEST" "matplotlib==$MATPLOTLIB" "contourpy==$CONTOURPY" \
+  "scipy==$SCIPY" "pytest==$PYTEST" "pytest-xdist==$XDIST" "execnet==$EXECNET" "matplotlib==$MATPLOTLIB" "contourpy==$CONTOURPY" \
   "cycler==$CYCLER" "fonttools==$FONTTOOLS" "kiwisolver==$KIWISOLVER" "pillow==$PILLOW" \
   "pyparsing==$PYPARSING" "python-dateutil==$DATEUTIL" "ruff==$RUFF"
 
