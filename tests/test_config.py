@@ -128,10 +128,10 @@ def test_schema_flags_say_what_a_restart_may_change_and_what_is_physics():
     # output and the analysis settings: none of them alters a step's arithmetic
     assert set(config.RESTART_KEYS) == {"run.max_steps"} | _section("stop", "checks", "decomp", "engine", "output",
                                                                     "analysis")
-    # physics: the box, the pour, the contact law, the bed, the stiffening ramp, dt and the stop rule; not the
-    # seeds (run.seed, bed.seed), the step cap, the input files, the skin and slots (they leave a run's result
-    # alone), nor the settings
-    assert set(config.PHYSICS_KEYS) == (_section("box", "pour", "contact", "bed", "stiffen", "stop")
+    # physics: the box, the pour, the contact law, the bed, the stiffening ramp, the flow phase, dt and the stop
+    # rule; not the seeds (run.seed, bed.seed), the step cap, the input files, the skin and slots (they leave a
+    # run's result alone), nor the settings
+    assert set(config.PHYSICS_KEYS) == (_section("box", "pour", "contact", "bed", "stiffen", "flow", "stop")
                                         | {"integration.dt"}) - {"bed.seed"}
     # the parameter set's columns: numbered 1..n, each once, the seed among them though it is not physics
     cols = sorted(k.param for k in config.SCHEMA if k.param)

@@ -117,6 +117,11 @@ SCHEMA = (
     _k("stiffen", "update_interval", 0.01,
        "the ramp's law changes this often [tau] (rounded to whole steps; between changes a GPU runs its steps "
        "in one launch)"),
+    _k("flow", "incline", 0.0,
+       "flow arrest (docs/model.md 5.5): the incline [degrees] of a flow phase from the run's first step for "
+       "flow.time, gravity tilted as box.incline tilts it; then box.incline (the arrest angle, below the angle "
+       "where flow stops) and the stop rule from there; 0 = no flow phase"),
+    _k("flow", "time", 0.0, "duration of the flow phase [tau] (rounded to whole steps); > 0 with flow.incline"),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "force_ratio", 0.01,
@@ -594,6 +599,13 @@ def resolve(raw):
          "0 < update_interval <= ramp_time")
     if k_from > 0 and not vals["run.initial_file"]:
         raise ConfigError(f"stiffen.k_n_from = {k_from:g} needs run.initial_file: the pile settled at that k_n")
+    f_inc, f_time = vals["flow.incline"], vals["flow.time"]
+    need("flow.incline", 0 <= f_inc < 90, "0 (no flow phase) <= incline < 90 degrees")
+    need("flow.time", f_time >= 0 and (f_time > 0) == (f_inc > 0),
+         "time > 0 with a flow phase (flow.incline > 0), 0 without")
+    if f_inc > 0 and k_from > 0:
+        raise ConfigError(f"flow.incline = {f_inc:g} with stiffen.k_n_from = {k_from:g}: a run takes a flow phase "
+                          f"or a stiffening ramp, not both (stiffen the arrested pile in a run of its own)")
     if vals["stop.E_stop"] is None:
         vals["stop.E_stop"] = 1e-8 * (k_n / 2e5) ** -0.75
         derived.add("stop.E_stop")

@@ -1,10 +1,10 @@
-"""Profiles of a flowing layer along the bed's normal (issue 42's chute diagnostics): the mean
-velocity, the granular temperature and the flux of the mobile spheres in bins of height, for a
-state with velocities (a snapshot of a flow down ``box.incline``, or any state: a static pile
-gives zeros).
+"""Profiles of a flowing layer along the bed's normal (the chute diagnostics of docs/model.md 5.5): the
+mean velocity, the granular temperature and the flux of the mobile spheres in bins of height, for a
+state with velocities (a snapshot of a flow down ``box.incline`` or in a run's flow phase,
+``flow.incline``; or any state: a static pile gives zeros).
 
 The bins are those of the packing-fraction profile (``bulk.Packing.region``: ``edges``), so
-phi(z) and v_x(z) share them; x is downslope (``box.incline`` tilts gravity about y).
+phi(z) and v_x(z) share them; x is downslope (the incline tilts gravity about y).
 """
 from __future__ import annotations
 

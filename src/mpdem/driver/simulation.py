@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .. import initial, memory, stiffen, threads
+from .. import flowarrest, initial, memory, stiffen, threads
 from ..io import tables
 from ..io import checkpoint
 from . import summary
@@ -180,8 +180,10 @@ class Run:
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
         self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block)
-        # the stiffening ramp's laws (``stiffen``), None without one; the engine's law is the step's
-        self.ramp = stiffen.Ramp.from_config(cfg, self.physics.law)
+        # laws that change with the step: a stiffening ramp (``stiffen``) or a flow phase (``flowarrest``; the
+        # config allows one of them), None without; the engine's law is the step's
+        self.schedule = (stiffen.Ramp.from_config(cfg, self.physics.law)
+                         or flowarrest.FlowPhase.from_config(cfg, self.physics.law))
         self._law_at(self.state.step)
         self.status = None          # "converged", "max_steps" or "interrupted"
         self.t0 = time.perf_counter()   # the loop's clock (started again when the loop starts)
@@ -217,15 +219,15 @@ class Run:
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
                  f"E_stop = {cfg.stop.E_stop:.3g} ({cfg.stop.rule}), max_steps = {cfg.run.max_steps}, "
                  f"seed = {cfg.run.seed}, ranks = {self.domain.size}")
-        if self.ramp:
-            self.log(self.ramp.describe(p.dt))
+        if self.schedule:
+            self.log(self.schedule.describe(p.dt))
 
     def _law_at(self, step):
-        """Give the engine the law of the force evaluation at ``step`` (the ramp's; the config's
+        """Give the engine the law of the force evaluation at ``step`` (the schedule's; the config's
         without one or past it). A new Physics only when the law changes."""
-        if self.ramp is None:
+        if self.schedule is None:
             return
-        law = self.ramp.law(step)
+        law = self.schedule.law(step)
         if law != self.engine.phys.law:
             self.engine.phys = self.physics.with_law(law)
 
@@ -252,8 +254,8 @@ class Run:
                     # all of one law
                     s0 = st.step
                     quiet = self._quiet_steps(s0, max_steps, progress)
-                    if self.ramp:
-                        quiet = min(quiet, self.ramp.room(s0))
+                    if self.schedule:
+                        quiet = min(quiet, self.schedule.room(s0))
                         self._law_at(s0 + 1)
                     for k, q in enumerate(eng.run_quiet(quiet, self._flags_now())):
                         self.checks(q, s0 + k + 1)
@@ -324,8 +326,8 @@ class Run:
         et, er = self.engine.kinetic()
         self.stop.add(et, er, N, *self.engine.force_ratio())
         self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total())
-        if self.ramp and self.ramp.active(self.state.step):
-            # on the ramp the pile is not yet the one to settle: the rule's window starts at its end
+        if self.schedule and self.schedule.active(self.state.step):
+            # on the ramp or in the flow the pile is not yet the one to settle: the rule's window starts at its end
             self.stop.samples.clear()
             return False
         return self.stop.satisfied()
@@ -366,7 +368,7 @@ class Run:
         """Write a state file of ``kind`` (collective); snapshots and the final state carry the contact list."""
         local = checkpoint.gather_state(self.state)
         if kind != "checkpoint":
-            # the forces of the law in use (the stiffening ramp's on the ramp)
+            # the forces of the law in use (the schedule's: a ramp's or a flow's)
             local.update(contact_pairs(self.state, self.engine.phys))
         try:
             checkpoint.write(path, local, self._attrs(kind), self.domain.net)
