@@ -78,6 +78,28 @@ def test_a_sphere_slides_at_the_incline_in_force(tmp_path):
     want = dt * ((e - 0.5) * math.sin(math.radians(30.0)) + (n - e + 0.5) * math.sin(math.radians(10.0)))
     assert v[0] == pytest.approx(want, rel=1e-9), r.stdout
     assert v[1] == 0.0
+    # thermo.csv's v_x, the mean downslope velocity of the mobile spheres (here the one), at every sample
+    th = np.genfromtxt(tmp_path / "slide" / "thermo.csv", delimiter=",", names=True)
+    assert th["v_x"][-1] == pytest.approx(v[0], rel=1e-6)
+    assert np.all(np.diff(th["v_x"]) > 0)
+
+
+def test_a_thermo_table_begun_without_v_x_keeps_its_columns(tmp_path):
+    """A restart of a run begun before the v_x column appends rows of the table's own width."""
+    from types import SimpleNamespace as NS
+    from mpdem.driver.schedule import Thermo
+    (tmp_path / "thermo.csv").write_text(Thermo.HEADER.replace(",v_x", ""))
+    row = (NS(step=10, time=0.001), 2.0, 1.0, 4, NS(mean=0.5, ratio=0.1), NS(max_overlap=1e-3, n_contacts=8, z_max=3.0),
+           2, 1.5, 0.4)
+    Thermo(tmp_path, 0).write(*row)
+    lines = (tmp_path / "thermo.csv").read_text().splitlines()
+    assert len(lines[1].split(",")) == 12
+    (tmp_path / "new").mkdir()
+    t = Thermo(tmp_path / "new", 0)
+    t.write(*row)
+    t.close()
+    head, first = (tmp_path / "new" / "thermo.csv").read_text().splitlines()
+    assert head.endswith(",force_ratio,v_x") and float(first.split(",")[12]) == 0.1
 
 
 @pytest.fixture(scope="module")

@@ -177,38 +177,41 @@ class StopRule:
 
 
 class Thermo:
-    """RUN/thermo.csv: one line per stop-rule sample (rank 0 writes; a restart truncates it first)."""
+    """RUN/thermo.csv: one line per stop-rule sample (rank 0 writes; a restart truncates it first).
+
+    ``v_x``: the mean velocity of the mobile spheres along x (downslope on an incline, docs/model.md
+    5.5), from their momentum summed exactly; flat while a chute flow is steady."""
 
     HEADER = ("step,time,ek,ek_trans,ek_rot,ek_window,max_overlap,contacts_per_particle,"
-              "z_max,rebuilds,wall_seconds,force_ratio\n")
+              "z_max,rebuilds,wall_seconds,force_ratio,v_x\n")
 
     def __init__(self, out_dir, rank):
         self.fh = None
-        self.ratio = True
+        self.columns = 13
         # opened at the first line, so that a run that fails before its first sample leaves no table
         self.path = os.path.join(out_dir, "thermo.csv") if rank == 0 else None
 
     def _open(self):
         new = not os.path.exists(self.path) or os.path.getsize(self.path) == 0
         if not new:
-            # a table begun before the force_ratio column keeps its columns
+            # a table begun before the force_ratio (12th) or v_x (13th) column keeps its columns
             with open(self.path) as fh:
-                self.ratio = fh.readline().rstrip("\n").endswith(",force_ratio")
+                self.columns = min(13, len(fh.readline().rstrip("\n").split(",")))
         self.fh = open(self.path, "a")
         if new:
             self.fh.write(self.HEADER)
 
-    def write(self, st, et, er, N, stop, info, rebuilds, wall):
+    def write(self, st, et, er, N, stop, info, rebuilds, wall, p_x=0.0):
         """One line: energies per mobile particle, the stop window's mean, the step's figures, the
-        unbalanced-force ratio."""
+        unbalanced-force ratio, the mean v_x (``p_x``: the momentum along x [m sqrt(g d)])."""
         if self.path is None:
             return
         if self.fh is None:
             self._open()
-        self.fh.write(f"{st.step},{st.time:.10g},{(et + er) / N:.6e},{et / N:.6e},{er / N:.6e},"
-                      f"{stop.mean:.6e},{info.max_overlap:.6e},{info.n_contacts / N:.5f},"
-                      f"{info.z_max:.6g},{rebuilds},{wall:.3f}"
-                      + (f",{stop.ratio:.6e}\n" if self.ratio else "\n"))
+        cols = [f"{st.step}", f"{st.time:.10g}", f"{(et + er) / N:.6e}", f"{et / N:.6e}", f"{er / N:.6e}",
+                f"{stop.mean:.6e}", f"{info.max_overlap:.6e}", f"{info.n_contacts / N:.5f}", f"{info.z_max:.6g}",
+                f"{rebuilds}", f"{wall:.3f}", f"{stop.ratio:.6e}", f"{p_x / N:.6e}"]
+        self.fh.write(",".join(cols[:self.columns]) + "\n")
 
     def flush(self):
         if self.fh:

@@ -323,9 +323,9 @@ class Run:
 
     def _sample(self, info, N):
         """A stop-rule sample and its thermo line; True if the rule holds."""
-        et, er = self.engine.kinetic()
+        et, er, p_x = self.engine.kinetic(momentum=True)
         self.stop.add(et, er, N, *self.engine.force_ratio())
-        self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total())
+        self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total(), p_x)
         if self.schedule and self.schedule.active(self.state.step):
             # on the ramp or in the flow the pile is not yet the one to settle: the rule's window starts at its end
             self.stop.samples.clear()

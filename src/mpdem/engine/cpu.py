@@ -223,14 +223,15 @@ class Engine(EngineBase):
             self._kick_due = False
             self.timers["integration"] += time.perf_counter() - t
 
-    def kinetic(self):
-        """Global (translational, rotational) kinetic energy sums [m g d], exact."""
+    def kinetic(self, momentum=False):
+        """Global (translational, rotational) kinetic energy sums [m g d], exact; with ``momentum``
+        also the momentum along x summed over the mobile spheres [m sqrt(g d)]."""
         self.complete()
         s = self.state
-        acc = new_accumulator(2)
+        acc = new_accumulator(3 if momentum else 2)
         kinetic_energy(s.n_own, self._particles(), acc, self.nchunk)
         acc = self.domain.sum_int(acc)
-        return to_float(acc[0]), to_float(acc[1])
+        return tuple(to_float(a) for a in acc)
 
     def force_ratio(self):
         """(unbalanced-force ratio, mobile spheres without a contact) of the last force evaluation

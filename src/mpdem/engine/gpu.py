@@ -485,16 +485,17 @@ class Engine(EngineBase):
             self.state.slots_current = False
             self.timers["integration"] += time.perf_counter() - t
 
-    def kinetic(self):
-        """Global (translational, rotational) kinetic energy sums [m g d], exact (on the host)."""
+    def kinetic(self, momentum=False):
+        """Global (translational, rotational) kinetic energy sums [m g d], exact (on the host); with
+        ``momentum`` also the momentum along x summed over the mobile spheres [m sqrt(g d)]."""
         self.complete()
         s = self.state
         if self.has_lists:
             self._download_rows(("v", "omega"), s.n_own)
-        acc = new_accumulator(2)
+        acc = new_accumulator(3 if momentum else 2)
         kinetic_energy(s.n_own, self._particles(), acc, 1)
         acc = self.domain.sum_int(acc)
-        return to_float(acc[0]), to_float(acc[1])
+        return tuple(to_float(a) for a in acc)
 
     def force_ratio(self):
         """(ratio, in flight) of the last evaluation, exact on any number of ranks, as the CPU

@@ -170,21 +170,22 @@ def kick_serial(n_own, particles, dt):
 
 @njit(cache=True, parallel=True)
 def kinetic_energy(n_own, particles, acc, nchunk):
-    """Kinetic energies of owned mobile rows as exact fixed-point sums.
+    """Kinetic energies (and the downslope momentum) of owned mobile rows as exact fixed-point sums.
 
     Parameters
     ----------
     particles : Particles
         ``v`` [sqrt(g d)], ``omega`` [sqrt(g/d)] and ``fixed`` are read.
-    acc : (2, NLIMBS) int64, out
-        ``acc[0]`` gets sum(1/2 m v^2) and ``acc[1]`` sum(1/2 I omega^2), each
-        an exact integer sum (see ``exactsum``), so the totals do not depend
-        on how particles are split over ranks or threads.
+    acc : (2, NLIMBS) or (3, NLIMBS) int64, out
+        ``acc[0]`` gets sum(1/2 m v^2) and ``acc[1]`` sum(1/2 I omega^2), and ``acc[2]`` (when
+        there) sum(m v_x), the momentum along x (downslope on an incline), each an exact integer sum
+        (see ``exactsum``), so the totals do not depend on how particles are split over ranks or threads.
     nchunk : int
         Chunks of rows for the threads.
     """
     v, omega, fixed = particles.v, particles.omega, particles.fixed
-    part = np.zeros((nchunk, 2, NLIMBS), np.int64)
+    na = acc.shape[0]
+    part = np.zeros((nchunk, na, NLIMBS), np.int64)
     for c in prange(nchunk):
         lo, hi = chunk_bounds(c, n_own, nchunk)
         for i in range(lo, hi):
@@ -195,7 +196,9 @@ def kinetic_energy(n_own, particles, acc, nchunk):
                          + omega[i, 2] * omega[i, 2])
             add_exact(part[c, 0], et)
             add_exact(part[c, 1], er)
+            if na > 2:
+                add_exact(part[c, 2], v[i, 0])
     for c in range(nchunk):
-        for a in range(2):
+        for a in range(na):
             for k in range(NLIMBS):
                 acc[a, k] += part[c, a, k]
