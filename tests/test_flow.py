@@ -48,3 +48,36 @@ def test_empty_and_single_bins_are_nan_not_errors():
     p = flow.profile([0.5, 2.5], [[1.0, 0, 0], [2.0, 0, 0]], np.array([0.0, 1.0, 2.0, 3.0]))
     assert list(p["n"]) == [1, 0, 1] and math.isnan(p["v_x"][1]) and p["v_x"][2] == 2.0
     assert np.all(np.isnan(p["T"]))
+
+
+def test_a_flat_series_is_steady_and_a_drifting_one_is_not():
+    """The steady-state test on series with known trends: noise about a constant (steady), the same
+    with a 5 % rise over the window (not), a short series (not judged)."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 300.0, 0.1)
+    flat = 2.0 + 0.05 * rng.standard_normal(len(t))
+    s = flow.steady(t, flat, 100.0, 0.02)
+    assert s["steady"] is True and abs(s["change"]) < 3 * s["sigma"] and abs(s["n"] - 1000) <= 1
+    assert s["first"] == pytest.approx(2.0, abs=0.01) and s["second"] == pytest.approx(2.0, abs=0.01)
+    # a rise of 0.1 over the last 100 tau: the halves' means differ by half of it, 2.5 % of the mean
+    ramp = flat + 0.001 * np.clip(t - 200.0, 0, None)
+    r = flow.steady(t, ramp, 100.0, 0.02)
+    assert r["steady"] is False and r["change"] == pytest.approx(0.05 / 2.05, abs=0.004)
+    assert flow.steady(t[:500], flat[:500], 100.0)["steady"] is None
+
+
+def test_the_steadiness_of_a_flow_arrest_run_comes_from_its_flow_phase(tmp_path):
+    """thermo.csv's rows up to flow.time are judged, the settling after them not."""
+    import mpdem
+    cfg = mpdem.load_config(**{"flow.incline": 24.0, "flow.time": 200.0, "run.max_steps": 10})
+    t = np.arange(0.1, 260.0, 0.1)
+    v_x = np.where(t <= 200.0, 3.0, 3.0 * np.exp(-(t - 200.0)))      # steady, then arrested
+    ek = np.where(t <= 200.0, 5.0 + 0.01 * np.sin(t), 5.0 * np.exp(-(t - 200.0)))
+    with open(tmp_path / "thermo.csv", "w") as fh:
+        fh.write("step,time,ek,v_x\n")
+        for k, (a, b, c) in enumerate(zip(t, ek, v_x)):
+            fh.write(f"{k},{a:.10g},{b:.6e},{c:.6e}\n")
+    s = flow.steadiness(str(tmp_path), cfg)
+    assert s["steady"] is True and s["until"] == 200.0 and s["v_x"]["second"] == pytest.approx(3.0)
+    assert abs(s["ek"]["n"] - 1000) <= 1
+    assert flow.steadiness(str(tmp_path), mpdem.load_config(**{"run.max_steps": 10})) is None

@@ -223,6 +223,12 @@ SCHEMA = (
     _k("analysis", "jackknife_columns", 4,
        "lateral columns along x and along y of the jackknife errors (k x k columns, k >= 2; docs/model.md 6.10)",
        int, restart=True, physics=False),
+    _k("analysis", "steady_window", 100.0,
+       "a flow-arrest run's flow counts as steady when the mean v_x and E_k of thermo.csv change by less than "
+       "analysis.steady_tolerance between the two halves of this last span of the flow phase [tau] "
+       "(docs/model.md 5.5)", restart=True, physics=False),
+    _k("analysis", "steady_tolerance", 0.02,
+       "the largest relative change between the halves of analysis.steady_window", restart=True, physics=False),
     _k("analysis", "zeta_bins", 50,
        "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
     _k("analysis", "mobilised", 0.99,
@@ -599,6 +605,8 @@ def resolve(raw):
          "0 < update_interval <= ramp_time")
     if k_from > 0 and not vals["run.initial_file"]:
         raise ConfigError(f"stiffen.k_n_from = {k_from:g} needs run.initial_file: the pile settled at that k_n")
+    need("analysis.steady_window", vals["analysis.steady_window"] > 0, "steady_window > 0")
+    need("analysis.steady_tolerance", vals["analysis.steady_tolerance"] > 0, "steady_tolerance > 0")
     f_inc, f_time = vals["flow.incline"], vals["flow.time"]
     need("flow.incline", 0 <= f_inc < 90, "0 (no flow phase) <= incline < 90 degrees")
     need("flow.time", f_time >= 0 and (f_time > 0) == (f_inc > 0),

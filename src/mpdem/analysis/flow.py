@@ -8,7 +8,9 @@ phi(z) and v_x(z) share them; x is downslope (the incline tilts gravity about y)
 """
 from __future__ import annotations
 
+import csv
 import math
+import os
 
 import numpy as np
 
@@ -47,3 +49,75 @@ def flux(v_x, L_x, L_y):
     """The solid-volume flux downslope per unit width [d sqrt(g d)]: sum of v_x times a sphere's
     volume pi/6, over the cell's area L_x L_y (the integral of phi v_x over the height)."""
     return float(np.sum(v_x) * (math.pi / 6.0) / (L_x * L_y))
+
+
+def steady(t, y, window, tolerance=0.02):
+    """Whether a flow's time series is flat over its last ``window``: the steady-state test of the
+    flow-arrest recipe (docs/model.md 5.5: flux and kinetic energy flat over some 100 tau).
+
+    The last ``window`` of the series is cut in two halves; the flow counts as steady when their means
+    differ by less than ``tolerance`` of the window's mean magnitude. The standard error of that change
+    (the halves' scatter over the square root of their sample counts; the samples are correlated, so it
+    is a lower bound) is reported beside it, to tell a drift from the flow's own fluctuation. A series
+    shorter than the window is not judged.
+
+    Parameters
+    ----------
+    t, y : (n,) float
+        Sample times [tau] (increasing) and values (e.g. thermo.csv's v_x or ek).
+    window : float
+        The span judged [tau].
+    tolerance : float
+        The largest relative change of the mean between the halves.
+
+    Returns
+    -------
+    dict: ``steady`` (True, False, or None when the series is shorter than ``window``), ``first`` and
+    ``second`` (the halves' means), ``change`` (second - first over the window's mean magnitude),
+    ``sigma`` (the standard error of that change, relative too), ``window`` and ``n`` (samples used).
+    """
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    out = {"steady": None, "first": math.nan, "second": math.nan, "change": math.nan, "sigma": math.nan,
+           "window": float(window), "n": 0}
+    if len(t) < 4 or t[-1] - t[0] < window:
+        return out
+    keep = t >= t[-1] - window
+    tt, yy = t[keep], y[keep]
+    half = tt < tt[0] + 0.5 * (tt[-1] - tt[0])
+    a, b = yy[half], yy[~half]
+    if len(a) < 2 or len(b) < 2:
+        return out
+    scale = max(abs(float(np.mean(yy))), 1e-300)
+    change = (float(np.mean(b)) - float(np.mean(a))) / scale
+    sigma = math.sqrt(np.var(a, ddof=1) / len(a) + np.var(b, ddof=1) / len(b)) / scale
+    out.update(first=float(np.mean(a)), second=float(np.mean(b)), change=change, sigma=sigma, n=int(keep.sum()),
+               steady=bool(abs(change) < tolerance))
+    return out
+
+
+def steadiness(run_dir, cfg):
+    """The steady-state test (``steady``) of a flow-arrest run's flow phase, from its thermo.csv: the mean
+    v_x and E_k over the last ``analysis.steady_window`` before the switch (``flow.time``).
+
+    Returns
+    -------
+    dict or None: None without a flow phase or a thermo table; else ``until`` (the switch [tau]) and
+    ``v_x``, ``ek`` (each ``steady``'s dict; v_x absent from a table begun before its column), and
+    ``steady``: both steady (None where either is not judged).
+    """
+    path = os.path.join(run_dir, "thermo.csv")
+    if cfg.flow.incline <= 0 or not os.path.exists(path):
+        return None
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    until = cfg.flow.time
+    rows = [r for r in rows if float(r["time"]) <= until]
+    t = np.array([float(r["time"]) for r in rows])
+    a = cfg.analysis
+    out = {"until": until, "window": a.steady_window, "tolerance": a.steady_tolerance}
+    for col in ("v_x", "ek"):
+        if rows and col in rows[0]:
+            out[col] = steady(t, [float(r[col]) for r in rows], a.steady_window, a.steady_tolerance)
+    verdicts = [out[c]["steady"] for c in ("v_x", "ek") if c in out]
+    out["steady"] = None if not verdicts or None in verdicts else all(verdicts)
+    return out

@@ -31,7 +31,7 @@ from .. import config
 from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import AnalysisError
-from . import bands
+from . import bands, flow
 from .measures import measure
 
 SUMMARY = "summary.json"
@@ -204,6 +204,9 @@ def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False
     if keep_packing and os.path.basename(path) == "final.h5":
         packing.write(os.path.join(os.path.dirname(path), PACKING), arrays, attrs)
     s, tables = summarise(arrays, attrs, cfg, os.path.abspath(path))
+    if os.path.basename(path) in ("final.h5", PACKING):
+        # a flow-arrest run: was its flow steady before the incline dropped (docs/model.md 5.5)
+        s["flow_steady"] = flow.steadiness(os.path.dirname(path), cfg)
     s["seconds"] = {"read": t_read, "total": time.perf_counter() - t0}
     write(out, s, tables, plots, log)
     return s, out
