@@ -4,10 +4,10 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 RANKS  ?= 2
-# pytest workers of test-serial and test-validation (pytest-xdist; a test file stays on one worker):
+# pytest workers of test-serial and test-validation (pytest-xdist; a worker out of tests takes some of another's):
 # the cores, at most 4
 TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
-XDIST  = -n $(TEST_JOBS) --dist loadfile
+XDIST  = -n $(TEST_JOBS) --dist worksteal
 
 .PHONY: setup run test test-fast lint test-serial test-mpi test-validation test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
 
