@@ -72,8 +72,13 @@ def test_a_sphere_slides_at_the_incline_in_force(tmp_path):
     r = cli("run", "--out", tmp_path / "slide", "--quiet", "--set", f"run.initial_file=\"{table}\"",
             "--set", "bed.wall=true", "--set", "contact.mu=0", "--set", "box.L_x=10", "--set", "box.L_y=10",
             "--set", "flow.incline=30", "--set", "flow.time=0.3", "--set", "box.incline=10",
-            "--set", f"run.max_steps={n}", check=3)
-    assert "flow arrest: gravity tilted by 30 degrees for 3000 steps" in (tmp_path / "slide/log.txt").read_text()
+            "--set", f"run.max_steps={n}", "--set", "output.progress_every=1000", check=3)
+    log = (tmp_path / "slide/log.txt").read_text()
+    assert "flow arrest: gravity tilted by 30 degrees for 3000 steps" in log
+    # the progress line shows the flow's kinetic energy, though the stop rule's window stays empty:
+    # at t = 0.1, v = g sin(30) t = 0.05 and E_k = v^2 / 2
+    assert "E_k/N         -" not in log.split("flow arrest:")[1]
+    assert "step      1000  t     0.100  E_k/N 1.250e-03" in log
     v = mpdem.read_state(tmp_path / "slide" / "final.h5")["v"][0]
     want = dt * ((e - 0.5) * math.sin(math.radians(30.0)) + (n - e + 0.5) * math.sin(math.radians(10.0)))
     assert v[0] == pytest.approx(want, rel=1e-9), r.stdout

@@ -125,6 +125,7 @@ class StopRule:
         self.samples = collections.deque(maxlen=self.size)
         self.ratio = math.nan           # the newest sample's unbalanced-force ratio
         self.in_flight = -1             # and its mobile spheres without a contact
+        self.latest = math.inf          # the newest sample, kept when a ramp or a flow phase clears the window
 
     @classmethod
     def from_config(cls, cfg, dt):
@@ -138,13 +139,17 @@ class StopRule:
         """A sample: of the translational and rotational kinetic energy [m g d] of N
         particles, the part ``energy`` names, per particle; the unbalanced-force ratio and the
         mobile spheres without a contact."""
-        self.samples.append((e_trans if self.energy == "translational" else e_trans + e_rot) / N)
+        self.latest = (e_trans if self.energy == "translational" else e_trans + e_rot) / N
+        self.samples.append(self.latest)
         self.ratio, self.in_flight = ratio, in_flight
 
     @property
     def last(self):
-        """The newest sample (inf before the first)."""
-        return self.samples[-1] if self.samples else math.inf
+        """The newest sample (inf before the first of this segment), also while a ramp or a flow
+        phase keeps the window empty."""
+        if math.isfinite(self.latest) or not self.samples:
+            return self.latest
+        return self.samples[-1]         # a restarted window, before this segment's first sample
 
     @property
     def mean(self):
