@@ -81,3 +81,19 @@ def test_the_steadiness_of_a_flow_arrest_run_comes_from_its_flow_phase(tmp_path)
     assert s["steady"] is True and s["until"] == 200.0 and s["v_x"]["second"] == pytest.approx(3.0)
     assert abs(s["ek"]["n"] - 1000) <= 1
     assert flow.steadiness(str(tmp_path), mpdem.load_config(**{"run.max_steps": 10})) is None
+
+
+def test_the_bagnold_fit_recovers_its_amplitude_and_exponent():
+    """Bins of a Bagnold profile with noise: A and the exponent 3/2 back; a linear profile is no Bagnold
+    profile (its best exponent is far from 3/2 and the 3/2 fit leaves a residual)."""
+    rng = np.random.default_rng(9)
+    z_bed, h = 1.0, 41.0
+    z = np.arange(1.25, 41.0, 0.5)
+    y, H = z - z_bed, h - z_bed
+    n = np.full(len(z), 400)
+    v = 0.02 * (H ** 1.5 - (H - y) ** 1.5)
+    b = flow.bagnold(z, v + 0.01 * rng.standard_normal(len(z)), n, z_bed, h)
+    assert b["A"] == pytest.approx(0.02, rel=1e-3) and b["rms"] < 0.01 and abs(b["exponent"] - 1.5) <= 0.02
+    lin = flow.bagnold(z, 0.1 * y, n, z_bed, h)
+    assert abs(lin["exponent"] - 1.5) > 0.3 and lin["rms"] > 10 * b["rms"]
+    assert flow.bagnold(z[:2], v[:2], n[:2], z_bed, h) is None

@@ -229,6 +229,9 @@ SCHEMA = (
        "(docs/model.md 5.5)", restart=True, physics=False),
     _k("analysis", "steady_tolerance", 0.02,
        "the largest relative change between the halves of analysis.steady_window", restart=True, physics=False),
+    _k("analysis", "flow_v_min", 0.01,
+       "a state counts as flowing, and its v_x(z) is fitted to the Bagnold profile (summary flow.bagnold), when "
+       "the mean v_x of its mobile spheres exceeds this [sqrt(g d)]", restart=True, physics=False),
     _k("analysis", "zeta_bins", 50,
        "bins of P(zeta) on [0, 1], zeta = |F_t| / (mu F_n)", int, restart=True, physics=False),
     _k("analysis", "mobilised", 0.99,
@@ -607,6 +610,7 @@ def resolve(raw):
         raise ConfigError(f"stiffen.k_n_from = {k_from:g} needs run.initial_file: the pile settled at that k_n")
     need("analysis.steady_window", vals["analysis.steady_window"] > 0, "steady_window > 0")
     need("analysis.steady_tolerance", vals["analysis.steady_tolerance"] > 0, "steady_tolerance > 0")
+    need("analysis.flow_v_min", vals["analysis.flow_v_min"] > 0, "flow_v_min > 0")
     f_inc, f_time = vals["flow.incline"], vals["flow.time"]
     need("flow.incline", 0 <= f_inc < 90, "0 (no flow phase) <= incline < 90 degrees")
     need("flow.time", f_time >= 0 and (f_time > 0) == (f_inc > 0),

@@ -121,3 +121,45 @@ def steadiness(run_dir, cfg):
     verdicts = [out[c]["steady"] for c in ("v_x", "ek") if c in out]
     out["steady"] = None if not verdicts or None in verdicts else all(verdicts)
     return out
+
+
+def bagnold(z, v_x, n, z_bed, h, exponents=np.arange(1.0, 2.501, 0.01)):
+    """The Bagnold profile of a steady chute flow (docs/model.md 5.5; Silbert et al. 2001) fitted to
+    binned mean velocities: v_x(y) = A (H^(3/2) - (H - y)^(3/2)), y = z - z_bed the height above the bed
+    and H = h - z_bed the layer's; A by least squares weighted by the spheres of each bin, and the
+    exponent let free as well (scanned over ``exponents``: 3/2 is Bagnold's).
+
+    Parameters
+    ----------
+    z, v_x, n : (B,) float
+        Bin centres [d], the bins' mean v_x [sqrt(g d)] (nan in empty bins) and sphere counts.
+    z_bed, h : float
+        The bed's top and the surface [d].
+
+    Returns
+    -------
+    dict: ``A`` and ``rms`` (the weighted rms residual over the weighted rms of v_x) at exponent 3/2,
+    ``exponent`` (the best), ``A_free`` and ``rms_free`` there, and ``bins`` used; None with fewer
+    than 3 usable bins or no flow.
+    """
+    z, v, w = (np.asarray(a, float) for a in (z, v_x, n))
+    H = h - z_bed
+    y = z - z_bed
+    use = np.isfinite(v) & (w > 0) & (y > 0) & (y < H)
+    if use.sum() < 3 or H <= 0:
+        return None
+    y, v, w = y[use], v[use], w[use]
+    scale = math.sqrt(np.sum(w * v * v) / np.sum(w))
+    if scale == 0.0:
+        return None
+
+    def fit(p):
+        f = H ** p - (H - y) ** p
+        A = float(np.sum(w * f * v) / np.sum(w * f * f))
+        return A, math.sqrt(np.sum(w * (v - A * f) ** 2) / np.sum(w)) / scale
+
+    A, rms = fit(1.5)
+    best = min(exponents, key=lambda p: fit(p)[1])
+    A_free, rms_free = fit(best)
+    return {"A": A, "rms": rms, "exponent": float(best), "A_free": A_free, "rms_free": rms_free,
+            "bins": int(use.sum())}

@@ -254,7 +254,8 @@ def depth_windows(m):
 
 
 def flow_profile(m):
-    """Mean velocity, granular temperature and flux of the mobile spheres along z (a flow, issue 42)."""
+    """Mean velocity, granular temperature and flux of the mobile spheres along z, and a flowing state's
+    fit to the Bagnold profile (docs/model.md 5.5)."""
     if "v" not in m.arrays:
         m.summary["flow"] = None
         m.summary["flow_note"] = "no velocities in the file (a packing.npz keeps positions and contact forces)"
@@ -265,10 +266,15 @@ def flow_profile(m):
     fp = flow.profile(m.pk.x[mob, 2], v, edges)
     m.tables["flow"] = dict(fp, edges=edges, phi=m.reg["phi_z"])
     T = fp["T"][np.isfinite(fp["T"])]
-    m.summary["flow"] = {"v_x_mean": float(v[:, 0].mean()) if len(v) else math.nan,
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    v_x_mean = float(v[:, 0].mean()) if len(v) else math.nan
+    flowing = v_x_mean > m.cfg.analysis.flow_v_min
+    m.summary["flow"] = {"v_x_mean": v_x_mean,
                          "flux": flow.flux(v[:, 0], m.pk.L_x, m.pk.L_y),
                          "T_mean": float(np.sum((v - v.mean(axis=0)) ** 2) / (3 * len(v))) if len(v) else math.nan,
-                         "T_max_bin": float(T.max()) if len(T) else math.nan}
+                         "T_max_bin": float(T.max()) if len(T) else math.nan,
+                         # the fit of a steady chute flow's profile; None for a state at rest
+                         "bagnold": flow.bagnold(mid, fp["v_x"], fp["n"], m.pk.z_bed, m.reg["h"]) if flowing else None}
 
 
 @dataclass(frozen=True)
