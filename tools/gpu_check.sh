@@ -12,9 +12,10 @@
 #   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
 #       bench (the GPU on the 20k table and its tiles; BENCH_CPU=1 the CPU engine too), pour (with POUR_MINUTES),
 #       digests (CPU against GPU on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a
-#       stiffening rung), switch (a restart that switches device, run to run, 2 ranks), pytest (the engine tests
-#       compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput and stall sections of the
-#       fused steps and the list build, where `ncu` is found), anatomy (tools/gpu_anatomy.py: a fused step with
+#       flow-arrest pile, a stiffening rung), switch (a restart that switches device, run to run, 2 ranks),
+#       pytest (the engine tests compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput
+#       and stall sections of the fused steps and the list build, where `ncu` is found), anatomy
+#       (tools/gpu_anatomy.py: a fused step with
 #       the rows and over no rows, blocks of 128 and 256), rows (ROWS: sweep tables run on the GPU, below)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
@@ -40,10 +41,12 @@ if [ "$SIZE" = small ]; then
     EX=(--set pour.N=40 --set box.L_x=4 --set box.L_y=4 --set pour.K0=5 --set contact.k_n=2e3); EXSTEPS=200
     LSTEPS=100; BSTEPS=20; TSTEPS=5; TILE=1x1; POUR=(--set pour.N=60 --set box.L_x=4 --set box.L_y=4); PSTEPS=100
     STIFF=(--k_n 2e4 --set run.max_steps=100 --set stiffen.ramp_time=0.02 --set stiffen.update_interval=0.005)
+    FLOWT=0.1
 else
     EX=(); EXSTEPS=30000; LSTEPS=2000; BSTEPS=2000; TSTEPS=200; TILE=7x7
     POUR=(--set pour.N=20000 --set box.L_x=20 --set box.L_y=20); PSTEPS=20000
     STIFF=(--k_n 2e6 --set run.max_steps=3000 --set stiffen.ramp_time=0.05)
+    FLOWT=1.5
 fi
 
 say "gpu_check $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
@@ -109,6 +112,8 @@ if has digests; then
     LMP=(--set 'run.initial_file="tests/data/lammps_sphere.data"' --set 'run.fixed_types=[2]' --set contact.gamma_t=20)
     compare lammps-hooke $LSTEPS "${LMP[@]}" --set contact.mu=0.5
     compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
+    # flow arrest (docs/model.md 5.5): poured onto a bed tilted by 25 degrees, levelled halfway
+    compare flow-arrest $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set flow.incline=25 --set flow.time=$FLOWT
     # a stiffening rung of that pile (docs/model.md 6.6: the ramp's laws, the history rescaled) on both devices
     for dev in cpu gpu; do
         $PY -m mpdem stiffen "$w/example-mu0.5-cpu" "${STIFF[@]}" --out "$w/stiff-$dev" --force --quiet --device $dev \
