@@ -220,8 +220,9 @@ def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, 
 def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path):
     run, ref, steps = straight
     out = tmp_path / "wall"
-    # half the straight run's time: the limit falls inside the run however fast the machine is
-    limit = max(1.0, 0.5 * STRAIGHT_SECONDS["run"])
+    # a quarter of the straight run's time: the limit falls inside the run however fast the machine is, also
+    # when the straight run was timed under more load than this one (tests share the cores with pytest-xdist)
+    limit = max(1.0, 0.25 * STRAIGHT_SECONDS["run"])
     t = time.monotonic()
     mpdem("run", *sets(), "--out", out, "--walltime", f"{limit:.2f}", "--walltime-margin", "0", "--quiet", check=75)
     assert time.monotonic() - t < limit + 30     # stopped at the limit, not at the end of the run
