@@ -23,9 +23,10 @@ from mpdem.kernels.gpu import rounded, runtime
 from mpdem.state import State
 
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
-# grid on a GPU. The kernels take any grid: every row is one thread's, whichever.
-GRIDS = [dict(block=2, blocks=2), dict(block=4, blocks=3)] if runtime.SIMULATOR else [dict(block=128),
-                                                                                      dict(block=32)]
+# grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
+# second takes a thread an entry for the forces (``engine.gpu_threads``).
+GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry")] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry")])
 
 
 def physics(mu=0.5, model="hooke", **kw):
@@ -79,12 +80,13 @@ def test_gpu_engine_steps_the_cpu_engines_bits(case):
 @pytest.mark.parametrize("case", ["mu0", "hertz-wall"])
 def test_steps_in_one_launch_give_the_steps_bits(case):
     """``run_quiet`` (the steps in cooperative launches, each ending at a step that needs a rebuild,
-    which the host finishes) gives the bits and the step records of the CPU engine's steps."""
+    which the host finishes) gives the bits and the step records of the CPU engine's steps, a
+    thread a row (frictionless) and a thread an entry (the wall)."""
     phys = CASES[case]
     want, st_c = stepped(cpu.Engine, phys, 30)
     x, v, omega, fixed, L = tight_lattice(m=5)
     st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
-    eng = gpu.Engine(st, phys, Domain(None), **GRIDS[0])
+    eng = gpu.Engine(st, phys, Domain(None), **GRIDS[["mu0", "hertz-wall"].index(case)])
     eng.start()
     infos = eng.run_quiet(29)
     assert len(infos) == 29 and st.step == 29 and eng.n_rebuilds >= 3
@@ -165,7 +167,8 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
 
 
 def test_any_grid_gives_the_same_bits():
-    """The launch's shape (threads per block, blocks, rows a thread) changes no bit."""
+    """The launch's shape (threads per block, blocks, rows a thread, a thread a row or an entry)
+    changes no bit."""
     phys = CASES["mu0.5-gamma_t"]
     digests = {checkpoint.digest(checkpoint.gather_state(stepped(gpu.Engine, phys, 12, g)[1])) for g in GRIDS}
     assert len(digests) == 1

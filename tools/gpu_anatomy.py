@@ -1,7 +1,9 @@
 """Where a fused GPU step's time goes (docs/performance.md, "GPU"): the bench's pile stepped in launches of
 ``kernels.gpu.step.advance``, timed three ways on the same grid.
 
-    python tools/gpu_anatomy.py TABLE [STEPS] [BLOCK]       (e.g. .devdata/landed20k.txt.gz 1000 128)
+    python tools/gpu_anatomy.py TABLE [STEPS] [BLOCK] [THREADS]    (e.g. .devdata/landed20k.txt.gz 1000 128 row)
+
+THREADS is ``engine.gpu_threads``: ``row`` (a thread a row) or ``entry`` (a thread an entry, then a row's sum).
 
 1. the steps as a run takes them (``Engine.run_quiet``: launches ended by list rebuilds, which the host does);
 2. one launch of STEPS steps that never stops for a rebuild (half the skin infinite: the lists go stale, the
@@ -23,19 +25,19 @@ from mpdem.engine.base import Physics
 from mpdem.kernels.bundles import make_box
 
 
-def main(path, steps=1000, block=128):
+def main(path, steps=1000, block=128, threads="row"):
     set_up_process()
-    cfg = table_config([f"engine.gpu_block={block}"])
+    cfg = table_config([f"engine.gpu_block={block}", f"engine.gpu_threads={threads}"])
     phys = Physics.from_config(cfg)
     warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, "gpu")
     whole, L_x, L_y = load_table(path, cfg)
     dom = Domain.from_config(None, cfg)
     st = dom.scatter(whole, L_x, L_y)
-    eng = make_engine(st, phys, dom, "gpu", block)
+    eng = make_engine(st, phys, dom, "gpu", block, threads)
     eng.start()
     eng.advance(50)
     cuda = eng.cuda
-    print(f"gpu_anatomy: {st.n_own} rows, block {block}, on {eng.device_name}")
+    print(f"gpu_anatomy: {st.n_own} rows, {eng._k} entries, block {block}, a thread a {threads}, on {eng.device_name}")
 
     cuda.synchronize()
     t = time.perf_counter()
@@ -52,7 +54,8 @@ def main(path, steps=1000, block=128):
     def launch(rows, half_skin):
         args = (rows, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"], d["nbr"],
                 d["hist"], d["stamp"], d["pair"], d["wall_ds"], planes_d, kinds_d, eng._epoch,
-                *make_box(st.L_x, st.L_y), eng.law, True, half_skin, steps, eng._rec)
+                *make_box(st.L_x, st.L_y), eng.law, True, half_skin, steps, eng._rec, eng.by_entry,
+                eng._k if rows else 0, d.get("row", d["nbr"]))
         grid = eng._cooperative_grid((st.n_own,) + args[1:])
         kernel = eng._launchers.get("advance") or k.advance
         kernel[grid](*args)         # warm (and the grid's first use)
@@ -73,4 +76,4 @@ def main(path, steps=1000, block=128):
 
 if __name__ == "__main__":
     a = sys.argv[1:]
-    main(a[0], *(int(v) for v in a[1:3]))
+    main(a[0], *(int(v) for v in a[1:3]), *a[3:4])

@@ -10,13 +10,13 @@
 #   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes):
 #       the config of a committed CPU run (REF, default the paper-size mu = 0.5 seed 1), its digest against that run's
 #   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
-#       bench (the GPU on the 20k table and its tiles; BENCH_CPU=1 the CPU engine too), pour (with POUR_MINUTES),
+#       bench (the GPU on the 20k table, a thread a row and an entry, and its tiles; BENCH_CPU=1 the CPU too), pour (with POUR_MINUTES),
 #       digests (CPU against GPU on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a
 #       flow-arrest pile, a stiffening rung), switch (a restart that switches device, run to run, 2 ranks),
 #       pytest (the engine tests compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput
 #       and stall sections of the fused steps and the list build, where `ncu` is found), anatomy
-#       (tools/gpu_anatomy.py: a fused step with
-#       the rows and over no rows, blocks of 128 and 256), rows (ROWS: sweep tables run on the GPU, below)
+#       (tools/gpu_anatomy.py: a fused step with the rows and over no rows, blocks of 128 and 256, a thread a row
+#       and a thread an entry), rows (ROWS: sweep tables run on the GPU, below)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
@@ -84,6 +84,10 @@ if has bench; then
             say "    $(tail -1 "$OUT/bench-$dev.log")"
         done
         grep -h "bench: " "$OUT/bench-gpu.log" | sed -n '3,9p' | tee -a "$SUM"
+        # the forces a thread an entry (engine.gpu_threads)
+        $PY -m mpdem bench --table "$TABLE" --device gpu --set engine.gpu_threads=entry --steps $BSTEPS \
+            > "$OUT/bench-gpu-entry.log" 2>&1
+        say "bench 20k gpu, a thread an entry: $(tail -1 "$OUT/bench-gpu-entry.log")"
         $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
         say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
     else
@@ -114,6 +118,11 @@ if has digests; then
     compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
     # flow arrest (docs/model.md 5.5): poured onto a bed tilted by 25 degrees, levelled halfway
     compare flow-arrest $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set flow.incline=25 --set flow.time=$FLOWT
+    # the forces a thread an entry (engine.gpu_threads = "entry") against the CPU run of the first pile
+    read -r de se < <(run example-mu0.5-entry gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set engine.gpu_threads=entry)
+    dc=$(digest "$w/example-mu0.5-cpu")
+    v=DIFFER; [ -n "$dc" ] && [ "$dc" = "$de" ] && v=equal
+    say "digest example-mu0.5, a thread an entry ($EXSTEPS steps): cpu ${dc:0:16} gpu ${de:0:16} (${se} s): $v"
     # a stiffening rung of that pile (docs/model.md 6.6: the ramp's laws, the history rescaled) on both devices
     for dev in cpu gpu; do
         $PY -m mpdem stiffen "$w/example-mu0.5-cpu" "${STIFF[@]}" --out "$w/stiff-$dev" --force --quiet --device $dev \
@@ -175,8 +184,11 @@ if has profile; then
 fi
 # 7. PARTS=anatomy: what a fused step costs with the rows and without (tools/gpu_anatomy.py)
 if has anatomy && [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
-    for b in 128 256; do
-        timeout "${ANATOMY_SECONDS:-90}" $PY tools/gpu_anatomy.py "$TABLE" 1000 $b 2>&1 | grep "^gpu_anatomy" | tee -a "$SUM"
+    for t in row entry; do
+        for b in 128 256; do
+            timeout "${ANATOMY_SECONDS:-90}" $PY tools/gpu_anatomy.py "$TABLE" 1000 $b $t 2>&1 | grep "^gpu_anatomy" |
+                tee -a "$SUM"
+        done
     done
 fi
 # 8. PARTS=rows: the rows of sweep tables (ROWS, under ROWS_CONFIG; ROWS_SET="key=value ..." beside them) on the GPU,

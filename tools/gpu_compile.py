@@ -62,7 +62,11 @@ def cases():
         "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, planes, kinds,
                                       5, *box, law, True, red)),
         "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds,
-                                        5, *box, law, True, 0.1, 4, rec)),
+                                        5, *box, law, True, 0.1, 4, rec, True, 4, nbr)),
+        "step.entry_forces": (step.entry_forces, (4, nbr, x, x, x, fixed, nbr, hist, stamp, pair, True, 5, *box, law,
+                                                  True, red)),
+        "step.row_sums": (step.row_sums, (n, x, x, x, x, x, fixed, start, stamp, pair, x, planes, kinds, 5, law, True,
+                                          red)),
         "lists.z_range": (lists.z_range, (n, x, np.zeros(2))),
         "lists.zero": (lists.zero, (n, cells)),
         "lists.bin_rows": (lists.bin_rows, (n, x, 3, 3, 3, 1.0, 1.0, 0.0, 1.2, cells, cells)),
@@ -74,6 +78,7 @@ def cases():
         "lists.carry_history": (lists.carry_history, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
                                                       np.uint32(3))),
         "lists.copy_rows": (lists.copy_rows, (n, x, x)),
+        "lists.entry_rows": (lists.entry_rows, (n, start, nbr)),
         "lists.gather_rows": (lists.gather_rows, (ids, x, x, x, np.zeros((3, n, 3)))),
     }
 

@@ -301,7 +301,7 @@ def run_table_bench(args, net):
     dom = Domain.from_config(net, cfg)
     st = dom.scatter(whole, L_x, L_y)
     del whole
-    eng = make_engine(st, phys, dom, device, cfg.engine.gpu_block)
+    eng = make_engine(st, phys, dom, device, cfg.engine.gpu_block, cfg.engine.gpu_threads)
     eng.start()
     eng.advance(WARMUP_STEPS)
     wall, rebuilds, before, after, steady = timed_loop(eng, dom, args.steps)

@@ -153,6 +153,11 @@ SCHEMA = (
     _k("engine", "gpu_block", 128,
        "threads per block of the GPU engine's kernels (a power of two from 32 to 1024); no effect on results",
        int, restart=True, physics=False),
+    _k("engine", "gpu_threads", "row",
+       "how the GPU engine's contact forces take its threads: 'row' (a thread a particle computes and sums its "
+       "neighbour list's contacts) or 'entry' (a thread a list entry computes one contact, then a thread a "
+       "particle sums its own in list order: more threads, the forces through GPU memory); no effect on results",
+       str, ("row", "entry"), restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",

@@ -49,9 +49,10 @@ def require(device):
         gpu_require()
 
 
-def make_engine(state, physics, domain, device="cpu", gpu_block=128):
-    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``: the GPU
-    engine's threads per block (``engine.gpu_block``; no effect on results)."""
+def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row"):
+    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block`` and
+    ``gpu_threads``: the GPU engine's threads per block and its threads of the forces
+    (``engine.gpu_block``, ``engine.gpu_threads``; no effect on results)."""
     if device == "gpu":
-        return engine_class(device)(state, physics, domain, block=gpu_block)
+        return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads)
     return engine_class(device)(state, physics, domain)

@@ -82,6 +82,11 @@ class Engine(EngineBase):
     blocks : int or None
         Blocks a launch at most (each thread then takes several rows); None for one row a thread.
         The tests under numba's simulator use a few threads: it runs each as a Python thread.
+    threads : {"row", "entry"}
+        How the contact forces take the threads (``engine.gpu_threads``): a thread a row computes and
+        sums its list's contacts (``kernels.gpu.step.forces``), or a thread an entry computes one
+        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``);
+        no effect on results.
 
     Attributes
     ----------
@@ -91,8 +96,11 @@ class Engine(EngineBase):
         ``domain.comm_seconds``.
     """
 
-    def __init__(self, state, physics, domain, block=128, blocks=None):
+    def __init__(self, state, physics, domain, block=128, blocks=None, threads="row"):
         runtime, self.k, self.kl = _kernels()
+        if threads not in ("row", "entry"):
+            raise ValueError(f"threads = {threads!r}: accepted 'row' or 'entry'")
+        self.by_entry = threads == "entry"
         self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
@@ -173,6 +181,7 @@ class Engine(EngineBase):
         d["hist"] = cuda.to_device(self._hist[:k] if len(self._hist) else np.zeros((1, 3)))
         d["stamp"] = cuda.to_device(self._stamp[:k] if len(self._stamp) else np.zeros(1, np.uint32))
         d["pair"] = cuda.device_array((1, 6))
+        self._entry_rows(None)
         # the owned rows the ghost refresh sends (several ranks), and room to gather them
         self._sources = self.domain.ghost_sources()
         m = max(len(self._sources), 1)
@@ -326,11 +335,34 @@ class Engine(EngineBase):
         self._run(L.carry_history, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], start, nbr, hist,
                                           stamp, stale))
         d["start"], d["nbr"], d["hist"], d["stamp"] = start, nbr, hist, stamp
-        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
         self._k = k
+        self._entry_rows(grid)
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
         self._host_lists = False
         self._pairs_kept = False
         s.slots_current = False
+
+    def _entry_rows(self, grid):
+        """Each list entry's row on the GPU (``row``) when the forces take a thread an entry: from the
+        host's lists (``grid`` None, after ``_upload``) or built on the GPU from its (a launch over
+        ``grid``)."""
+        if not self.by_entry:
+            return
+        s, d, k = self.state, self._dev, max(self._k, 1)
+        if grid is None:
+            rows = np.repeat(np.arange(s.n_own, dtype=np.int32), np.diff(self.nbr_start[:s.n_own + 1]))
+            d["row"] = self.cuda.to_device(rows if len(rows) else np.zeros(1, np.int32))
+        else:
+            d["row"] = self.cuda.device_array(k, np.int32)
+            self._run(self.kl.entry_rows, grid, (s.n_own, d["start"], d["row"]))
+
+    def _pairs(self, keep):
+        """``pair`` with room for every entry where an evaluation writes it (kept pairs, or the forces
+        a thread an entry)."""
+        d, k = self._dev, max(self._k, 1)
+        if (keep or self.by_entry) and d["pair"].shape[0] < k:
+            d["pair"] = self.cuda.device_array((int(k * 1.1) + 64, 6))
+        return d["pair"]
 
     def _buffer(self, name, size, dtype):
         """A device array of at least ``size`` elements kept between rebuilds (grown by a quarter)."""
@@ -363,14 +395,21 @@ class Engine(EngineBase):
         With ``keep_pairs`` every entry's force stays on the GPU for ``force_ratio``."""
         t = time.perf_counter()
         s, d, k = self.state, self._dev, self.k
-        if keep_pairs and d["pair"].shape[0] < max(self._k, 1):
-            d["pair"] = self.cuda.device_array((max(self._k, 1), 6))
+        pair = self._pairs(keep_pairs)
         self._pairs_kept = keep_pairs
         self._epoch += 1
         planes_d, kinds_d = self._device_planes()
-        self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
-                     d["nbr"], d["hist"], d["stamp"], d["pair"], keep_pairs, d["wall_ds"], planes_d, kinds_d,
-                     self._epoch, *make_box(s.L_x, s.L_y), self.law, increment, self._red)
+        box = make_box(s.L_x, s.L_y)
+        if self.by_entry:
+            self._launch("entry_forces", max(self._k, 1), d["row"], d["x"], d["v"], d["omega"], d["fixed"], d["nbr"],
+                         d["hist"], d["stamp"], pair, keep_pairs, self._epoch, *box, self.law, increment, self._red)
+            self._launch("row_sums", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
+                         d["stamp"], pair, d["wall_ds"], planes_d, kinds_d, self._epoch, self.law, increment,
+                         self._red)
+        else:
+            self._launch("forces", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
+                         d["nbr"], d["hist"], d["stamp"], pair, keep_pairs, d["wall_ds"], planes_d, kinds_d,
+                         self._epoch, *box, self.law, increment, self._red)
         red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
@@ -429,8 +468,9 @@ class Engine(EngineBase):
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
-                    d["nbr"], d["hist"], d["stamp"], d["pair"], d["wall_ds"], planes_d, kinds_d, self._epoch,
-                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
+                    d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
+                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
+                    max(self._k, 1), d.get("row", d["nbr"]))
             self._launch("advance", *args, grid=self._cooperative_grid(args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
@@ -459,8 +499,9 @@ class Engine(EngineBase):
         return infos
 
     def _cooperative_grid(self, args):
-        """The grid of ``advance``: one row a thread if every block fits on the GPU at once (a
-        cooperative launch needs that), else as many blocks as fit, each thread taking several rows."""
+        """The grid of ``advance``: one row (or entry, ``by_entry``) a thread if every block fits on the
+        GPU at once (a cooperative launch needs that), else as many blocks as fit, each thread taking
+        several."""
         if self._coop_blocks is None:
             if self._simulator:     # numba's simulator runs a cooperative grid of one block only
                 self._coop_blocks = 1
@@ -472,7 +513,7 @@ class Engine(EngineBase):
                 except (AttributeError, StopIteration):
                     # one block a multiprocessor is resident whatever the kernel's resources
                     self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
-        blocks, block = self._grid(args[0])
+        blocks, block = self._grid(max(self.state.n_own, self._k) if self.by_entry else self.state.n_own)
         return min(blocks, self._coop_blocks), block
 
     def complete(self):

@@ -201,3 +201,11 @@ def gather_rows(rows, x, v, omega, out):
             out[0, k, a] = x[i, a]
             out[1, k, a] = v[i, a]
             out[2, k, a] = omega[i, a]
+
+
+@cuda.jit
+def entry_rows(n_own, start, row):
+    """row[e] = i for every entry e of row i's list (``start``: the lists' (n_own + 1,) offsets)."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        for e in range(start[i], start[i + 1]):
+            row[e] = i

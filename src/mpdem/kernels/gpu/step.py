@@ -1,7 +1,9 @@
 """The GPU engine's step: half-kick and drift, contact forces, half-kick (numba-cuda kernels).
 
-One thread a row. Each row computes every entry of its full neighbour list
-itself, in partner-id order, and sums as it goes: the pair's law from i's
+One thread a row (``forces``), or a thread an entry then a thread a row
+(``entry_forces`` and ``row_sums``: more threads for the GPU, the entries'
+forces through its memory). Each row's entries are those of its full
+neighbour list, in partner-id order, summed in that order: the pair's law from i's
 side is the exact negative of the law from j's side (``kernels/law.py``:
 mirror-exact separations, symmetric sums), so the row's sum is the CPU
 engine's sum of the same values in the same order, to the bit. Each entry
@@ -126,9 +128,62 @@ def kick(n_own, v, omega, f, torque, fixed, dt):
 
 
 @device
+def _contact(i, e, xi, yi, zi, x, v, omega, fixed, nbr, hist, stamp, now, before, L_x, L_y, hx, hy, law, increment):
+    """Entry e of mobile row i (at xi, yi, zi [d]): (1 if in contact else 0, the overlap [d], the
+    contact's force on i [m g] (3), its torque on i [m g d] (3)); in contact, the entry's history
+    is advanced and its stamp set to ``now``. The torque is zero without friction."""
+    j = nbr[e]
+    dx = min_image(xi - x[j, 0], L_x, hx)
+    dy = min_image(yi - x[j, 1], L_y, hy)
+    dz = zi - x[j, 2]
+    r2 = norm2(dx, dy, dz)
+    if not r2 < 1.0:
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    delta, nx, ny, nz = approach(dx, dy, dz, r2)
+    meff = 1.0 if fixed[j] else 0.5
+    vrx = v[i, 0] - v[j, 0]
+    vry = v[i, 1] - v[j, 1]
+    vrz = v[i, 2] - v[j, 2]
+    vn = dot(vrx, vry, vrz, nx, ny, nz)
+    fn, scale = normal(delta, vn, meff, law)
+    if law.mu > 0.0:
+        wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
+        vtx, vty, vtz = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
+        was = stamp[e] == before
+        sx, sy, sz, ftx, fty, ftz = tangential(
+            (hist[e, 0] if was else 0.0, hist[e, 1] if was else 0.0, hist[e, 2] if was else 0.0),
+            (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
+        # + 0.0 stores a zero as +0.0 whichever way it was reached
+        hist[e, 0] = sx + 0.0
+        hist[e, 1] = sy + 0.0
+        hist[e, 2] = sz + 0.0
+        cfx, cfy, cfz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
+        ctx, cty, ctz = contact_torque(nx, ny, nz, ftx, fty, ftz)
+    else:
+        cfx, cfy, cfz = normal_force(fn, nx, ny, nz)
+        ctx = 0.0
+        cty = 0.0
+        ctz = 0.0
+    stamp[e] = now
+    return 1, delta, cfx, cfy, cfz, ctx, cty, ctz
+
+
+@device
+def _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz):
+    """pair[e] = the entry's force [m g] and torque [m g d]."""
+    pair[e, 0] = cfx
+    pair[e, 1] = cfy
+    pair[e, 2] = cfz
+    pair[e, 3] = ctx
+    pair[e, 4] = cty
+    pair[e, 5] = ctz
+
+
+@device
 def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                now, before, L_x, L_y, hx, hy, law, increment):
-    """Row i (mobile) of ``forces``; returns (its largest overlap [d], its contacts)."""
+    """Row i (mobile) of ``forces``: its entries computed and summed in order, then the planes;
+    returns (its largest overlap [d], its contacts)."""
     deepest = 0.0
     contacts = 0
     friction = law.mu > 0.0
@@ -142,58 +197,33 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     ty = 0.0
     tz = 0.0
     for e in range(start[i], start[i + 1]):
-        j = nbr[e]
-        dx = min_image(xi - x[j, 0], L_x, hx)
-        dy = min_image(yi - x[j, 1], L_y, hy)
-        dz = zi - x[j, 2]
-        r2 = norm2(dx, dy, dz)
-        if not r2 < 1.0:
+        c, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, xi, yi, zi, x, v, omega, fixed, nbr, hist, stamp,
+                                                          now, before, L_x, L_y, hx, hy, law, increment)
+        if c == 0:
             if keep:
-                for a in range(6):
-                    pair[e, a] = 0.0
+                _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             continue
         contacts += 1
-        delta, nx, ny, nz = approach(dx, dy, dz, r2)
         if delta > deepest:
             deepest = delta
-        meff = 1.0 if fixed[j] else 0.5
-        vrx = v[i, 0] - v[j, 0]
-        vry = v[i, 1] - v[j, 1]
-        vrz = v[i, 2] - v[j, 2]
-        vn = dot(vrx, vry, vrz, nx, ny, nz)
-        fn, scale = normal(delta, vn, meff, law)
         if friction:
-            wx, wy, wz = spin(omega[i, 0], omega[i, 1], omega[i, 2], omega[j, 0], omega[j, 1], omega[j, 2])
-            vtx, vty, vtz = slip(vrx, vry, vrz, vn, nx, ny, nz, wx, wy, wz)
-            was = stamp[e] == before
-            sx, sy, sz, ftx, fty, ftz = tangential(
-                (hist[e, 0] if was else 0.0, hist[e, 1] if was else 0.0, hist[e, 2] if was else 0.0),
-                (vtx, vty, vtz), (nx, ny, nz), scale, meff, abs(fn), law, increment)
-            # + 0.0 stores a zero as +0.0 whichever way it was reached
-            hist[e, 0] = sx + 0.0
-            hist[e, 1] = sy + 0.0
-            hist[e, 2] = sz + 0.0
-            cfx, cfy, cfz = contact_force(fn, nx, ny, nz, ftx, fty, ftz)
-            ctx, cty, ctz = contact_torque(nx, ny, nz, ftx, fty, ftz)
             tx = add(tx, ctx)
             ty = add(ty, cty)
             tz = add(tz, ctz)
-        else:
-            cfx, cfy, cfz = normal_force(fn, nx, ny, nz)
-            ctx = 0.0
-            cty = 0.0
-            ctz = 0.0
-        stamp[e] = now
         fx = add(fx, cfx)
         fy = add(fy, cfy)
         fz = add(fz, cfz)
         if keep:
-            pair[e, 0] = cfx
-            pair[e, 1] = cfy
-            pair[e, 2] = cfz
-            pair[e, 3] = ctx
-            pair[e, 4] = cty
-            pair[e, 5] = ctz
+            _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
+    return _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, deepest,
+                       fx, fy, fz, tx, ty, tz), contacts
+
+
+@device
+def _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, deepest, fx, fy, fz, tx, ty, tz):
+    """Row i's contacts with the planes added to its sums of gravity and its entries (fx .. tz), and
+    the whole stored in f[i] and torque[i]; returns the largest overlap of the row's entries
+    (``deepest`` [d]) and planes but the floor."""
     for k in range(len(kinds)):
         kind = kinds[k]
         rough = kind == PLANE_ROUGH
@@ -202,7 +232,7 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         else:
             ds = (0.0, 0.0, 0.0)
         delta, pfx, pfy, pfz, ptx, pty, ptz, sx, sy, sz = plane_contact(
-            xi, yi, zi, v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2], ds,
+            x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2], ds,
             planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], kind, law, increment)
         if rough:
             wall_ds[i, 0] = sx
@@ -223,7 +253,32 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     torque[i, 0] = tx
     torque[i, 1] = ty
     torque[i, 2] = tz
-    return deepest, contacts
+    return deepest
+
+
+@device
+def _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds, now, law, increment):
+    """Row i (mobile) of ``row_sums``: gravity and the forces its entries left in ``pair`` (those
+    in contact: stamped ``now``), in the entries' order, then the planes; returns the largest
+    overlap of its planes but the floor [d]. The sums of ``_force_row``, so its bits."""
+    friction = law.mu > 0.0
+    fx = law.g_x
+    fy = law.g_y
+    fz = law.g_z
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    for e in range(start[i], start[i + 1]):
+        if stamp[e] != now:
+            continue
+        if friction:
+            tx = add(tx, pair[e, 3])
+            ty = add(ty, pair[e, 4])
+            tz = add(tz, pair[e, 5])
+        fx = add(fx, pair[e, 0])
+        fy = add(fy, pair[e, 1])
+        fz = add(fz, pair[e, 2])
+    return _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, 0.0, fx, fy, fz, tx, ty, tz)
 
 
 @cuda.jit
@@ -285,6 +340,79 @@ def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, 
     sum_into(red, RED_CONTACTS, contacts, iroom)
 
 
+@cuda.jit
+def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, epoch, L_x, L_y, hx, hy, law,
+                 increment, red):
+    """The first half of ``forces`` a thread an entry: each entry's contact force and torque on its
+    row into ``pair`` (and its history, in place); ``row_sums`` then sums them a thread a row.
+
+    ``row`` (K,) int32: each entry's row. ``pair`` (K, 6) float64 holds every entry in contact
+    (stamped with this evaluation), every entry with ``keep`` (zeros out of contact). Reduces the
+    largest overlap [d] (RED_OVERLAP) and the contacts (RED_CONTACTS) into ``red``; sets the slots
+    of ``kick_drift`` to ``NEUTRAL``. Other arguments as ``forces``'s; any grid.
+    """
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    if cuda.grid(1) == 0:
+        red[RED_D2] = NEUTRAL[RED_D2]
+        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
+        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
+        red[RED_BAD] = NEUTRAL[RED_BAD]
+    _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, np.uint32(epoch & 0xFFFFFFFF),
+                 np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law, increment, red, room, iroom)
+
+
+@device_cuda
+def _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx, hy,
+                 law, increment, red, room, iroom):
+    """This thread's entries of ``entry_forces`` (e, e + threads, ...), their reductions into
+    ``red`` (every thread of the block calls it)."""
+    deepest = 0.0
+    contacts = 0
+    for e in range(cuda.grid(1), n_entries, cuda.gridsize(1)):
+        i = row[e]
+        if fixed[i]:
+            continue
+        c, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x[i, 0], x[i, 1], x[i, 2], x, v, omega, fixed, nbr,
+                                                          hist, stamp, now, before, L_x, L_y, hx, hy, law, increment)
+        if c:
+            contacts += 1
+            deepest = max(deepest, delta)
+            _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
+        elif keep:
+            _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    max_into(red, RED_OVERLAP, deepest, room)
+    sum_into(red, RED_CONTACTS, contacts, iroom)
+
+
+@cuda.jit
+def row_sums(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, epoch, law,
+             increment, red):
+    """The second half of ``forces`` after ``entry_forces``: each owned row's force and torque, a
+    thread a row (gravity, its entries' in order, the planes'); the largest plane overlap into
+    ``red[RED_OVERLAP]``. Any grid."""
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds,
+               np.uint32(epoch & 0xFFFFFFFF), law, increment, red, room)
+
+
+@device_cuda
+def _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, increment,
+               red, room):
+    """This thread's rows of ``row_sums`` (i, i + threads, ...) and their reduction (every thread of
+    the block calls it)."""
+    deepest = 0.0
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if fixed[i]:
+            for a in range(3):
+                f[i, a] = 0.0
+                torque[i, a] = 0.0
+            continue
+        deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds, now,
+                                        law, increment))
+    max_into(red, RED_OVERLAP, deepest, room)
+
+
 @device_cuda
 def _go_on(red, half_skin, room):
     """Whether every row of ``red``'s step moved less than ``half_skin`` [d] since ``x_ref`` with a
@@ -303,7 +431,7 @@ def _go_on(red, half_skin, room):
 
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec):
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -313,8 +441,10 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     must be rebuilt first) or a position is not finite, the forces of evaluation ``epoch + s + 1``.
     A step that needs a rebuild ends the launch after its drift: the rows of steps 0..s-1 are
     whole, step s has drifted, and its ``rec[s]`` says why (the caller finishes it). ``rec`` is
-    (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. The same arithmetic as the
-    step's two kernels, so the same bits.
+    (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. With ``by_entry`` the forces are
+    ``entry_forces`` then ``row_sums`` (``pair`` has room for every one of the ``n_entries``
+    entries, ``row`` their rows), a grid barrier between. The same arithmetic as the step's
+    kernels, so the same bits.
     """
     grid = cuda.cg.this_grid()
     room = cuda.shared.array(BLOCK_MAX, np.float64)
@@ -333,7 +463,15 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
         grid.sync()
         if not _go_on(rec[s], half_skin, room):
             break
-        _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes, kinds,
-                     np.uint32((epoch + s + 1) & 0xFFFFFFFF), np.uint32((epoch + s) & 0xFFFFFFFF), L_x, L_y, hx, hy,
-                     law, True, rec[s], room, iroom)
+        now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
+        before = np.uint32((epoch + s) & 0xFFFFFFFF)
+        if by_entry:
+            _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
+                         hx, hy, law, True, rec[s], room, iroom)
+            grid.sync()
+            _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, True,
+                       rec[s], room)
+        else:
+            _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes,
+                         kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, iroom)
         grid.sync()
