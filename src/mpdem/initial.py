@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import build, state, stiffen
+from . import bedcache, build, state, stiffen
 from .errors import InputError
 from .io import tables
 from .io import checkpoint, lammps
@@ -103,7 +103,8 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
 
 
 def bed(cfg, net, log):
-    """The frozen bed of a pour: from ``bed.file``, or made by rank 0 and sent to all.
+    """The frozen bed of a pour: from ``bed.file``, or made by rank 0 (or read from the beds made
+    before, ``bedcache``) and sent to all.
 
     Warns when its areal density is outside [bed.density_min, bed.density_max].
     """
@@ -111,7 +112,7 @@ def bed(cfg, net, log):
         b = build.Bed(particles(cfg.bed.file, cfg, all_fixed=True, log=log)["x"].copy(),
                       note=f"from {cfg.bed.file}")
     else:
-        b = net.bcast(build.make_bed(cfg, progress=log) if net.rank == 0 else None)
+        b = net.bcast(bedcache.made_bed(cfg, progress=log) if net.rank == 0 else None)
     dens = len(b.x) / (cfg.box.L_x * cfg.box.L_y)
     log(f"bed: {len(b.x)} frozen spheres, {dens:.3f} per d^2, z_bed = {b.z_top:.4f}; {b.note}")
     if not cfg.bed.density_min <= dens <= cfg.bed.density_max:
