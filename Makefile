@@ -9,7 +9,7 @@ RANKS  ?= 2
 TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
 XDIST  = -n $(TEST_JOBS) --dist worksteal
 
-.PHONY: setup run test test-fast lint test-serial test-mpi test-validation test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
+.PHONY: setup run test test-fast lint test-serial test-pytest test-mpi test-validation test-slurm test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
 
 setup:
 	@bash tools/setup.sh
@@ -20,7 +20,7 @@ run: setup
 	$(PY) -m mpdem analyze runs/example
 
 # Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
-test: setup lint test-serial test-mpi test-gpu-compile test-validation
+test: setup lint test-pytest test-mpi test-gpu-compile test-slurm
 
 test-fast: setup lint test-serial test-mpi
 
@@ -38,6 +38,12 @@ test-gpu-compile:
 test-serial:
 	$(PY) -m pytest -q -rs $(XDIST) tests
 
+# every test of tests/ but the real-Slurm ones, in one pytest-xdist session (test-serial and the first part of
+# test-validation together; tests/conftest.py hands the long validation runs out first, so that the short
+# tests fill the workers' ends)
+test-pytest:
+	$(PY) -m pytest -q -rs $(XDIST) -m "not slurm" tests
+
 test-mpi:
 	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \
 	  for n in 2 3 4; do \
@@ -50,6 +56,9 @@ test-mpi:
 # The real-Slurm tests run by themselves after the rest: their 2-rank job chain needs both cores to meet its deadline.
 test-validation:
 	$(PY) -m pytest -q -rs $(XDIST) -m "validation and not slurm" tests
+	@$(MAKE) --no-print-directory test-slurm
+
+test-slurm:
 	$(PY) -m pytest -q -rs -m "validation and slurm" tests
 	@if grep -qs "mark.validation" mpi_tests/test_*.py; then \
 	  echo "== mpi_tests -m validation under mpiexec -n 2"; \

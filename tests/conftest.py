@@ -23,3 +23,11 @@ memory.return_freed_memory()
 @pytest.fixture
 def engine_factory():
     return make_engine
+
+
+def pytest_collection_modifyitems(config, items):
+    """The files with long runs (a test marked ``validation``) first, each file's tests together and in
+    their order (a module's fixtures are made once): pytest-xdist's workers start on the long runs, and
+    the short tests fill the ends (``make test-pytest``)."""
+    long = {item.path for item in items if item.get_closest_marker("validation")}
+    items.sort(key=lambda item: item.path not in long)
