@@ -38,7 +38,7 @@ test-gpu-compile:
 test-serial:
 	$(PY) -m pytest -q -rs $(XDIST) tests
 
-# every test of tests/ but the real-Slurm ones, in one pytest-xdist session (test-serial and the first part of
+# every test of tests/ but the real-Slurm ones, in one pytest-xdist run (test-serial and the first part of
 # test-validation together; tests/conftest.py hands the long validation runs out first, so that the short
 # tests fill the workers' ends)
 test-pytest:
