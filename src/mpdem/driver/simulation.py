@@ -251,7 +251,7 @@ class Run:
             quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
                 if quiet_runs:
-                    # the steps before the next that something reads after, in one go (the GPU engine),
+                    # the steps before the next that something reads after, in one go (``run_quiet``),
                     # all of one law
                     s0 = st.step
                     quiet = self._quiet_steps(s0, max_steps, progress)

@@ -13,7 +13,10 @@ Every engine is built as ``Engine(state, physics, domain)`` and offers:
   ``v`` and ``omega`` are the half-step values, and ``complete()`` applies it (every reader of the
   rows, through ``State.sync``, and ``kinetic`` call it first). ``keep_pairs`` keeps every pair's
   force of the step's evaluation for ``force_ratio`` (the same bits either way);
-- ``advance(n)``, ``complete()``;
+- ``run_quiet(n, flags)`` -> n StepInfos: n steps as ``step(flags, defer_kick=True)`` that nothing
+  reads between (the driver's steps between samples, files and progress lines), which an engine may
+  run without returning to Python (the CPU's on one rank and one thread, the GPU's on one rank);
+- ``advance(n)`` (``run_quiet``'s steps, then ``complete()``), ``complete()``;
 - ``rebuild()``; ``kinetic()`` -> exact (translational, rotational) sums; ``contacts()``;
   ``force_ratio()``; ``sync_state()`` (the state's rows and compact contact slots current for a reader,
   attached as ``State.sync``); ``memory_bytes()``;

@@ -146,12 +146,11 @@ class EngineBase:
 
     def advance(self, n):
         """Advance n steps (no monitors; each step's second half-kick deferred to the next
-        step's first pass, the last one's applied); returns the last StepInfo."""
-        info = self.info
-        for _ in range(n):
-            info = self.step(defer_kick=True)
+        step's first pass, the last one's applied); returns the last StepInfo. The steps run
+        as the engine's ``run_quiet`` runs them."""
+        infos = self.run_quiet(n) if n > 0 else ()
         self.complete()
-        return info
+        return infos[-1] if len(infos) else self.info
 
     def _particles(self):
         """The host State's rows as the kernels' ``Particles``."""

@@ -17,6 +17,7 @@ from ..kernels.calls import Bound
 from ..kernels.exactsum import new_accumulator, to_float
 from ..kernels.forces import contact_forces, contact_forces_serial, plane_forces
 from ..kernels.integrate import kick, kick_drift, kick_drift_serial, kick_serial, kinetic_energy
+from ..kernels.quiet import REC_COLUMNS, REC_CONTACTS, REC_OVERLAP, REC_ZMAX, REC_ZMIN, quiet_steps
 from .base import NO_FLAGS, EngineBase, StepInfo
 from .lists import NeighbourLists
 from .pairstore import PairStore
@@ -24,6 +25,13 @@ from .pairstore import PairStore
 # the force pass's block of rows: room for this many computed entries (or a row's longest list), in
 # which the contact law runs over a whole block's contacts (116 kB a chunk; 256 and 1024 time alike)
 FORCE_BLOCK = 1024
+# steps of one ``quiet_steps`` call at most (``run_quiet``): its record is this many rows
+QUIET_CALL = 1000
+
+
+def _finite_max(v):
+    """A value as the step's max reduction gives it: NaN becomes +inf (``Domain.max_many``)."""
+    return math.inf if math.isnan(v) else v
 
 
 class Kernels(NamedTuple):
@@ -32,6 +40,7 @@ class Kernels(NamedTuple):
     kick_drift: Bound
     kick: Bound
     plane_forces: Bound
+    quiet_steps: Bound
 
 
 class Engine(EngineBase):
@@ -68,6 +77,7 @@ class Engine(EngineBase):
         # the second half-kick of the last step, left for the next step's first pass (``step(defer_kick=True)``)
         self._kick_due = False
         self._reduce = np.zeros(4)
+        self._rec = np.zeros((0, REC_COLUMNS))    # ``run_quiet``'s record of its steps
         self.info = StepInfo()    # the newest step's (each step makes a new one)
         self.n_contacts = 0       # contacts of the whole pile at the last count (``contacts``)
         self.timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
@@ -102,7 +112,7 @@ class Engine(EngineBase):
         # each called through the overload numba chose at its first call after a reallocation
         self._kernels = Kernels(Bound(contact_forces if nchunk > 1 else contact_forces_serial),
                                 Bound(kick_drift if nchunk > 1 else kick_drift_serial),
-                                Bound(kick if nchunk > 1 else kick_serial), Bound(plane_forces))
+                                Bound(kick if nchunk > 1 else kick_serial), Bound(plane_forces), Bound(quiet_steps))
         self._drift = np.zeros((nchunk, 3))
         self._scratch(2 * self.lists.longest())
         if built:
@@ -174,12 +184,19 @@ class Engine(EngineBase):
         ``flags``, ``defer_kick`` and ``keep_pairs`` are the interface's (``engine/__init__.py``);
         the deferred half-kick is applied in the next step's first pass (``kick_drift``'s
         ``pending``): the same operations in the same order, one pass over the rows less a step."""
-        s, p, dom = self.state, self.phys, self.domain
+        s, p = self.state, self.phys
         t = time.perf_counter()
-        n2, z_min, z_max = self._kernels.kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self.lists.box(),
-                                                    self._drift, self._kick_due)
+        drifted = self._kernels.kick_drift(s.n_own, self._particles(), s.x_ref, p.dt, self.lists.box(), self._drift,
+                                           self._kick_due)
         self._kick_due = False
         self.timers["integration"] += time.perf_counter() - t
+        return self._after_drift(*drifted, flags, defer_kick, keep_pairs)
+
+    def _after_drift(self, n2, z_min, z_max, flags, defer_kick, keep_pairs):
+        """The rest of ``step`` after its kick and drift, which gave this rank's largest squared
+        displacement ``n2`` [d^2] (NaN: a position is not finite) and lowest and highest mobile
+        centre [d]: the step's one reduction, list work, forces, the second half-kick."""
+        s, p, dom = self.state, self.phys, self.domain
         # one exact max: the same decisions on every rank count (NaN -> inf)
         red = self._reduce
         if len(red) != 4 + len(flags):
@@ -197,7 +214,7 @@ class Engine(EngineBase):
         else:
             dom.refresh(s)
             # a pair left out of the near lists may come within reach once a particle moved near_skin/2
-            if not n2 < 0.25 * lists.near_skin * lists.near_skin:
+            if not n2 < self._near_limit2():
                 t = time.perf_counter()
                 lists.moved += moved
                 if lists.filter():
@@ -213,6 +230,54 @@ class Engine(EngineBase):
         self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
                              flags._make(agreed))
         return self.info
+
+    def _near_limit2(self):
+        """(near_skin / 2)^2 [d^2]: a squared displacement not below it needs a new filtering."""
+        return 0.25 * self.lists.near_skin * self.lists.near_skin
+
+    def run_quiet(self, n, flags=NO_FLAGS):
+        """``n`` steps that nothing reads between (no sample, no file, no progress line), each as
+        ``step(flags, defer_kick=True)``; returns their StepInfos, with ``flags`` for all.
+
+        On one rank and one chunk (one thread) the steps that need no list work run in one kernel
+        call (``kernels.quiet.quiet_steps``), with none of a step's Python; a step that needs a
+        rebuild or a new filtering (or has a position that is not finite) is finished on ``step``'s
+        path. The same arithmetic in the same order, so the same bits. Otherwise (several ranks
+        or threads) they are steps one by one. The seconds of a kernel call count as "forces"."""
+        if self.domain.parallel or self.nchunk > 1 or self.state.n_own == 0:
+            return [self.step(flags, defer_kick=True) for _ in range(n)]
+        s, p, work, lists = self.state, self.phys, self._work, self.lists
+        if len(self._rec) < min(n, QUIET_CALL):
+            self._rec = np.zeros((min(n, QUIET_CALL), REC_COLUMNS))
+        rec, infos = self._rec, []
+        while len(infos) < n:
+            m = min(n - len(infos), QUIET_CALL)
+            t = time.perf_counter()
+            near, pair = self.store.ring(lists, work.found.shape[1])
+            geo, kinds = self.plane_arrays()
+            whole = self._kernels.quiet_steps(m, s.n_own, self._particles(), s.x_ref, p.dt, lists.box(),
+                                              self._kick_due, near, lists.slots(pair), self._epoch, self.law,
+                                              work, geo, kinds, s.wall_ds, lists.moved, 0.5 * p.skin,
+                                              self._near_limit2(), rec)
+            self.timers["forces"] += time.perf_counter() - t
+            overlap = self.last_overlap
+            for r in rec[:whole].tolist():
+                infos.append(StepInfo(_finite_max(overlap), self.n_contacts, r[REC_ZMIN], r[REC_ZMAX], flags))
+                overlap = r[REC_OVERLAP]
+            if whole:
+                self._kick_due = True
+                s.slots_current = False
+                self._epoch += whole
+                s.step += whole
+                s.time = s.step * p.dt
+                self.last_overlap, self._contacts = overlap, int(rec[whole - 1, REC_CONTACTS])
+                self.info = infos[-1]
+            if whole < m:
+                # the step the call ended at has drifted: its list work and forces on ``step``'s path
+                self._kick_due = False
+                d2, z_min, z_max = rec[whole, :3].tolist()
+                infos.append(self._after_drift(d2, z_min, z_max, flags, True, False))
+        return infos
 
     def complete(self):
         """Apply the second half-kick that ``step(defer_kick=True)`` left (nothing if none)."""

@@ -309,38 +309,45 @@ def plane_forces(n_own, particles, planes, kinds, plane_ds, law, increment, chun
     -------
     float : the largest overlap with a plane other than the floor [d] (0 if none).
     """
-    x, v, omega, fixed = particles.x, particles.v, particles.omega, particles.fixed
-    f, torque = particles.f, particles.torque
     nchunk = len(chunk_max)
     for c in prange(nchunk):
-        deepest = 0.0
         lo, hi = chunk_bounds(c, n_own, nchunk)
-        for i in range(lo, hi):
-            if fixed[i]:
-                continue
-            for k in range(len(kinds)):
-                kind = kinds[k]
-                rough = kind == PLANE_ROUGH
-                ds = (plane_ds[i, 0], plane_ds[i, 1], plane_ds[i, 2]) if rough else (0.0, 0.0, 0.0)
-                delta, fx, fy, fz, tx, ty, tz, sx, sy, sz = plane_contact(
-                    x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2],
-                    ds, planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], kind, law, increment)
-                if rough:
-                    plane_ds[i, 0] = sx
-                    plane_ds[i, 1] = sy
-                    plane_ds[i, 2] = sz
-                if not delta > 0.0:
-                    continue
-                if kind != PLANE_FLOOR:
-                    deepest = max(deepest, delta)
-                f[i, 0] += fx
-                f[i, 1] += fy
-                f[i, 2] += fz
-                torque[i, 0] += tx
-                torque[i, 1] += ty
-                torque[i, 2] += tz
-        chunk_max[c] = deepest
+        chunk_max[c] = _plane_rows(lo, hi, particles, planes, kinds, plane_ds, law, increment)
     deepest = 0.0
     for c in range(nchunk):
         deepest = max(deepest, chunk_max[c])
+    return deepest
+
+
+@njit(cache=True, error_model="numpy")
+def _plane_rows(lo, hi, particles, planes, kinds, plane_ds, law, increment):
+    """Rows lo..hi-1 of ``plane_forces``; returns their largest overlap with a plane other than
+    the floor [d] (0 if none)."""
+    x, v, omega, fixed = particles.x, particles.v, particles.omega, particles.fixed
+    f, torque = particles.f, particles.torque
+    deepest = 0.0
+    for i in range(lo, hi):
+        if fixed[i]:
+            continue
+        for k in range(len(kinds)):
+            kind = kinds[k]
+            rough = kind == PLANE_ROUGH
+            ds = (plane_ds[i, 0], plane_ds[i, 1], plane_ds[i, 2]) if rough else (0.0, 0.0, 0.0)
+            delta, fx, fy, fz, tx, ty, tz, sx, sy, sz = plane_contact(
+                x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], omega[i, 0], omega[i, 1], omega[i, 2],
+                ds, planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3], kind, law, increment)
+            if rough:
+                plane_ds[i, 0] = sx
+                plane_ds[i, 1] = sy
+                plane_ds[i, 2] = sz
+            if not delta > 0.0:
+                continue
+            if kind != PLANE_FLOOR:
+                deepest = max(deepest, delta)
+            f[i, 0] += fx
+            f[i, 1] += fy
+            f[i, 2] += fz
+            torque[i, 0] += tx
+            torque[i, 1] += ty
+            torque[i, 2] += tz
     return deepest
