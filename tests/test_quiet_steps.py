@@ -48,6 +48,7 @@ def _counting(eng):
 @pytest.mark.parametrize("mu,wall", [(0.0, False), (0.5, False), (0.5, True)])
 def test_steps_in_one_call_are_the_steps_one_by_one(mu, wall):
     one, many = _gas(mu, wall), _gas(mu, wall)
+    assert many.steps_in_one_call
     calls = _counting(many)
     r0, f0 = many.n_rebuilds, many.lists.n_filters
     assert r0 == 1
@@ -88,6 +89,7 @@ def test_a_position_that_is_not_finite_is_reported_at_its_step():
 def test_several_threads_take_the_steps_one_by_one():
     eng = _gas(0.5, False)
     eng.set_chunks(3)
+    assert not eng.steps_in_one_call
     calls = _counting(eng)
     ref = _gas(0.5, False)
     got = eng.run_quiet(300)

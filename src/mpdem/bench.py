@@ -10,7 +10,9 @@ by side. Untimed first: the kernels on a tiny pile (then the memory
 baseline), the set-up force evaluation and 50 steps. It prints the case,
 rebuilds and contacts, each phase's share of the loop (forces, lists,
 integration from the engine's ``timers``; communication from the Domain;
-glue the rest), memory per atom, and last ``ns_per_atom_step=X`` with every
+glue the rest; the steps an engine runs in one call, ``run_quiet``, count as
+forces: on one rank and one thread the CPU's kicks and drifts are among them),
+memory per atom, and last ``ns_per_atom_step=X`` with every
 atom (bed included) counted, as LAMMPS counts them (a side-by-side script
 reads that line).
 
@@ -130,11 +132,8 @@ def warm_up_kernels(phys, L_x, L_y, device="cpu"):
     fixed = np.concatenate([np.zeros(len(mob), np.uint8), np.ones(len(bed), np.uint8)])
     eng = make_engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None), device)
     eng.start()
+    # (in ``run_quiet``'s way: the kernels of steps in one call compiled too)
     eng.advance(WARMUP_STEPS)
-    if hasattr(eng, "run_quiet"):
-        # the GPU engine's fused steps are a kernel of their own (compiled in a second or two)
-        eng.run_quiet(WARMUP_STEPS)
-        eng.complete()
     # a rebuild with contacts in the lists compiles the history's list-to-slot kernels too
     eng.rebuild()
     eng.advance(1)
@@ -208,9 +207,9 @@ def timed_loop(eng, dom, steps):
     # two appends a step, some 0.1 us
     ends, lists = [], []
     switches = resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw
-    # an engine that runs steps in one go (the GPU engine's ``run_quiet``) is timed in runs of QUIET
-    # steps, each run's time shared evenly among its steps
-    quiet = getattr(eng, "run_quiet", None)
+    # an engine that runs steps in one go (``steps_in_one_call``: the CPU's on one rank and one thread,
+    # the GPU's on one rank) is timed in runs of QUIET steps, each run's time shared evenly among its steps
+    quiet = eng.run_quiet if eng.steps_in_one_call else None
     t0 = time.perf_counter()
     done = 0
     while done < steps:

@@ -15,7 +15,8 @@ Every engine is built as ``Engine(state, physics, domain)`` and offers:
   force of the step's evaluation for ``force_ratio`` (the same bits either way);
 - ``run_quiet(n, flags)`` -> n StepInfos: n steps as ``step(flags, defer_kick=True)`` that nothing
   reads between (the driver's steps between samples, files and progress lines), which an engine may
-  run without returning to Python (the CPU's on one rank and one thread, the GPU's on one rank);
+  run without returning to Python (``steps_in_one_call``: the CPU's on one rank and one thread, the
+  GPU's on one rank);
 - ``advance(n)`` (``run_quiet``'s steps, then ``complete()``), ``complete()``;
 - ``rebuild()``; ``kinetic()`` -> exact (translational, rotational) sums; ``contacts()``;
   ``force_ratio()``; ``sync_state()`` (the state's rows and compact contact slots current for a reader,

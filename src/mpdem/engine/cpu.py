@@ -235,6 +235,11 @@ class Engine(EngineBase):
         """(near_skin / 2)^2 [d^2]: a squared displacement not below it needs a new filtering."""
         return 0.25 * self.lists.near_skin * self.lists.near_skin
 
+    @property
+    def steps_in_one_call(self):
+        """``run_quiet`` runs its steps in kernel calls (one rank, one thread), not one by one."""
+        return not self.domain.parallel and self.nchunk == 1
+
     def run_quiet(self, n, flags=NO_FLAGS):
         """``n`` steps that nothing reads between (no sample, no file, no progress line), each as
         ``step(flags, defer_kick=True)``; returns their StepInfos, with ``flags`` for all.
@@ -244,7 +249,7 @@ class Engine(EngineBase):
         rebuild or a new filtering (or has a position that is not finite) is finished on ``step``'s
         path. The same arithmetic in the same order, so the same bits. Otherwise (several ranks
         or threads) they are steps one by one. The seconds of a kernel call count as "forces"."""
-        if self.domain.parallel or self.nchunk > 1 or self.state.n_own == 0:
+        if not self.steps_in_one_call or self.state.n_own == 0:
             return [self.step(flags, defer_kick=True) for _ in range(n)]
         s, p, work, lists = self.state, self.phys, self._work, self.lists
         if len(self._rec) < min(n, QUIET_CALL):

@@ -450,6 +450,11 @@ class Engine(EngineBase):
                              flags._make(agreed))
         return self.info
 
+    @property
+    def steps_in_one_call(self):
+        """``run_quiet`` runs its steps in launches of many (one rank), not one by one."""
+        return not self.domain.parallel
+
     def run_quiet(self, n, flags=NO_FLAGS):
         """``n`` steps that nothing reads between (no sample, no file, no progress line), each as
         ``step(flags, defer_kick=True)``; returns their StepInfos, with ``flags`` for all.
