@@ -284,3 +284,22 @@ def test_a_stiffening_rung_on_the_gpu_is_the_cpu_rung(tmp_path):
         mpdem("stiffen", tmp_path / "soft", *rung, "--device", dev, "--out", tmp_path / dev, check=3)
     assert "over 64 steps" in (tmp_path / "gpu" / "log.txt").read_text()
     assert summary_digest(tmp_path / "gpu") == summary_digest(tmp_path / "cpu")
+
+
+def test_a_position_that_is_not_finite_stops_the_steps_without_list_work():
+    """As the CPU engine (test_quiet_steps.py): from the step whose drift made a position NaN, each
+    step says so (z_min NaN) with no rebuild over it, in launches and step by step."""
+    phys = CASES["mu0"]
+    got = []
+    for quiet in (False, True):
+        eng, st = stepped(gpu.Engine, phys, 5, GRIDS[0])
+        eng.sync_state()
+        # a mobile sphere's velocity, in the rows a new engine takes up
+        st.v[int(np.flatnonzero(st.fixed[:st.n_own] == 0)[0]), 2] = np.nan
+        eng = gpu.Engine(st, phys, Domain(None), **GRIDS[0])
+        eng.start_from_file()
+        builds = eng.n_rebuilds
+        infos = eng.run_quiet(3) if quiet else [eng.step(defer_kick=True) for _ in range(3)]
+        assert all(np.isnan(i.z_min) for i in infos) and eng.n_rebuilds == builds
+        got.append([(i.z_max, i.max_overlap) for i in infos])
+    assert got[0] == got[1]

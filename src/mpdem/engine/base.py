@@ -152,6 +152,16 @@ class EngineBase:
         self.complete()
         return infos[-1] if len(infos) else self.info
 
+    def _not_finite(self, overlap, z_max, flags):
+        """End a step whose drift made a position NaN or infinite (an infinite displacement in the
+        step's reduction, the same on every rank): no list work or forces on such rows (a cell index
+        of a NaN reads anywhere); its StepInfo has z_min NaN, which stops a run (``Checks.fatal``)."""
+        s = self.state
+        s.step += 1
+        s.time = s.step * self.phys.dt
+        self.info = StepInfo(overlap, self.n_contacts, math.nan, z_max, flags)
+        return self.info
+
     def _particles(self):
         """The host State's rows as the kernels' ``Particles``."""
         s = self.state

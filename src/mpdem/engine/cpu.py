@@ -206,6 +206,8 @@ class Engine(EngineBase):
         if flags:
             red[4:] = flags
         n2, overlap, neg_z_min, z_max, *agreed = dom.max_many(red).tolist()
+        if math.isinf(n2):
+            return self._not_finite(overlap, z_max, flags._make(agreed))
         # the displacement since the last filtering plus those before bounds every one since the build
         # (rebuilding early changes no bit: sums run in partner-id order and left-out pairs add zeros)
         moved, lists = math.sqrt(n2), self.lists
@@ -226,9 +228,7 @@ class Engine(EngineBase):
             self.complete()
         s.step += 1
         s.time = s.step * p.dt
-        # an infinite displacement: a position became NaN or infinite
-        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
-                             flags._make(agreed))
+        self.info = StepInfo(overlap, self.n_contacts, -neg_z_min, z_max, flags._make(agreed))
         return self.info
 
     def _near_limit2(self):

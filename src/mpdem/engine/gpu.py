@@ -436,6 +436,8 @@ class Engine(EngineBase):
         n2 = math.nan if red[k.RED_BAD] else float(red[k.RED_D2])
         reduce = [n2, overlap, -float(red[k.RED_ZMIN]), float(red[k.RED_ZMAX])] + list(flags)
         n2, overlap, neg_z_min, z_max, *agreed = self.domain.max_many(np.array(reduce)).tolist()
+        if math.isinf(n2):
+            return self._not_finite(overlap, z_max, flags._make(agreed))
         if not math.sqrt(n2) < 0.5 * p.skin:
             self.rebuild()
         else:
@@ -446,8 +448,7 @@ class Engine(EngineBase):
             self.complete()
         s.step += 1
         s.time = s.step * p.dt
-        self.info = StepInfo(overlap, self.n_contacts, math.nan if math.isinf(n2) else -neg_z_min, z_max,
-                             flags._make(agreed))
+        self.info = StepInfo(overlap, self.n_contacts, -neg_z_min, z_max, flags._make(agreed))
         return self.info
 
     @property
