@@ -101,3 +101,29 @@ def test_several_threads_take_the_steps_one_by_one():
     assert got == [ref.step(defer_kick=True) for _ in range(300)]
     assert calls["kernel"] == 0 and calls["host"] == 300
     assert digest(gather_state(eng.state)) == digest(gather_state(ref.state))
+
+
+def test_the_drivers_quiet_span_ends_before_the_first_step_a_schedule_reads():
+    """``schedule.quiet_span`` (the steps the driver hands to ``run_quiet``) against a walk over the
+    steps with each schedule's ``due``: the stop samples, progress lines, snapshots and checkpoints."""
+    from types import SimpleNamespace
+
+    from mpdem.decomp import Domain
+    from mpdem.driver.schedule import Checkpoints, Progress, Snapshots, StopRule, quiet_span
+
+    g = np.random.default_rng(5)
+    for _ in range(200):
+        every = [int(g.integers(1, 400)), int(g.integers(1, 400)), int(g.integers(0, 3)) * int(g.integers(1, 400)),
+                 int(g.integers(0, 3)) * int(g.integers(1, 400))]
+        stop = StopRule(1e-9, "energy", 1.0, every[0] * 1e-4, 1e-4)
+        progress = Progress(every[1], print, Domain(None), 1e-4, 10**6, 1, 0, 0.0)
+        snaps = Snapshots("-", every[2], None, 0)
+        ckpts = Checkpoints("-", SimpleNamespace(checkpoint_every=every[3], checkpoint_seconds=0.0), None,
+                            Domain(None), print)
+        step, max_steps, most = int(g.integers(0, 2000)), int(g.integers(0, 2500)), int(g.integers(0, 600))
+        walk, s = 0, step + 1
+        while walk < most and s < max_steps and not (stop.due(s) or progress.due(s) or snaps.due(s)
+                                                     or ckpts.due(s, False)):
+            walk += 1
+            s += 1
+        assert quiet_span(step, max_steps, (stop, progress, snaps, ckpts), most) == walk, (every, step, max_steps)

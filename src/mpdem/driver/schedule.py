@@ -55,6 +55,18 @@ class Logger:
             self.fh.close()
 
 
+def next_multiple(step, every):
+    """The first step after ``step`` that is a multiple of ``every`` (None if ``every`` is 0: never)."""
+    return (step // every + 1) * every if every else None
+
+
+def quiet_span(step, max_steps, schedules, most):
+    """The steps after ``step`` before the first at which one of ``schedules`` (each with a
+    ``next_due(step)``: a step, or None for never) is due, short of ``max_steps``; at most ``most``."""
+    due = [d for d in (sch.next_due(step) for sch in schedules) if d is not None]
+    return max(0, min(most, max_steps - step - 1, *(d - step - 1 for d in due)))
+
+
 def fmt_seconds(s):
     """``1h02m`` or ``3m05s``; ``?`` for an unknown duration."""
     if not math.isfinite(s) or s < 0:
@@ -134,6 +146,10 @@ class StopRule:
 
     def due(self, step):
         return step % self.n_sample == 0
+
+    def next_due(self, step):
+        """The first step after ``step`` that is ``due``."""
+        return next_multiple(step, self.n_sample)
 
     def add(self, e_trans, e_rot, N, ratio=math.nan, in_flight=-1):
         """A sample: of the translational and rotational kinetic energy [m g d] of N
@@ -239,6 +255,10 @@ class Progress:
     def due(self, step):
         return step % self.every == 0
 
+    def next_due(self, step):
+        """The first step after ``step`` that is ``due``."""
+        return next_multiple(step, self.every)
+
     def line(self, st, info, stop):
         """Log the line (collective: every rank calls it at the same steps)."""
         now = time.perf_counter()
@@ -299,6 +319,10 @@ class Checkpoints:
     def due(self, step, clock):
         return bool(self.o.checkpoint_every and step % self.o.checkpoint_every == 0) or bool(clock)
 
+    def next_due(self, step):
+        """The first step after ``step`` that is ``due`` by the step count (None: none is)."""
+        return next_multiple(step, self.o.checkpoint_every)
+
     def write(self, step):
         """Write the next checkpoint (collective); returns its path."""
         t = time.perf_counter()
@@ -338,6 +362,10 @@ class Snapshots:
 
     def due(self, step):
         return bool(self.every) and step % self.every == 0
+
+    def next_due(self, step):
+        """The first step after ``step`` that is ``due`` (None: none is)."""
+        return next_multiple(step, self.every)
 
     def write(self, final=False):
         """Write the next snapshot, or RUN/final.h5 (collective); returns its path."""

@@ -35,7 +35,7 @@ from .._version import __version__
 from ..errors import EXIT_RESTART, WriteError
 from ..pairs import contact_pairs
 from .runstate import History, RunState
-from .schedule import Checkpoints, Checks, Logger, Progress, Snapshots, StopRule, Thermo
+from .schedule import Checkpoints, Checks, Logger, Progress, Snapshots, StopRule, Thermo, quiet_span
 from ..state import State
 
 # the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
@@ -308,13 +308,7 @@ class Run:
         """Steps after ``step`` that no schedule reads after (no stop sample, progress line,
         snapshot, step checkpoint; short of ``max_steps``), up to ``most``: the engine may run them
         without stopping (``run_quiet``). Their flags are those of the first of them."""
-        n = 0
-        s = step + 1
-        while n < most and s < max_steps and not (self.stop.due(s) or progress.due(s) or
-                                                   self.snapshots.due(s) or self.checkpoints.due(s, False)):
-            n += 1
-            s += 1
-        return n
+        return quiet_span(step, max_steps, (self.stop, progress, self.snapshots, self.checkpoints), most)
 
     def _flags_now(self):
         """This rank's StepFlags for the step's allreduce."""
