@@ -539,3 +539,28 @@ def test_a_set_apart_by_a_parameter_outside_the_columns_says_so(tmp_path):
     z_rows = [ln for ln in text if ln.startswith("| z | mu = 0.5")]
     assert len(z_rows) == 2 and sum(ratio in ln for ln in z_rows) == 1, z_rows
     assert len([ln for ln in text if ln.startswith("- S") and ratio in ln]) == 1
+
+
+def test_flow_arrested_sets_are_compared_with_the_papers_flow_arrest_numbers_alone(tmp_path):
+    """A poured set and a flow-arrest set (a flow phase: docs/model.md 5.5) of one mu, eps, k_n and
+    phi_i: the README compares the first with the poured z = 4.90 and the second with 4.69 and
+    phi = 0.594, never the other way round."""
+    rng = np.random.default_rng(6)
+    root = tmp_path / "runs"
+    for flow, z, phi in ((False, 4.85, 0.612), (True, 4.71, 0.596)):
+        for seed in (1, 2):
+            run = root / f"mu0.5_s{seed}{'_flow' if flow else ''}"
+            s = make_run(run, params(mu=0.5, seed=seed), z + 0.01 * seed, phi, 0.6, rng)
+            if flow:
+                s["physics"] = {"flow.incline": 24.0, "flow.time": 400.0}
+                (run / "analysis" / "summary.json").write_text(json.dumps(rundir.json_safe(s)))
+    out = tmp_path / "out"
+    co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
+    text = (out / "README.md").read_text().splitlines()
+    rows = [ln for ln in text if ln.startswith("| z | mu = 0.5") or ln.startswith("| phi | mu = 0.5")]
+    flow_rows = [ln for ln in rows if "flow.time" in ln]
+    poured = [ln for ln in rows if "flow.time" not in ln]
+    assert len(flow_rows) == 2 and all("4.69" in ln or "0.594" in ln for ln in flow_rows), flow_rows
+    assert all("4.725" in ln or "0.596" in ln for ln in flow_rows), flow_rows
+    assert not any("4.69" in ln or "0.594" in ln for ln in poured), poured
+    assert any("4.9" in ln and "4.865" in ln for ln in poured), poured

@@ -53,6 +53,12 @@ def _extras(s):
     return ", ".join(f"{k} = {v}" for k, v in sorted({**_off_columns(s), **s.extra}.items()))
 
 
+def flow_arrested(s):
+    """Whether a set's packings were made by stopping a flow (a flow phase, ``flow.time``: docs/model.md
+    5.5), the paper's second protocol: compared with its flow-arrest numbers, not the poured ones."""
+    return bool(s.extra.get("flow.time"))
+
+
 def _cond(s, alpha=False):
     base = f"mu = {s.p('mu'):g}, eps = {s.p('epsilon'):g}"
     if alpha:
@@ -76,8 +82,9 @@ def comparisons(sets, fit_res):
                          paper=p_value, paper_err=p_err, accept=accept, verdict=_verdict(value, accept),
                          source=source, note=note))
 
+    poured = [s for s in sets if not flow_arrested(s)]
     for p in paper.POINTS:
-        for s in sets:
+        for s in poured:
             ref = paper.is_reference(s.p("k_n"), s.p("phi_i"))
             if not (paper.applies(p, s.p("mu"), s.p("epsilon")) and (ref or p["quantity"] == "alpha")):
                 continue
@@ -85,7 +92,14 @@ def comparisons(sets, fit_res):
             if n:
                 add(p["quantity"], _cond(s, p["quantity"] == "alpha"), s.id, m, e, n, p["value"], p["err"],
                     p["accept"], p["source"])
-    ref = [s for s in sets if paper.is_reference(s.p("k_n"), s.p("phi_i"))]
+    for p in paper.FLOW_ARREST:
+        for s in sets:
+            if flow_arrested(s) and paper.applies(p, s.p("mu"), s.p("epsilon")):
+                m, e, n = s.stat(p["quantity"])
+                if n:
+                    add(p["quantity"], _cond(s), s.id, m, e, n, p["value"], p["err"], p["accept"], p["source"],
+                        p["note"])
+    ref = [s for s in poured if paper.is_reference(s.p("k_n"), s.p("phi_i"))]
     for fam, members in families(ref, "contact.mu"):
         if len(members) >= 3:
             for q in ("z", "phi"):
@@ -93,7 +107,7 @@ def comparisons(sets, fit_res):
                     _trend(members, q), None, None, "decreases monotonically, saturates for mu >= 1", None, None,
                     paper.SOURCE)
     for p in paper.SMALL_POINTS:
-        for s in sets:
+        for s in poured:
             if (paper.is_small_pile(s.p("N"), s.p("L_x"), s.p("L_y")) and paper.is_reference(s.p("k_n"), s.p("phi_i"))
                     and paper.applies(p, s.p("mu"), s.p("epsilon"))):
                 m, e, n = s.stat(p["quantity"])
