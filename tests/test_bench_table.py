@@ -28,6 +28,32 @@ def test_phase_lines_add_up_to_the_loop():
     assert share == {"forces": 60.0, "lists": 10.0, "integration": 10.0, "communication": 5.0, "glue": 15.0}
 
 
+def test_steps_run_in_one_go_share_their_runs_time_evenly(monkeypatch):
+    """An engine that runs steps in one go is timed in runs of ``bench.QUIET`` steps, each run's time
+    shared evenly among its steps: every step of the steady loop (no list work) gets a run's share."""
+    import time
+
+    from mpdem.decomp import Domain
+
+    class Engine:
+        steps_in_one_call, n_rebuilds = True, 0
+        timers = {"forces": 0.0, "lists": 0.0, "integration": 0.0}
+
+        def run_quiet(self, n):
+            time.sleep(2e-5 * n)
+
+        def complete(self):
+            pass
+
+    got = {}
+    monkeypatch.setattr(bench, "steadiness", lambda steps, lists, wall, switches: got.update(steps=steps) or {})
+    bench.timed_loop(Engine(), Domain(None), 3 * bench.QUIET)
+    steps = got["steps"]
+    assert len(steps) == 3 * bench.QUIET and (steps > 0).all()
+    for run in steps.reshape(3, bench.QUIET):
+        assert np.allclose(run, run[0], rtol=1e-6) and 2e-5 <= run[0] < 2e-3
+
+
 def test_steadiness_leaves_list_steps_out_and_counts_the_slow_ones_beyond_the_median():
     steps = np.array([1.0, 1.0, 1.05, 1.0, 3.0, 1.0, 9.0, 1.0, 1.0, 1.0])
     lists = np.zeros(10, bool)

@@ -219,8 +219,9 @@ def timed_loop(eng, dom, steps):
         else:
             eng.step(defer_kick=True)
         t = time.perf_counter()
-        ends.extend(ends[-1] + (t - ends[-1]) * (k + 1) / n if ends else t0 + (t - t0) * (k + 1) / n
-                    for k in range(n))
+        # (the run's start read before the list grows)
+        start = ends[-1] if ends else t0
+        ends.extend([start + (t - start) * (k + 1) / n for k in range(n)])
         lists.extend([timers["lists"]] * n)
         done += n
     eng.complete()
