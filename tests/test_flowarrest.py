@@ -134,6 +134,28 @@ def test_a_restart_inside_the_flow_goes_on_bit_for_bit(tmp_path):
     assert again.digest == straight.digest
 
 
+def test_a_flow_lengthened_at_a_restart_is_the_straight_run_of_its_new_time(tmp_path):
+    """``restart --set flow.time`` inside the flow (docs/model.md 5.5): the run of flow.time = 0.25 tau
+    (switch at step 2500) restarted at step 1234 of a run of 0.2 tau (switch at 2000) gives the straight
+    0.25 tau run's digest; outside the flow it is refused before any work, naming the steps."""
+    short = dict(PILE, run__max_steps=3000)
+    straight = mpdem.run(cfg_of(**dict(short, flow__time=0.25)), tmp_path / "straight")
+    first = mpdem.run(cfg_of(**dict(short, run__max_steps=1234, output__checkpoint_every=1234)), tmp_path / "split")
+    assert first.status == "max_steps"
+    with pytest.raises(ConfigError, match=r"flow would end at step 1000, before .* step 1234; accepted: a "
+                                          r"flow.time above 0.1234 tau"):
+        mpdem.restart(tmp_path / "split", set_items=["flow.time=0.1"])
+    again = mpdem.restart(tmp_path / "split", set_items=["run.max_steps=3000", "flow.time=0.25"])
+    assert again.digest == straight.digest
+    assert mpdem.load_config(str(tmp_path / "split" / "config.toml")).flow.time == 0.25
+    with pytest.raises(ConfigError, match=r"past its flow's end at step 2500 \(flow.time = 0.25\)"):
+        mpdem.restart(tmp_path / "split", set_items=["run.max_steps=4000", "flow.time=0.5"])
+    plain = mpdem.run(cfg_of(**dict(short, flow__incline=0.0, flow__time=0.0, run__max_steps=100)), tmp_path / "plain")
+    assert plain.status == "max_steps"
+    with pytest.raises(ConfigError, match=r"flow.time = 1.0: accepted time > 0 with a flow phase"):
+        mpdem.restart(tmp_path / "plain", set_items=["flow.time=1", "run.max_steps=200"])
+
+
 def test_the_gpu_engine_takes_the_same_switch(tmp_path):
     """Under the simulator (or on a GPU): a short flow across its switch, the CPU's digest; the
     progress line at step 80 ends a launch, and the next must stop before the switch at step 100."""

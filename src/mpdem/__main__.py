@@ -263,7 +263,8 @@ def parser():
     rs = sub.add_parser("restart", help="continue a run from its newest valid checkpoint or a state file")
     rs.add_argument("target", metavar="RUN_DIR|STATE_FILE")
     rs.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                    help="change run.max_steps, stop.*, checks.*, decomp.*, engine.*, output.* or analysis.*")
+                    help="change run.max_steps, stop.*, checks.*, decomp.*, engine.*, output.* or analysis.*; "
+                         "flow.time while the flow runs (docs/model.md 5.5)")
     rs.add_argument("--quiet", action="store_true", help="progress to the log file only")
     sf = sub.add_parser("stiffen", help="a new run: a finished run's pile stiffened to --k_n through the ramp "
                                         "(docs/model.md 6.6), then settled by the stop rule")

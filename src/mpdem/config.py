@@ -121,7 +121,8 @@ SCHEMA = (
        "flow arrest (docs/model.md 5.5): the incline [degrees] of a flow phase from the run's first step for "
        "flow.time, gravity tilted as box.incline tilts it; then box.incline (the arrest angle, below the angle "
        "where flow stops) and the stop rule from there; 0 = no flow phase"),
-    _k("flow", "time", 0.0, "duration of the flow phase [tau] (rounded to whole steps); > 0 with flow.incline"),
+    _k("flow", "time", 0.0, "duration of the flow phase [tau] (rounded to whole steps); > 0 with flow.incline; "
+       "a restart inside the flow may change it (`restart RUN --set flow.time=T`, T past the restart's step)"),
     _k("stop", "E_stop", DERIVED,
        "stop when kinetic energy per particle is below this [m g d]; default 1e-8 (k_n/2e5)^(-3/4)", restart=True),
     _k("stop", "force_ratio", 0.01,

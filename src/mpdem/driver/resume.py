@@ -135,6 +135,9 @@ def restart_config(attrs, path, run, sets):
     if sets:
         new = config.load(None, sets, base=raw)
         bad = _fixed_keys_differing(new, cfg)
+        if "flow.time" in bad:
+            _check_flow_time(cfg, new, int(attrs.get("step", 0)), path)
+            bad.remove("flow.time")
         if bad:
             raise config.ConfigError(
                 f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only "
@@ -142,6 +145,23 @@ def restart_config(attrs, path, run, sets):
                 f"to continue with other physics start a new run with --set run.initial_file={path}")
         cfg = new
     return cfg
+
+
+def _check_flow_time(old, new, step, path):
+    """Allow ``--set flow.time`` at a restart only inside the flow (docs/model.md 5.5): a flow found not
+    yet steady may run longer, or shorter, while it runs; the steps before are the same either way, so
+    the run is the straight run of the new flow.time. Raises ConfigError otherwise (a flow.time without a
+    flow phase the config refuses itself)."""
+    dt = old.integration.dt
+    end_old = max(1, int(round(old.flow.time / dt)))
+    end_new = max(1, int(round(new.flow.time / dt)))
+    want = f"--set flow.time={new.flow.time:g}"
+    if step >= end_old:
+        raise config.ConfigError(f"{want}: {path} is at step {step}, past its flow's end at step {end_old} "
+                                 f"(flow.time = {old.flow.time:g}): flow.time can change only while the flow runs")
+    if step >= end_new:
+        raise config.ConfigError(f"{want}: the flow would end at step {end_new}, before {path}'s step {step}; "
+                                 f"accepted: a flow.time above {step * dt:g} tau")
 
 
 def _fixed_keys_differing(a, b):
