@@ -564,3 +564,20 @@ def test_flow_arrested_sets_are_compared_with_the_papers_flow_arrest_numbers_alo
     assert all("4.725" in ln or "0.596" in ln for ln in flow_rows), flow_rows
     assert not any("4.69" in ln or "0.594" in ln for ln in poured), poured
     assert any("4.9" in ln and "4.865" in ln for ln in poured), poured
+
+
+def test_a_derived_key_set_away_from_its_derivation_is_named(tmp_path):
+    """stop.E_stop is derived from k_n (docs/config.md): a set run with a stricter stop is a set apart
+    and says so under the sets table, one with the derived value (written out) says nothing."""
+    rng = np.random.default_rng(7)
+    root = tmp_path / "runs"
+    for E_stop, tag in ((None, ""), (1e-10, "_strict")):
+        s = make_run(root / f"mu0_s1{tag}", params(mu=0.0, seed=1), 6.14, 0.64, 0.4, rng)
+        s["physics"] = {"stop.E_stop": E_stop if E_stop else 1e-8, "contact.k_n": 2e5}
+        (root / f"mu0_s1{tag}" / "analysis" / "summary.json").write_text(json.dumps(rundir.json_safe(s)))
+    out = tmp_path / "out"
+    co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
+    text = (out / "README.md").read_text().splitlines()
+    notes = [ln for ln in text if ln.startswith("- S")]
+    assert len([ln for ln in text if ln.startswith("| S0")]) >= 2
+    assert len(notes) == 1 and "stop.E_stop = 1e-10" in notes[0], notes

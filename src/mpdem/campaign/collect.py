@@ -186,17 +186,36 @@ def _physics_key(physics):
 
 
 def _extra(physics_key):
-    """The keys of a ``_physics_key`` outside PARAM_KEYS set away from their defaults (not derived)."""
+    """The keys of a ``_physics_key`` outside PARAM_KEYS set away from their defaults; a derived key
+    (``stop.E_stop``) where it differs from what the run's other keys derive."""
     from ..config import DERIVED, KEYS, PARAM_KEYS, REQUIRED
-    out = {}
+    out, derived = {}, _derived_values(physics_key)
     for k, v in physics_key:
         spec = KEYS.get(k)
-        if spec is None or k in PARAM_KEYS or spec.default in (REQUIRED, DERIVED):
+        if spec is None or k in PARAM_KEYS or spec.default is REQUIRED:
+            continue
+        if spec.default is DERIVED:
+            want = derived.get(k)
+            if want is not None and isinstance(v, (int, float)) and not math.isclose(v, want, rel_tol=1e-12):
+                out[k] = v
             continue
         default = tuple(spec.default) if isinstance(spec.default, (list, tuple)) else spec.default
         if v != default:
             out[k] = v
     return out
+
+
+def _derived_values(physics_key):
+    """The derived keys' values that a run's other physics keys give (empty if they do not resolve)."""
+    from ..config import DERIVED, KEYS, ConfigError, resolve
+    raw = {k: list(v) if isinstance(v, tuple) else v for k, v in physics_key
+           if k in KEYS and KEYS[k].default is not DERIVED}
+    raw.setdefault("run.max_steps", 1)
+    try:
+        vals = resolve(raw).values
+    except (ConfigError, TypeError, ValueError):
+        return {}
+    return {k: vals[k] for k in KEYS if KEYS[k].default is DERIVED}
 
 
 def group(runs):
