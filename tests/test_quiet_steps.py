@@ -127,3 +127,28 @@ def test_the_drivers_quiet_span_ends_before_the_first_step_a_schedule_reads():
             walk += 1
             s += 1
         assert quiet_span(step, max_steps, (stop, progress, snaps, ckpts), most) == walk, (every, step, max_steps)
+
+
+def test_each_call_takes_the_scratch_a_rebuild_made():
+    """A rebuild on the host's path may make a wider force scratch (``Engine._scratch``, for a longer
+    list); the next kernel call of the same ``run_quiet`` must take that one, not the one before."""
+    eng = _gas(0.5, False)
+    kernel, rebuild = eng._kernels.quiet_steps, eng.rebuild
+    seen = []
+
+    def wider():
+        rebuild()
+        eng._scratch(eng._work.found.shape[1] + 1)    # as a longer list would
+
+    class Checked:
+        reset = kernel.reset
+
+        def __call__(self, *a):
+            seen.append(a[11] is eng._work)
+            return kernel(*a)
+
+    eng.rebuild = wider
+    eng._kernels = eng._kernels._replace(quiet_steps=Checked())
+    builds = eng.n_rebuilds
+    eng.run_quiet(600)
+    assert eng.n_rebuilds > builds + 2 and len(seen) > 3 and all(seen)

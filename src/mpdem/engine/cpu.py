@@ -251,13 +251,15 @@ class Engine(EngineBase):
         or threads) they are steps one by one. The seconds of a kernel call count as "forces"."""
         if not self.steps_in_one_call or self.state.n_own == 0:
             return [self.step(flags, defer_kick=True) for _ in range(n)]
-        s, p, work, lists = self.state, self.phys, self._work, self.lists
+        s, p, lists = self.state, self.phys, self.lists
         if len(self._rec) < min(n, QUIET_CALL):
             self._rec = np.zeros((min(n, QUIET_CALL), REC_COLUMNS))
         rec, infos = self._rec, []
         while len(infos) < n:
             m = min(n - len(infos), QUIET_CALL)
             t = time.perf_counter()
+            # the scratch of this call: a rebuild on the host's path may have made a wider one
+            work = self._work
             near, pair = self.store.ring(lists, work.found.shape[1])
             geo, kinds = self.plane_arrays()
             whole = self._kernels.quiet_steps(m, s.n_own, self._particles(), s.x_ref, p.dt, lists.box(),
