@@ -14,6 +14,11 @@ from __future__ import annotations
 from .kernels.law import gravity_vector
 
 
+def end_step(flow_time, dt):
+    """The first step after a flow of ``flow_time`` tau at time step ``dt`` (rounded to whole steps)."""
+    return max(1, int(round(flow_time / dt)))
+
+
 class FlowPhase:
     """The laws of a flow-arrest run, step by step (the interface of ``stiffen.Ramp``).
 
@@ -35,7 +40,7 @@ class FlowPhase:
         self.incline, self.arrest = cfg.flow.incline, cfg.box.incline
         g_x, g_y, g_z = gravity_vector(cfg.box.gravity, cfg.flow.incline)
         self.flow = law._replace(g_x=g_x, g_y=g_y, g_z=g_z)
-        self.end = max(1, int(round(cfg.flow.time / cfg.integration.dt)))
+        self.end = end_step(cfg.flow.time, cfg.integration.dt)
 
     @classmethod
     def from_config(cls, cfg, law):

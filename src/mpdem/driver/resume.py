@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from ..io import checkpoint, diskspace
 from .. import config
+from ..flowarrest import end_step
 from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import EXIT_NOT_CONVERGED, EXIT_OK, WriteError
@@ -153,8 +154,7 @@ def _check_flow_time(old, new, step, path):
     the run is the straight run of the new flow.time. Raises ConfigError otherwise (a flow.time without a
     flow phase the config refuses itself)."""
     dt = old.integration.dt
-    end_old = max(1, int(round(old.flow.time / dt)))
-    end_new = max(1, int(round(new.flow.time / dt)))
+    end_old, end_new = end_step(old.flow.time, dt), end_step(new.flow.time, dt)
     want = f"--set flow.time={new.flow.time:g}"
     if step >= end_old:
         raise config.ConfigError(f"{want}: {path} is at step {step}, past its flow's end at step {end_old} "

@@ -465,7 +465,7 @@ class Engine(EngineBase):
         a step that needs a list rebuild (or has a position that is not finite), which the host
         finishes as ``step`` would. The same arithmetic, so the same bits. With several ranks (the
         ghosts are refreshed through the host every step) they are steps one by one."""
-        if self.domain.parallel or self.state.n_own == 0:
+        if not self.steps_in_one_call or self.state.n_own == 0:
             return [self.step(flags, defer_kick=True) for _ in range(n)]
         s, p, d, k = self.state, self.phys, self._dev, self.k
         infos = []
