@@ -229,6 +229,10 @@ SCHEMA = (
     _k("analysis", "jackknife_columns", 4,
        "lateral columns along x and along y of the jackknife errors (k x k columns, k >= 2; docs/model.md 6.10)",
        int, restart=True, physics=False),
+    _k("analysis", "surface_cell", 2.0,
+       "side of the cells on which the free surface's height field is taken [d] (the box split into "
+       "round(L / surface_cell) cells per axis): its roughness and rms local slopes (docs/model.md 6.10)",
+       restart=True, physics=False),
     _k("analysis", "steady_window", 100.0,
        "a flow-arrest run's flow counts as steady when the mean v_x and E_k of thermo.csv change by less than "
        "analysis.steady_tolerance between the two halves of this last span of the flow phase [tau] "
@@ -670,6 +674,7 @@ def resolve(raw):
     need("analysis.backbone_cuts", all(0 <= c < 1 for c in vals["analysis.backbone_cuts"]),
          "fractions 0 <= cut < 1")
     need("analysis.jackknife_columns", vals["analysis.jackknife_columns"] >= 2, "jackknife_columns >= 2")
+    need("analysis.surface_cell", vals["analysis.surface_cell"] > 0, "surface_cell > 0 [d]")
     need("analysis.force_fraction", 0 <= vals["analysis.force_fraction"] < 1, "0 <= force_fraction < 1")
     need("analysis.band_width", vals["analysis.band_width"] > 0, "band_width > 0")
     need("stop.force_ratio", 0 < vals["stop.force_ratio"] < 1, "0 < force_ratio < 1")

@@ -14,7 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import backbone, bands, bulk, contacts, fits, flow, gofr, jackknife, mobilisation, nearcontact, order
+from . import (backbone, bands, bulk, contacts, fabric, fits, flow, gofr, jackknife, mobilisation, nearcontact, order,
+               surface)
 
 
 @dataclass
@@ -221,19 +222,18 @@ def depth_windows(m):
     """z, z without rattlers, phi and alpha on fixed windows of depth below the free surface, with
     jackknife errors over lateral columns (6.10); a window deeper than the slab's bottom margin is
     not measured (``complete`` false): piles of any height are compared at the same depths."""
-    a, pk, h = m.cfg.analysis, m.pk, m.reg["h"]
+    a, pk = m.cfg.analysis, m.pk
     k = a.jackknife_columns
     K = k * k
     col = jackknife.columns(pk.x, pk.L_x, pk.L_y, k)
     zm, mob_col = pk.x[pk.mobile, 2], col[pk.mobile]
     lo, hi = fits.fit_window(a.fit_xi_hi, a.fit_xi_lo)
     out = []
-    for d_lo, d_hi in zip(a.depth_windows[::2], a.depth_windows[1::2]):
-        z1, z2 = h - d_hi, h - d_lo
-        if z1 < m.z1:
-            # deeper than the slab's bottom margin: the bed's layering (or the bed itself) would enter
-            out.append({"depth_lo": d_lo, "depth_hi": d_hi, "z1": z1, "z2": z2, "complete": False})
+    for win in _windows(m):
+        if not win["complete"]:
+            out.append(win)
             continue
+        d_lo, d_hi, z1, z2 = win["depth_lo"], win["depth_hi"], win["z1"], win["z2"]
         rows = pk.in_slab(z1, z2)
         kept = rows & pk.kept
         st = pk.measure(z1, z2)
@@ -251,6 +251,38 @@ def depth_windows(m):
                     "overlap_median": st["overlap_median"], "alpha": fit["alpha"], "alpha_err": fit["alpha_err"],
                     "alpha_n": fit["n"]})
     m.summary["depth_windows"] = {"columns": K, "windows": out}
+
+
+def contact_fabric(m):
+    """The fabric of the contact normals, plain and force-weighted, in the slab and on the depth
+    windows, with jackknife errors over lateral columns (6.10)."""
+    k = m.cfg.analysis.jackknife_columns
+    pk, cf = m.pk, m.cf
+    # branch = x_i - x_j (minimum image): the midpoint is x_j + branch / 2
+    mid = pk.x[pk.pairs[:, 1]] + 0.5 * cf.branch
+    col = jackknife.columns(mid, pk.L_x, pk.L_y, k)
+    force = np.maximum(cf.F_n, 0.0)
+
+    def of(sel):
+        return {"contacts": fabric.of_contacts(cf.nrm[sel], col[sel], k * k),
+                "forces": fabric.of_contacts(cf.nrm[sel], col[sel], k * k, force[sel])}
+
+    wins = []
+    for win in _windows(m):
+        if win["complete"]:
+            win.update(of((mid[:, 2] >= win["z1"]) & (mid[:, 2] <= win["z2"])))
+        wins.append(win)
+    m.summary["fabric"] = {"columns": k * k, "slab": of(m.in_slab), "windows": wins}
+
+
+def free_surface(m):
+    """The free surface's roughness and local slopes on cells of ``analysis.surface_cell`` (6.10)."""
+    a, pk = m.cfg.analysis, m.pk
+    h = surface.heights(pk.x[pk.mobile], pk.L_x, pk.L_y, a.surface_cell)
+    m.summary["surface"] = dict(surface.roughness(h, pk.L_x, pk.L_y), cell=a.surface_cell,
+                                incline=m.cfg.box.incline,
+                                note="periodic in x and y, the mean surface is parallel to the bed: its tilt to "
+                                     "gravity is box.incline")
 
 
 def flow_profile(m):
@@ -287,7 +319,8 @@ class Measure:
 
 MEASURES = tuple(Measure(f.__name__, f, f.__doc__.split("\n")[0]) for f in (
     slab, backbone_z, backbone_cuts, isostatic_count, halved_margins, crystal_order, depth_bands,
-    force_distribution, alpha, radial_distribution, force_ratios, depth_windows, flow_profile))
+    force_distribution, alpha, radial_distribution, force_ratios, depth_windows, contact_fabric, free_surface,
+    flow_profile))
 
 
 def measure(arrays, attrs, cfg):
@@ -338,6 +371,15 @@ def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
             "z_iso_backbone": 4.0 + n_m_bb / 3.0, "mobilised": mobilised,
             "note": "z_iso = 4 + n_m / 3, n_m the fully mobilised contacts per sphere (each counted for both "
                     "of its spheres): 3 N z / 2 - N_m = 6 N"}
+
+
+def _windows(m):
+    """The fixed depth windows of ``analysis.depth_windows`` below the surface h (6.10): dicts of
+    depth_lo, depth_hi, z1, z2 and complete (false for a window deeper than the slab's bottom margin,
+    where the bed's layering, or the bed itself, would enter; such a window is not measured)."""
+    a, h = m.cfg.analysis, m.reg["h"]
+    return [{"depth_lo": d_lo, "depth_hi": d_hi, "z1": h - d_hi, "z2": h - d_lo, "complete": bool(h - d_hi >= m.z1)}
+            for d_lo, d_hi in zip(a.depth_windows[::2], a.depth_windows[1::2])]
 
 
 def _range(want, L_x, L_y, z1, z2, dr, name, warns):

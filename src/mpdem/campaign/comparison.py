@@ -16,7 +16,7 @@ import numpy as np
 
 from ..io import rundir
 from ..analysis import fits
-from . import paper
+from . import depth, paper
 from .figures import FIGURES
 from .runs import NAN, families, fmt_kn, fmt_pm
 
@@ -260,16 +260,18 @@ def _depth_section(windows):
     have = [r for r in windows if math.isfinite(r["mean"])]
     if not have:
         return []
-    L = ["## z and φ at fixed depths below the surface (`depth.csv`)", "",
+    L = ["## z, φ and the contact fabric at fixed depths below the surface (`depth.csv`)", "",
          "The slab of docs/model.md 6.1 follows each pile's height; these windows are the same depths in every "
          "pile. Errors: the seed scatter pooled over the sets of one N and μ, over √(seeds of the set); and the "
          "jackknife over each pile's 4 × 4 lateral columns, combined over its seeds: independent of the seeds, and an "
          "upper bound (a pile's columns are anticorrelated; docs/model.md 6.10). "
-         "A run analysed before the windows existed has none (`mpdem analyze` again).", ""]
+         "The fabric: the anisotropy of the contact normals' tensor and the angle of its major axis from the bed's "
+         "normal toward +x (downslope; docs/model.md 6.10). "
+         "A run analysed before the windows (or the fabric) existed has none (`mpdem analyze` again).", ""]
     L += [_table(["set", "μ", "N", "window [d]", "quantity", "mean", "± pooled seeds", "± jackknife", "seeds"],
-                 [[r["set"], f"{r['mu']:g}", r["N"], r["window"], "z" if r["quantity"] == "z" else "φ",
-                   f"{r['mean']:.{3 if r['quantity'] == 'z' else 4}f}",
-                   *(f"{r[k]:.{3 if r['quantity'] == 'z' else 4}f}" if math.isfinite(r[k]) else "—"
+                 [[r["set"], f"{r['mu']:g}", r["N"], r["window"], depth.LABEL[r["quantity"]],
+                   f"{r['mean']:.{depth.DIGITS[r['quantity']]}f}",
+                   *(f"{r[k]:.{depth.DIGITS[r['quantity']]}f}" if math.isfinite(r[k]) else "—"
                      for k in ("pooled_sem", "jackknife")), r["n_seeds"]] for r in have]), ""]
     return L
 

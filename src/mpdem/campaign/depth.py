@@ -15,7 +15,12 @@ from ..io import rundir
 
 _D = next(k.default for k in SCHEMA if k.section == "analysis" and k.name == "depth_windows")
 WINDOWS = tuple(zip(_D[::2], _D[1::2]))       # (top, bottom) depths below the surface [d]
-QUANTITIES = ("z", "phi")
+QUANTITIES = ("z", "phi", "fabric_a", "fabric_angle")
+# where a window's quantity lives in summary.json: the depth_windows entry, or the fabric's (its contacts part)
+_SOURCE = {"z": ("depth_windows", None, "z"), "phi": ("depth_windows", None, "phi"),
+           "fabric_a": ("fabric", "contacts", "anisotropy"), "fabric_angle": ("fabric", "contacts", "angle")}
+LABEL = {"z": "z", "phi": "φ", "fabric_a": "fabric anisotropy", "fabric_angle": "fabric angle [°]"}
+DIGITS = {"z": 3, "phi": 4, "fabric_a": 3, "fabric_angle": 1}
 
 
 def label(window):
@@ -30,14 +35,16 @@ def key(q, window, jk=False):
 
 def window_quantities(summary, num):
     """The per-run numbers of the default windows from a summary.json (nan where absent)."""
-    found = {(w["depth_lo"], w["depth_hi"]): w for w in (summary.get("depth_windows") or {}).get("windows", [])
-             if w.get("complete")}
+    found = {part: {(w["depth_lo"], w["depth_hi"]): w for w in (summary.get(part) or {}).get("windows", [])
+                    if w.get("complete")} for part in ("depth_windows", "fabric")}
     out = {}
     for win in WINDOWS:
-        w = found.get(win, {})
         for q in QUANTITIES:
-            out[key(q, win)] = num(w.get(q))
-            out[key(q, win, True)] = num(w.get(f"{q}_err"))
+            part, sub, name = _SOURCE[q]
+            w = found[part].get(win, {})
+            w = (w.get(sub) or {}) if sub else w
+            out[key(q, win)] = num(w.get(name))
+            out[key(q, win, True)] = num(w.get(f"{name}_err"))
     return out
 
 
