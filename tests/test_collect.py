@@ -581,3 +581,35 @@ def test_a_derived_key_set_away_from_its_derivation_is_named(tmp_path):
     notes = [ln for ln in text if ln.startswith("- S")]
     assert len([ln for ln in text if ln.startswith("| S0")]) >= 2
     assert len(notes) == 1 and "stop.E_stop = 1e-10" in notes[0], notes
+
+
+def test_a_set_keeps_its_id_when_new_sets_join_in_front_of_it(tmp_path):
+    """collect.json keeps each set's signature; a later collect into the same directory gives the same
+    set the same id, and a new set (here one that sorts first, mu = 0) the next free number."""
+    from mpdem.campaign.runs import AnalysedRun
+    rng = np.random.default_rng(5)
+    root, out = tmp_path / "runs", tmp_path / "out"
+    for mu, z in ((0.5, 4.90), (1.0, 4.80)):
+        for seed in (1, 2):
+            make_run(root / f"mu{mu}_s{seed}", params(mu=mu, seed=seed), z + 0.001 * seed, 0.62, 0.5, rng)
+    first = co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
+    ids = {tuple(v["runs"]): k for k, v in first["sets"].items()}
+    assert sorted(ids.values()) == ["S01", "S02"]
+    for seed in (1, 2):
+        make_run(root / f"mu0.0_s{seed}", params(mu=0.0, seed=seed), 6.1, 0.64, 0.4, rng)
+    # a set of the same parameters as an old one but another physics key is new as well
+    s = make_run(root / "mu0.5_s1_translational", params(mu=0.5, seed=1), 5.0, 0.62, 0.5, rng)
+    s["physics"] = {"stop.energy": "translational"}
+    (root / "mu0.5_s1_translational/analysis/summary.json").write_text(json.dumps(s))
+    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    # what collect does with the earlier collect.json of its output directory
+    sets, _ = co.group(runs, co.previous_ids(str(out)))
+    again = {tuple(r.path for r in x.runs): x.id for x in sets}
+    for paths, sid in ids.items():
+        assert again[paths] == sid
+    assert sorted(k for r, k in again.items() if r not in ids) == ["S03", "S04"]
+    # listed in parameter order: mu = 0 first, its id notwithstanding
+    assert sets[0].p("mu") == 0.0 and sets[0].id in ("S03", "S04")
+    # without an earlier collect.json the sets are numbered in parameter order
+    fresh, _ = co.group(runs, co.previous_ids(str(tmp_path / "nowhere")))
+    assert [x.id for x in fresh] == ["S01", "S02", "S03", "S04"] and fresh[0].p("mu") == 0.0

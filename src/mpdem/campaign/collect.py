@@ -218,16 +218,42 @@ def _derived_values(physics_key):
     return {k: vals[k] for k in KEYS if KEYS[k].default is DERIVED}
 
 
-def group(runs):
+def signature(s):
+    """A set's identity as a canonical string: its parameters (all but the seed) and the physics keys set
+    away from their defaults (``Set.extra``). What ``collect.json`` keeps to give a set the same id again."""
+    return json.dumps({"params": {k: v for k, v in s.params.items() if k != "run.seed"}, "extra": s.extra},
+                      sort_keys=True, default=str)
+
+
+def previous_ids(out):
+    """{signature: id} of the sets of an earlier collect into ``out`` (its collect.json); empty when there
+    is none, it is unreadable, or it was written before the signatures were kept."""
+    try:
+        with open(os.path.join(out, "collect.json")) as fh:
+            old = json.load(fh).get("sets") or {}
+        return {v["signature"]: k for k, v in old.items() if isinstance(v, dict) and "signature" in v}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def group(runs, known=None):
     """Sets of runs with equal parameters; a repeated seed in a set is a duplicate.
 
     A run is a pure function of its parameters and seed (ARCHITECTURE.md, "Invariants"), so two
     runs of one set with one seed are one sample: the later is skipped.
 
+    Parameters
+    ----------
+    runs : AnalysedRun list
+    known : {signature: id} of an earlier collect (``previous_ids``) or None. A set found there keeps
+        its id; the others take the next numbers after the highest known, in parameter order; without
+        ``known`` the sets are numbered S01, S02, ... in parameter order. So notes that cite a set by
+        its id stay right when new sets join.
+
     Returns
     -------
-    (sets, skipped): Sets ordered by parameters (ids S01, S02, ...), runs
-    ordered by seed; [{"path", "reason"}] of the duplicates.
+    (sets, skipped): Sets ordered by parameters, runs ordered by seed; [{"path", "reason"}] of the
+    duplicates.
     """
     by_key, skipped = {}, []
     for r in runs:
@@ -247,9 +273,15 @@ def group(runs):
                 kept[seed] = r
         samples = sorted(kept, key=lambda k: (_order(k[0]), _order(k[1])))
         sets.append(Set("", dict(key[0]), [kept[k] for k in samples], _extra(key[1])))
-    width = max(2, len(str(len(sets))))
-    for i, s in enumerate(sets, 1):
-        s.id = f"S{i:0{width}d}"
+    known = known or {}
+    taken = [int(v[1:]) for v in known.values() if v[:1] == "S" and v[1:].isdigit()]
+    nxt = max(taken, default=0) + 1
+    width = max(2, len(str(nxt + len(sets))))
+    for s in sets:
+        s.id = known.get(signature(s))
+        if s.id is None:
+            s.id = f"S{nxt:0{width}d}"
+            nxt += 1
     return sets, skipped
 
 
@@ -415,7 +447,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
             skipped.append({"path": p, "reason": why})
         else:
             loaded.append(run)
-    sets, dup = group(loaded)
+    sets, dup = group(loaded, previous_ids(out or "paper"))
     skipped += dup
     for s in skipped:
         log(f"collect: skipped {s['path']}: {s['reason']}")
@@ -449,7 +481,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
             "n_runs": n_runs, "n_sets": len(sets)}
     write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows)
     res = {**info, "sets": {s.id: {"params": {SHORT[k]: v for k, v in s.params.items()}, "seeds": s.seeds,
-                                   "runs": [r.path for r in s.runs]} for s in sets},
+                                   "runs": [r.path for r in s.runs], "signature": signature(s)} for s in sets},
            "skipped": skipped, "comparisons": rows,
            "figures": {k: v for k, v in figs.items() if not k.startswith("_")}, "figure_notes": figs["_notes"],
            "files": ["runs.csv", "sets.csv", "depth.csv", "fits.json", "README.md", "collect.json"]
