@@ -449,6 +449,18 @@ def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
     assert out_dir == str(run / "analysis") and s_pack["source"].endswith("packing.npz")
     for k in ("z", "z_no_rattlers", "phi", "alpha", "backbone", "bands", "P_f", "zeta", "order"):
         assert rundir.json_safe(s_pack[k]) == rundir.json_safe(s_full[k]), k
+    # analysed again where its final.h5 was analysed, the packing keeps what it cannot measure (the flow
+    # of the velocities it lacks), from the summary of the same step, and says so
+    assert s_pack["flow"] is None and "carried" not in s_pack
+    s_first, _ = report.analyze(str(run / "packing.npz"), out=str(tmp_path / "a1"), plots=False, log=lambda m: None)
+    assert s_first["flow"] == rundir.json_safe(s_full["flow"]) and s_first["flow"]["v_x_mean"] == 0.0
+    assert s_first["carried"]["keys"] == ["flow"] and s_first["carried"]["from"].endswith("final.h5")
+    assert "flow_note" not in s_first and s_first["z"] == s_full["z"]
+    # not from a summary of another step
+    old = json.loads((tmp_path / "a1" / "summary.json").read_text())
+    (tmp_path / "a1" / "summary.json").write_text(json.dumps(dict(old, step=old["step"] + 1)))
+    s_other, _ = report.analyze(str(run / "packing.npz"), out=str(tmp_path / "a1"), plots=False, log=lambda m: None)
+    assert s_other["flow"] is None and "carried" not in s_other
     # a damaged or foreign file is refused with its name
     bad = tmp_path / "bad.npz"
     bad.write_bytes(open(out, "rb").read()[:2000])

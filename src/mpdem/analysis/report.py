@@ -19,6 +19,7 @@ renamed. The analysis runs in one process (its kernels use numba threads).
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -36,6 +37,9 @@ from .measures import measure
 
 SUMMARY = "summary.json"
 PACKING = "packing.npz"     # a run's kept packing (``mpdem export --format packing``) when final.h5 is gone
+# what a packing cannot measure again: the flow of the velocities it does not keep, and the steadiness of a
+# thermo table that is not kept beside it; analysed again, a run keeps these from its earlier analysis
+CARRIED = ("flow", "flow_steady")
 
 
 def locate(target, out=None):
@@ -207,9 +211,32 @@ def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False
     if os.path.basename(path) in ("final.h5", PACKING):
         # a flow-arrest run: was its flow steady before the incline dropped (docs/model.md 5.5)
         s["flow_steady"] = flow.steadiness(os.path.dirname(path), cfg)
+    if os.path.basename(path) == PACKING:
+        _carry(out, s)
     s["seconds"] = {"read": t_read, "total": time.perf_counter() - t0}
     write(out, s, tables, plots, log)
     return s, out
+
+
+def _carry(out, s):
+    """Keep in ``s`` (the summary of a packing.npz) the numbers of ``CARRIED`` that the earlier summary in
+    ``out`` measured on the same state (the same step) and the packing cannot; ``carried`` names them."""
+    try:
+        with open(os.path.join(out, SUMMARY)) as fh:
+            old = json.load(fh)
+    except (OSError, ValueError):
+        return
+    if not isinstance(old, dict) or old.get("step") != s["step"]:
+        return
+    kept = [k for k in CARRIED if s.get(k) is None and old.get(k) is not None]
+    for k in kept:
+        s[k] = old[k]
+    if "flow" in kept:
+        s.pop("flow_note", None)
+    if kept:
+        s["carried"] = {"keys": kept, "from": old.get("source"),
+                        "note": "measured on the run's state with velocities and its thermo table, which the "
+                                "packing does not keep: kept from the earlier analysis of the same step"}
 
 
 def describe(s):
