@@ -456,11 +456,16 @@ def test_a_packing_file_keeps_what_analyze_needs_and_analyses_alike(tmp_path):
     assert s_first["flow"] == rundir.json_safe(s_full["flow"]) and s_first["flow"]["v_x_mean"] == 0.0
     assert s_first["carried"]["keys"] == ["flow"] and s_first["carried"]["from"].endswith("final.h5")
     assert "flow_note" not in s_first and s_first["z"] == s_full["z"]
-    # not from a summary of another step
+    # analysed a third time, the origin stays the final.h5
+    s_third, _ = report.analyze(str(run / "packing.npz"), out=str(tmp_path / "a1"), plots=False, log=lambda m: None)
+    assert s_third["carried"]["from"] == s_first["carried"]["from"] and s_third["flow"] == s_first["flow"]
+    # not from a summary of another state: another step, or another run's parameters at the same step
     old = json.loads((tmp_path / "a1" / "summary.json").read_text())
-    (tmp_path / "a1" / "summary.json").write_text(json.dumps(dict(old, step=old["step"] + 1)))
-    s_other, _ = report.analyze(str(run / "packing.npz"), out=str(tmp_path / "a1"), plots=False, log=lambda m: None)
-    assert s_other["flow"] is None and "carried" not in s_other
+    for other in (dict(old, step=old["step"] + 1), dict(old, params=dict(old["params"], **{"contact.mu": 0.25}))):
+        (tmp_path / "a1" / "summary.json").write_text(json.dumps(other))
+        s_other, _ = report.analyze(str(run / "packing.npz"), out=str(tmp_path / "a1"), plots=False,
+                                    log=lambda m: None)
+        assert s_other["flow"] is None and "carried" not in s_other
     # a damaged or foreign file is refused with its name
     bad = tmp_path / "bad.npz"
     bad.write_bytes(open(out, "rb").read()[:2000])

@@ -435,7 +435,7 @@ def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     s["physics"] = {"stop.energy": "translational", "stop.E_stop": 1e-9}   # E_stop: derived, not a family key
     (root / "mu0.5_s1_translational/analysis/summary.json").write_text(json.dumps(s))
     runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
-    sets, _ = co.group(runs)
+    sets, _, _ = co.group(runs)
     assert len(sets) == 4 and sorted(x.extra.get("stop.energy", "total") for x in sets).count("translational") == 1
     fams = families(sets, "contact.mu")
     assert sorted(len(m) for _, m in fams) == [1, 3]
@@ -491,7 +491,7 @@ def test_the_rungs_of_a_stiffening_ladder_are_one_family_apart_from_the_poured_p
         s["physics"] = {"stiffen.k_n_from": k_n / 10}
         (d / "analysis/summary.json").write_text(json.dumps(s))
     runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
-    sets, _ = co.group(runs)
+    sets, _, _ = co.group(runs)
     assert len(sets) == 5
     fams = families(sets, "contact.k_n")
     assert sorted(len(m) for _, m in fams) == [2, 3]
@@ -515,7 +515,7 @@ def test_a_run_on_another_bed_is_another_sample(tmp_path):
         (root / name / "analysis/summary.json").write_text(json.dumps(s))
     from mpdem.campaign.runs import AnalysedRun
     runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
-    sets, skipped = co.group(runs)
+    sets, skipped, _ = co.group(runs)
     assert len(sets) == 1 and len(sets[0].runs) == 3
     assert [os.path.basename(r.path) for r in sets[0].runs] == ["s1", "s1_bed7", "s10"]
     reasons = sorted(os.path.basename(s["path"]) + ": " + s["reason"] for s in skipped)
@@ -594,22 +594,53 @@ def test_a_set_keeps_its_id_when_new_sets_join_in_front_of_it(tmp_path):
             make_run(root / f"mu{mu}_s{seed}", params(mu=mu, seed=seed), z + 0.001 * seed, 0.62, 0.5, rng)
     first = co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
     ids = {tuple(v["runs"]): k for k, v in first["sets"].items()}
-    assert sorted(ids.values()) == ["S01", "S02"]
+    assert sorted(ids.values()) == ["S01", "S02"] and sorted(first["set_ids"].values()) == ["S01", "S02"]
     for seed in (1, 2):
         make_run(root / f"mu0.0_s{seed}", params(mu=0.0, seed=seed), 6.1, 0.64, 0.4, rng)
     # a set of the same parameters as an old one but another physics key is new as well
     s = make_run(root / "mu0.5_s1_translational", params(mu=0.5, seed=1), 5.0, 0.62, 0.5, rng)
     s["physics"] = {"stop.energy": "translational"}
     (root / "mu0.5_s1_translational/analysis/summary.json").write_text(json.dumps(s))
-    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+
+    def runs_in(root):
+        return [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text()))
+                for d in sorted(root.iterdir())]
+
     # what collect does with the earlier collect.json of its output directory
-    sets, _ = co.group(runs, co.previous_ids(str(out)))
+    sets, _, reg = co.group(runs_in(root), co.previous_ids(str(out)))
     again = {tuple(r.path for r in x.runs): x.id for x in sets}
     for paths, sid in ids.items():
         assert again[paths] == sid
     assert sorted(k for r, k in again.items() if r not in ids) == ["S03", "S04"]
+    assert sorted(reg.values()) == ["S01", "S02", "S03", "S04"]
     # listed in parameter order: mu = 0 first, its id notwithstanding
     assert sets[0].p("mu") == 0.0 and sets[0].id in ("S03", "S04")
     # without an earlier collect.json the sets are numbered in parameter order
-    fresh, _ = co.group(runs, co.previous_ids(str(tmp_path / "nowhere")))
+    fresh, _, _ = co.group(runs_in(root), co.previous_ids(str(tmp_path / "nowhere")))
     assert [x.id for x in fresh] == ["S01", "S02", "S03", "S04"] and fresh[0].p("mu") == 0.0
+
+
+def test_a_number_once_given_is_not_given_again_and_ids_stay_distinct():
+    """A set no longer collected keeps its number in the registry; a new set does not take it. Two sets of
+    one signature get distinct ids; widths follow the largest number; odd ids in an old file are ignored."""
+    from mpdem.campaign.runs import Set
+    known = {"a": "S01", "b": "S02", "gone": "S03"}
+    sets = [Set("", {}, [], signature=sig) for sig in ("b", "new", "a", "a")]
+    reg = co.number(sets, known)
+    assert [x.id for x in sets] == ["S02", "S04", "S01", "S05"]
+    assert reg["gone"] == "S03" and reg["new"] == "S04" and reg["a"] == "S01"
+    many = [Set("", {}, [], signature=str(k)) for k in range(120)]
+    co.number(many)
+    assert many[0].id == "S001" and many[-1].id == "S120"
+    late = [Set("", {}, [], signature="x")]
+    co.number(late, {f"s{k}": f"S{k:02d}" for k in range(1, 100)})
+    assert late[0].id == "S100"
+
+
+def test_previous_ids_reads_the_registry_and_skips_what_it_cannot_use(tmp_path):
+    (tmp_path / "collect.json").write_text(json.dumps({
+        "set_ids": {"a": "S01", "b": "S\u00b2", "c": 3, "d": "S07"},
+        "sets": {"S02": {"signature": "e"}, "S\u00b3": {"signature": "f"}, "S09": {"signature": ["g"]}}}))
+    assert co.previous_ids(str(tmp_path)) == {"a": "S01", "d": "S07", "e": "S02"}
+    (tmp_path / "collect.json").write_text("[1, 2]")
+    assert co.previous_ids(str(tmp_path)) == {}

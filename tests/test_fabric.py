@@ -92,6 +92,37 @@ def test_the_jackknife_of_equal_columns_is_zero_and_of_random_ones_the_scatter_o
     assert np.mean(est["angle"]) == pytest.approx(15.0, abs=1.0)
 
 
+def test_the_angle_error_of_an_axis_near_the_horizontal_does_not_wrap():
+    # major axis at -89.9 degrees: leave-one-out angles on both sides of +-90 are one axis, not 180 apart
+    rng = np.random.default_rng(2)
+    K, m = 16, 50
+    v = rng.normal(size=(K * m, 3)) * [1.0, 1.0, 2.0]
+    v = _rotate_y(v / np.linalg.norm(v, axis=1)[:, None], -89.9)
+    f = fabric.of_contacts(v, np.repeat(np.arange(K), m), K)
+    assert abs(abs(f["angle"]) - 89.9) < 3.0 and f["angle_err"] < 3.0
+
+
+def test_a_contact_across_the_periodic_seam_sits_in_its_midpoint_s_column(tmp_path):
+    """Two spheres touching across x = 0 (at x = 0.3 and L - 0.6): the contact's midpoint is at
+    x = -0.15, i.e. L - 0.15, in the last column along x, not the middle of the box."""
+    from mpdem import config
+    from mpdem.analysis import measures
+    L = 8.0
+    x = np.array([[0.3, 4.1, 5.0], [L - 0.6 + 1e-3, 4.1, 5.0], [4.0, 0.5, 2.0], [4.0, 1.5 - 1e-3, 2.0]])
+    fixed = np.zeros(4, np.uint8)
+    arrays = {"id": np.arange(4), "x": x, "fixed": fixed}
+    cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}", "pour.N=4",
+                             "analysis.jackknife_columns=4", "analysis.margin_bottom=0",
+                             "analysis.margin_top=0"])
+    m = measures.sample(arrays, {"L_x": L, "L_y": L}, cfg)
+    assert len(m.pk.pairs) == 2
+    mid = measures.midpoints(m)
+    seam = int(np.argmax(np.abs(m.cf.nrm[:, 0])))
+    assert np.mod(mid[seam, 0], L) == pytest.approx(L - 0.15 + 5e-4)
+    from mpdem.analysis import jackknife
+    assert jackknife.columns(mid, L, L, 4)[seam] == 3 * 4 + 2      # last column in x, y = 4.1 in the third
+
+
 def test_a_flat_surface_is_smooth_and_a_sine_has_its_rms_height_and_slope():
     L_x, L_y, cell = 20.0, 10.0, 2.0
     gx, gy = np.meshgrid(np.arange(10) * 2.0 + 1.0, np.arange(5) * 2.0 + 1.0, indexing="ij")
@@ -159,6 +190,7 @@ def test_a_pile_poured_along_gravity_has_no_downslope_direction_and_the_windows_
     for kind in ("contacts", "forces"):
         d = s["fabric"]["slab"][kind]
         assert abs(d["R_xz"]) < 3 * d["R_xz_err"] and abs(d["angle"]) < 3 * d["angle_err"]
+        assert d["angle_err"] < 10.0 and d["R_xz_err"] < 0.01       # errors that can tell a tilt
         assert sum(d["eigenvalues"]) == pytest.approx(1.0) and 0 < d["anisotropy_err"] < d["anisotropy"]
     got = [w for w in s["fabric"]["windows"] if w["complete"]]
     from mpdem.campaign.runs import num

@@ -65,7 +65,7 @@ def of_contacts(nrm, groups, K, weight=None):
     nrm : (M, 3) unit normals
     groups : (M,) int in 0..K-1, each contact's lateral column
     K : int number of columns
-    weight : (M,) float or None (see ``tensor``)
+    weight : (M,) float or None (see ``tensor``); ``n`` counts every contact, weighted or not
 
     Returns
     -------
@@ -92,5 +92,8 @@ def of_contacts(nrm, groups, K, weight=None):
     k = len(used)
     for q in QUANTITIES:
         v = np.array([d[q] for d in loo])
+        if q == "angle" and math.isfinite(out[q]):
+            # an axis: -89 and +89 degrees are 2 apart; each leave-one-out angle taken within 90 of the estimate
+            v = out[q] + (v - out[q] + 90.0) % 180.0 - 90.0
         out[f"{q}_err"] = float(math.sqrt((k - 1) / k * np.sum((v - v.mean()) ** 2)))
     return out

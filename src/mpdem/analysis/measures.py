@@ -258,9 +258,9 @@ def contact_fabric(m):
     windows, with jackknife errors over lateral columns (6.10)."""
     k = m.cfg.analysis.jackknife_columns
     pk, cf = m.pk, m.cf
-    # branch = x_i - x_j (minimum image): the midpoint is x_j + branch / 2
-    mid = pk.x[pk.pairs[:, 1]] + 0.5 * cf.branch
+    mid = midpoints(m)
     col = jackknife.columns(mid, pk.L_x, pk.L_y, k)
+    # a tensile contact (F_n < 0: a dashpot pulling, rare in a settled pile) weighs 0 in the force fabric
     force = np.maximum(cf.F_n, 0.0)
 
     def of(sel):
@@ -371,6 +371,12 @@ def isostatic(pk, cf, live, kept, bulk_rows, mu, mobilised):
             "z_iso_backbone": 4.0 + n_m_bb / 3.0, "mobilised": mobilised,
             "note": "z_iso = 4 + n_m / 3, n_m the fully mobilised contacts per sphere (each counted for both "
                     "of its spheres): 3 N z / 2 - N_m = 6 N"}
+
+
+def midpoints(m):
+    """(P, 3) the contacts' midpoints [d]: x_j + b / 2, b = x_i - x_j the minimum image (a contact across
+    a periodic seam lies on it, possibly outside [0, L))."""
+    return m.pk.x[m.pk.pairs[:, 1]] + 0.5 * m.cf.branch
 
 
 def _windows(m):

@@ -220,13 +220,16 @@ def analyze(target, out=None, sets=(), plots=True, log=print, keep_packing=False
 
 def _carry(out, s):
     """Keep in ``s`` (the summary of a packing.npz) the numbers of ``CARRIED`` that the earlier summary in
-    ``out`` measured on the same state (the same step) and the packing cannot; ``carried`` names them."""
+    ``out`` measured on the same state and the packing cannot; ``carried`` names them and their origin.
+    The same state: the same step, time, sphere count, parameters and bed (an ``--out`` shared by runs
+    that stopped at one step carries nothing between them)."""
     try:
         with open(os.path.join(out, SUMMARY)) as fh:
             old = json.load(fh)
     except (OSError, ValueError):
         return
-    if not isinstance(old, dict) or old.get("step") != s["step"]:
+    same = ("step", "time", "n", "params", "bed_seed")
+    if not isinstance(old, dict) or any(rundir.json_safe(old.get(k)) != rundir.json_safe(s.get(k)) for k in same):
         return
     kept = [k for k in CARRIED if s.get(k) is None and old.get(k) is not None]
     for k in kept:
@@ -234,9 +237,12 @@ def _carry(out, s):
     if "flow" in kept:
         s.pop("flow_note", None)
     if kept:
-        s["carried"] = {"keys": kept, "from": old.get("source"),
+        before = old.get("carried") or {}
+        s["carried"] = {"keys": kept, "from": before.get("from", old.get("source")),
+                        "settings": before.get("settings", old.get("settings")),
                         "note": "measured on the run's state with velocities and its thermo table, which the "
-                                "packing does not keep: kept from the earlier analysis of the same step"}
+                                "packing does not keep: kept from the earlier analysis of the same state "
+                                "(with its analysis settings)"}
 
 
 def describe(s):

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import time
 import warnings
 
@@ -218,22 +219,67 @@ def _derived_values(physics_key):
     return {k: vals[k] for k in KEYS if KEYS[k].default is DERIVED}
 
 
-def signature(s):
-    """A set's identity as a canonical string: its parameters (all but the seed) and the physics keys set
-    away from their defaults (``Set.extra``). What ``collect.json`` keeps to give a set the same id again."""
-    return json.dumps({"params": {k: v for k, v in s.params.items() if k != "run.seed"}, "extra": s.extra},
-                      sort_keys=True, default=str)
+def signature(params, extra, unknown=None):
+    """A set's identity as a canonical string: its parameters (all but the seed), the physics keys set away
+    from their defaults (``Set.extra``) and any physics key this version does not know (``unknown``). What
+    ``collect.json`` keeps to give a set the same id again."""
+    sig = {"params": {k: v for k, v in params.items() if k != "run.seed"}, "extra": extra}
+    if unknown:
+        sig["unknown"] = unknown
+    return json.dumps(sig, sort_keys=True, default=str)
+
+
+_ID = re.compile(r"S([0-9]+)", re.ASCII)
 
 
 def previous_ids(out):
-    """{signature: id} of the sets of an earlier collect into ``out`` (its collect.json); empty when there
-    is none, it is unreadable, or it was written before the signatures were kept."""
+    """{signature: id} of every set an earlier collect into ``out`` named (its collect.json: ``set_ids``, the
+    sets of all collects before it, and ``sets``); empty when there is none or it is unreadable."""
     try:
         with open(os.path.join(out, "collect.json")) as fh:
-            old = json.load(fh).get("sets") or {}
-        return {v["signature"]: k for k, v in old.items() if isinstance(v, dict) and "signature" in v}
-    except (OSError, ValueError, AttributeError):
+            old = json.load(fh)
+    except (OSError, ValueError):
         return {}
+    if not isinstance(old, dict):
+        return {}
+    reg = {}
+    ids = old.get("set_ids")
+    for sig, sid in (ids.items() if isinstance(ids, dict) else ()):
+        if isinstance(sig, str) and isinstance(sid, str) and _ID.fullmatch(sid):
+            reg[sig] = sid
+    sets = old.get("sets")
+    for sid, v in (sets.items() if isinstance(sets, dict) else ()):
+        if isinstance(v, dict) and isinstance(v.get("signature"), str) and _ID.fullmatch(sid):
+            reg.setdefault(v["signature"], sid)
+    return reg
+
+
+def number(sets, known=None):
+    """Give each set its id: the one ``known`` ({signature: id}, ``previous_ids``) has for its signature,
+    else the next number after every number ``known`` holds (so a number once given, even to a set no
+    longer collected, is not given again); without ``known`` S01, S02, ... in the order of ``sets``.
+
+    Returns
+    -------
+    dict: ``known`` with the new sets' signatures added (collect.json's ``set_ids``)
+    """
+    reg = dict(known or {})
+    nums = [int(m.group(1)) for m in map(_ID.fullmatch, reg.values()) if m]
+    given, new = set(), []
+    for s in sets:
+        sid = reg.get(s.signature)
+        if sid is None or sid in given:        # a second set of one signature takes a number of its own
+            new.append(s)
+        else:
+            s.id = sid
+            given.add(sid)
+    nxt = max(nums, default=0) + 1
+    width = max([2, len(str(nxt + len(new) - 1))] + [len(v) - 1 for v in reg.values() if _ID.fullmatch(v)])
+    for s in new:
+        s.id = f"S{nxt:0{width}d}"
+        nxt += 1
+        reg.setdefault(s.signature, s.id)
+    return reg
 
 
 def group(runs, known=None):
@@ -245,16 +291,17 @@ def group(runs, known=None):
     Parameters
     ----------
     runs : AnalysedRun list
-    known : {signature: id} of an earlier collect (``previous_ids``) or None. A set found there keeps
-        its id; the others take the next numbers after the highest known, in parameter order; without
-        ``known`` the sets are numbered S01, S02, ... in parameter order. So notes that cite a set by
-        its id stay right when new sets join.
+    known : {signature: id} of the sets of earlier collects (``previous_ids``) or None: a set found
+        there keeps its id, a new one takes a number never given before (``number``); without it the
+        sets are numbered S01, S02, ... in parameter order. So notes that cite a set by its id stay
+        right when new sets join.
 
     Returns
     -------
-    (sets, skipped): Sets ordered by parameters, runs ordered by seed; [{"path", "reason"}] of the
-    duplicates.
+    (sets, skipped, ids): Sets ordered by parameters, runs ordered by seed; [{"path", "reason"}] of the
+    duplicates; {signature: id} of ``known`` and the new sets.
     """
+    from ..config import KEYS
     by_key, skipped = {}, []
     for r in runs:
         # PARAM_KEYS name the set; every other physics key of the config must agree as well
@@ -272,17 +319,12 @@ def group(runs, known=None):
             else:
                 kept[seed] = r
         samples = sorted(kept, key=lambda k: (_order(k[0]), _order(k[1])))
-        sets.append(Set("", dict(key[0]), [kept[k] for k in samples], _extra(key[1])))
-    known = known or {}
-    taken = [int(v[1:]) for v in known.values() if v[:1] == "S" and v[1:].isdigit()]
-    nxt = max(taken, default=0) + 1
-    width = max(2, len(str(nxt + len(sets))))
-    for s in sets:
-        s.id = known.get(signature(s))
-        if s.id is None:
-            s.id = f"S{nxt:0{width}d}"
-            nxt += 1
-    return sets, skipped
+        extra = _extra(key[1])
+        unknown = {k: v for k, v in key[1] if k not in KEYS}
+        sets.append(Set("", dict(key[0]), [kept[k] for k in samples], extra,
+                        signature(dict(key[0]), extra, unknown)))
+    ids = number(sets, known)
+    return sets, skipped, ids
 
 
 # ---------------------------------------------------------------- fits
@@ -447,7 +489,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
             skipped.append({"path": p, "reason": why})
         else:
             loaded.append(run)
-    sets, dup = group(loaded, previous_ids(out or "paper"))
+    sets, dup, set_ids = group(loaded, previous_ids(out or "paper"))
     skipped += dup
     for s in skipped:
         log(f"collect: skipped {s['path']}: {s['reason']}")
@@ -481,7 +523,8 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
             "n_runs": n_runs, "n_sets": len(sets)}
     write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows)
     res = {**info, "sets": {s.id: {"params": {SHORT[k]: v for k, v in s.params.items()}, "seeds": s.seeds,
-                                   "runs": [r.path for r in s.runs], "signature": signature(s)} for s in sets},
+                                   "runs": [r.path for r in s.runs], "signature": s.signature} for s in sets},
+           "set_ids": set_ids,
            "skipped": skipped, "comparisons": rows,
            "figures": {k: v for k, v in figs.items() if not k.startswith("_")}, "figure_notes": figs["_notes"],
            "files": ["runs.csv", "sets.csv", "depth.csv", "fits.json", "README.md", "collect.json"]

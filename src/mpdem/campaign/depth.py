@@ -1,6 +1,8 @@
-"""z and phi on fixed depth windows below the surface, per parameter set, with two independent errors
-(docs/model.md 6.10): the seed scatter pooled over the sets of one N and mu (``fits.pooled_scatter``,
-as for eq. 7) and the jackknife over each pile's lateral columns, combined over its seeds.
+"""z, phi and the contact fabric (its anisotropy and the angle of its major axis) on fixed depth windows
+below the surface, per parameter set, with two independent errors (docs/model.md 6.10): the seed scatter
+pooled over the sets of one N and mu (``fits.pooled_scatter``, as for eq. 7) and the jackknife over each
+pile's lateral columns, combined over its seeds. The angle's mean over seeds is a plain mean (angles
+away from +-90 degrees).
 
 The windows are the default ``analysis.depth_windows``; a run analysed before they existed, or
 too short for a window, has none there (nan), and ``mpdem analyze`` again gives them.

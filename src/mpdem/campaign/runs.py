@@ -53,6 +53,7 @@ class Set:
     params: dict
     runs: list
     extra: dict = field(default_factory=dict)
+    signature: str = ""     # its identity across collects (``collect.signature``)
 
     def p(self, short):
         """A parameter by its short name (mu, epsilon, k_n, phi_i, N, L_x, ...)."""
