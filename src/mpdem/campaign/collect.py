@@ -489,7 +489,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
             skipped.append({"path": p, "reason": why})
         else:
             loaded.append(run)
-    sets, dup, set_ids = group(loaded, previous_ids(out or "paper"))
+    sets, dup, set_ids = group(loaded, previous_ids(out))
     skipped += dup
     for s in skipped:
         log(f"collect: skipped {s['path']}: {s['reason']}")
