@@ -99,6 +99,16 @@ def _csv(path, header, cols):
     rundir.write_csv(path, header, zip(*cols))
 
 
+def zeta_table(z):
+    """(header, columns) of zeta.csv from ``mobilisation.force_ratios``'s dict: P(zeta) on its bins, and
+    F_t/F_n on the same bins for mu >= 1 (``campaign.ratio`` reads ``count_ratio``)."""
+    cols, head = [z["edges"][:-1], z["edges"][1:], z["count"], z["P_zeta"]], ["zeta_lo", "zeta_hi", "count", "P"]
+    if "P_ratio" in z:
+        cols += [z["count_ratio"], z["P_ratio"]]
+        head += ["count_ratio", "P_ratio"]
+    return head, cols
+
+
 def write_tables(out, s, t):
     """The CSV files of one analysis."""
     reg = t["profile"]
@@ -108,12 +118,7 @@ def write_tables(out, s, t):
     n = np.arange(len(s["P_z"]))
     _csv(os.path.join(out, "coordination.csv"), ["n", "P", "P_no_rattlers"], [n, s["P_z"], s["P_z_no_rattlers"]])
     if "zeta" in t:
-        z = t["zeta"]
-        cols, head = [z["edges"][:-1], z["edges"][1:], z["count"], z["P_zeta"]], ["zeta_lo", "zeta_hi", "count", "P"]
-        if "P_ratio" in z:
-            cols += [z["count_ratio"], z["P_ratio"]]
-            head += ["count_ratio", "P_ratio"]
-        _csv(os.path.join(out, "zeta.csv"), head, cols)
+        _csv(os.path.join(out, "zeta.csv"), *zeta_table(t["zeta"]))
     if "flow" in t:
         f = t["flow"]
         _csv(os.path.join(out, "flow.csv"), ["z_lo", "z_hi", "n", "phi", "v_x", "v_y", "v_z", "T"],

@@ -13,7 +13,6 @@ bin over the seeds; Figs. 7 and 9 draw the eq. 7 and eq. 9 fits of
 """
 from __future__ import annotations
 
-import csv
 import math
 import os
 from collections import Counter
@@ -22,7 +21,7 @@ import numpy as np
 
 from ..analysis import fits
 from . import paper
-from .runs import NAN, families, fmt_kn, fmt_pm, num
+from .runs import NAN, families, fmt_kn, fmt_pm, num, read_table
 
 
 def _seeds(n):
@@ -90,14 +89,7 @@ class Figures:
         """Columns of RUN/analysis/<name>.csv as float arrays, None when missing or unreadable."""
         key = (run.path, name)
         if key not in self._tables:
-            path = os.path.join(run.path, "analysis", f"{name}.csv")
-            try:
-                with open(path, newline="") as fh:
-                    rows = list(csv.reader(fh))
-                self._tables[key] = {h: np.array([float(r[i]) if r[i] else NAN for r in rows[1:]])
-                                     for i, h in enumerate(rows[0])}
-            except (OSError, ValueError, IndexError):
-                self._tables[key] = None
+            self._tables[key] = read_table(run.path, name)
         return self._tables[key]
 
     def mean_curve(self, s, name, ycol, bins):

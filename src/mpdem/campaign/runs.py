@@ -10,7 +10,9 @@ of the figures and README.md.
 """
 from __future__ import annotations
 
+import csv
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +68,16 @@ class Set:
     def stat(self, q):
         """(mean, standard error, count) of quantity ``q`` over the runs; see ``mean_sem``."""
         return mean_sem([r.q[q] for r in self.runs])
+
+
+def read_table(run_dir, name):
+    """Columns of RUN/analysis/<name>.csv as float arrays (empty cells nan); None when missing or unreadable."""
+    try:
+        with open(os.path.join(run_dir, "analysis", f"{name}.csv"), newline="") as fh:
+            rows = list(csv.reader(fh))
+        return {h: np.array([float(r[i]) if r[i] else NAN for r in rows[1:]]) for i, h in enumerate(rows[0])}
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def num(v):
