@@ -91,6 +91,8 @@ reproduce-paper: setup
 	$(PY) -m mpdem sweep $(PAPER)/height.tsv --config $(PAPER)/height.toml --out $(PAPER_RUNS)/height --no-collect
 	$(PY) -m mpdem sweep $(PAPER)/size.tsv --config $(PAPER)/size.toml --out $(PAPER_RUNS)/size --no-collect
 	$(PY) -m mpdem sweep $(PAPER)/dev-stiff.tsv --config $(DEV)/dev.toml --out $(PAPER_RUNS)/dev --no-collect
+	$(PY) -m mpdem sweep $(PAPER)/dev-claims.tsv $(PAPER)/dev-claims-K0.tsv $(PAPER)/dev-claims-hertz.tsv \
+	  --config $(DEV)/dev.toml --out $(PAPER_RUNS)/dev --no-collect
 	$(MAKE) collect-paper
 
 # The tables, fits and figures of analysis/results/paper from its committed files alone (summaries and
