@@ -75,10 +75,48 @@ def test_a_spinning_sphere_holds_the_total_rule_but_not_the_translational_one(tm
     assert r.ek > e_rot > 100 * r.cfg.stop.E_stop
     assert r.ek - e_rot < r.cfg.stop.E_stop
 
+    # the run says once, in its log, that rotation alone holds it, and how to stop it
+    log = (tmp_path / "total" / "log.txt").read_text()
+    assert log.count("rotation alone holds the run") == 1 and "stop.energy=translational" in log
+
     r2, status2, _ = run_pile(tmp_path, "trans", "translational")
     assert status2 == "converged" and r2.state.step < 60000
     s = json.loads((tmp_path / "trans" / "summary.json").read_text())
     assert s["converged"] and s["E_k_per_particle"] > e_rot
+    assert "rotation alone" not in (tmp_path / "trans" / "log.txt").read_text()
+
+
+def test_the_spinner_hint_needs_a_full_window_held_by_rotation_alone():
+    def rule(energy="total", kind="window"):
+        return StopRule(1.0, kind, 0.3, 0.1, 0.1, energy)     # a window of 3 samples, E_stop = 1
+    r = rule()
+    r.add(0.5, 20.0, 1)
+    r.add(0.5, 20.0, 1)
+    assert r.spin_hint() is None                      # the window is not full
+    r.add(0.5, 20.0, 1)
+    msg = r.spin_hint()
+    assert "is 20.5 over the stop window" in msg and "translational part is 0.5" in msg
+    assert "stop.energy=translational" in msg
+    assert r.spin_hint() is None                      # once
+    moving = rule()
+    for _ in range(3):
+        moving.add(2.0, 40.0, 1)                      # the translation itself above E_stop: no hint
+    assert moving.spin_hint() is None
+    both = rule()
+    for _ in range(3):
+        both.add(0.5, 1.0, 1)                         # rotation not 10 times the translation
+    assert both.spin_hint() is None
+    for energy, kind in (("translational", "window"), ("total", "instantaneous")):
+        other = rule(energy, kind)
+        for _ in range(3):
+            other.add(0.5, 20.0, 1)
+        assert other.spin_hint() is None              # that rule is not held by the spin
+    cleared = rule()
+    for _ in range(3):
+        cleared.add(0.5, 20.0, 1)
+    cleared.clear()
+    cleared.add(0.5, 20.0, 1)
+    assert cleared.spin_hint() is None and len(cleared.trans) == 1
 
 
 def test_restart_with_the_translational_rule_ends_a_run_held_by_a_spinner(tmp_path):

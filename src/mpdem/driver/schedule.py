@@ -135,6 +135,8 @@ class StopRule:
         self.n_sample = max(1, int(round(sample_interval / dt)))
         self.size = max(1, int(round(window / (self.n_sample * dt))))
         self.samples = collections.deque(maxlen=self.size)
+        self.trans = collections.deque(maxlen=self.size)   # the translational part of the same samples
+        self.hinted = False             # the spinner hint (``spin_hint``) said once in this segment
         self.ratio = math.nan           # the newest sample's unbalanced-force ratio
         self.in_flight = -1             # and its mobile spheres without a contact
         self.latest = math.inf          # the newest sample, kept when a ramp or a flow phase clears the window
@@ -157,7 +159,30 @@ class StopRule:
         mobile spheres without a contact."""
         self.latest = (e_trans if self.energy == "translational" else e_trans + e_rot) / N
         self.samples.append(self.latest)
+        self.trans.append(e_trans / N)
         self.ratio, self.in_flight = ratio, in_flight
+
+    def clear(self):
+        """Empty the window (a ramp or a flow phase: the pile is not yet the one to settle)."""
+        self.samples.clear()
+        self.trans.clear()
+
+    def spin_hint(self):
+        """Once, a message when the window rule on the total energy is held up by rotation alone: a
+        full window whose translational mean is below E_stop while the total's is not, the spin at
+        least 10 times the translation (a sphere spinning about two contacts, docs/model.md 5.4).
+        None otherwise, and after the first message."""
+        if (self.hinted or self.energy != "total" or self.rule != "window" or len(self.samples) < self.size
+                or len(self.trans) < self.size):
+            return None
+        total, trans = self.mean, sum(self.trans) / len(self.trans)
+        if not (trans < self.E_stop <= total and total - trans >= 10 * trans):
+            return None
+        self.hinted = True
+        return (f"E_k/N is {total:.3g} over the stop window, but its translational part is {trans:.3g}, below "
+                f"stop.E_stop = {self.E_stop:.3g}: rotation alone holds the run (a sphere spinning about two "
+                f"contacts, which nothing damps: docs/model.md 5.4). The pile may be at rest; "
+                f"`mpdem restart RUN --set stop.energy=translational` stops on the translational energy")
 
     @property
     def last(self):

@@ -323,9 +323,14 @@ class Run:
         self.thermo.write(self.state, et, er, N, self.stop, info, self.engine.n_rebuilds, self.wall_total(), p_x)
         if self.schedule and self.schedule.active(self.state.step):
             # on the ramp or in the flow the pile is not yet the one to settle: the rule's window starts at its end
-            self.stop.samples.clear()
+            self.stop.clear()
             return False
-        return self.stop.satisfied()
+        if self.stop.satisfied():
+            return True
+        hint = self.stop.spin_hint()
+        if hint:
+            self.log.warn(hint)
+        return False
 
     def _interrupt(self, sig):
         """Checkpoint and stop early (a signal or the wall time): status "interrupted"."""
