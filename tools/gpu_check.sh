@@ -7,6 +7,8 @@
 # scipy, h5py and mpi4py (an MPI library only for RANKS > 1); writes its logs and a summary to $OUT
 # (default ./gpu_check_out) and prints the summary table last. About 5 minutes on an H100.
 #   bash tools/gpu_check.sh [TABLE]        TABLE: the bench's landed20k.txt.gz (no timings of it without)
+#   (to a lent machine: `bash tools/device_slim.sh on` before the call, `off` after: the checkout's packings
+#   would pass the 64 MiB it takes; docs/gpu.md)
 #   POUR_MINUTES=6 bash tools/gpu_check.sh TABLE     also the paper-size pour to its stop rule (or 6 minutes):
 #       the config of a committed CPU run (REF, default the paper-size mu = 0.5 seed 1), its digest against that run's
 #   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
