@@ -69,3 +69,18 @@ def test_one_seed_a_set_gives_the_difference_without_an_error():
     assert z["diff"] == pytest.approx(0.2) and math.isnan(z["err"]) and math.isnan(z["p"])
     lines = contrasts.section(e, lambda f, drop: "fam")
     assert any("phi_i = 0.3 vs 0.13" in ln and "0.200" in ln and "—" in ln for ln in lines)
+
+
+def test_the_sets_away_from_the_default_are_compared_among_themselves():
+    ref = make_set("S1", [4.9, 5.0, 5.1], [0.61, 0.611, 0.612])
+    k20 = make_set("S2", [5.2, 5.25, 5.3], [0.62, 0.621, 0.622], **{"pour.K0": 20.0})
+    k50 = make_set("S3", [5.2, 5.3, 5.25], [0.62, 0.622, 0.621], **{"pour.K0": 50.0})
+    (e,) = contrasts.contrasts([ref, k20, k50])
+    a = e["among"]
+    assert a["sets"] == ["S2", "S3"] and a["values"] == [20.0, 50.0]
+    assert a["z"]["F"] == pytest.approx(0.0, abs=1e-9) and a["z"]["p"] == pytest.approx(1.0)   # equal means
+    assert a["z"]["dof"] == [1, 4]
+    assert [r["z"]["p"] < 0.05 for r in e["rows"]] == [True, True]                              # both off the default
+    assert any(ln.startswith("- K0 = 20.0, 50.0 (S2, S3): z: F = 0.00 (1, 4), p = 1")
+               for ln in contrasts.section([e], lambda f, drop: "fam"))
+    assert "among" not in contrasts.contrasts([ref, k20])[0]

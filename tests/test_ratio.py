@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from mpdem import config
-from mpdem.analysis import mobilisation, report
+from mpdem.analysis import fits, mobilisation, report
 from mpdem.campaign import ratio
 from mpdem.campaign.runs import AnalysedRun, Set, families
 from mpdem.io import rundir
@@ -93,7 +93,7 @@ def test_a_run_without_the_ratio_table_gives_nothing(tmp_path):
 def test_anova_equals_scipys():
     rng = np.random.default_rng(2)
     groups = [rng.normal(0, 1, 3), rng.normal(0.5, 1, 2), rng.normal(0, 1, 4)]
-    a = ratio.anova(groups)
+    a = fits.one_way_anova(groups)
     ref = stats.f_oneway(*groups)
     assert a["F"] == pytest.approx(ref.statistic, rel=1e-12)
     assert a["p"] == pytest.approx(ref.pvalue, rel=1e-9)
@@ -104,10 +104,10 @@ def test_anova_equals_scipys():
 
 def test_anova_rejects_at_its_stated_rate_and_finds_a_shift():
     rng = np.random.default_rng(3)
-    p_same = [ratio.anova([rng.normal(0, 1, 3) for _ in range(3)])["p"] for _ in range(2000)]
+    p_same = [fits.one_way_anova([rng.normal(0, 1, 3) for _ in range(3)])["p"] for _ in range(2000)]
     # under one distribution p is uniform: 5 % below 0.05 (binomial sd 0.5 %)
     assert 0.035 < np.mean(np.array(p_same) < 0.05) < 0.065
-    p_shift = [ratio.anova([rng.normal(m, 1, 3) for m in (0, 0, 6)])["p"] for _ in range(200)]
+    p_shift = [fits.one_way_anova([rng.normal(m, 1, 3) for m in (0, 0, 6)])["p"] for _ in range(200)]
     assert np.median(p_shift) < 1e-3
 
 

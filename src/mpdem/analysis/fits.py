@@ -90,6 +90,32 @@ def pooled_scatter(groups):
     return (math.sqrt(ss / dof) if dof else math.nan), dof
 
 
+def one_way_anova(groups):
+    """One-way analysis of variance of the values in ``groups``.
+
+    Parameters
+    ----------
+    groups : list of sequences of floats, one per set (a set may hold one value)
+
+    Returns
+    -------
+    dict: ``F``, ``dof`` [S - 1, n - S], ``p`` (the F distribution's upper tail), ``scatter``
+    (the pooled within-set standard deviation); F and p nan where n - S < 1 or the scatter is 0.
+    """
+    g = [np.asarray(v, float) for v in groups if len(v)]
+    n, S = sum(len(v) for v in g), len(g)
+    allv = np.concatenate(g) if g else np.zeros(0)
+    within = sum(float(((v - v.mean()) ** 2).sum()) for v in g)
+    between = sum(len(v) * float((v.mean() - allv.mean()) ** 2) for v in g)
+    d1, d2 = S - 1, n - S
+    res = {"F": math.nan, "dof": [d1, d2], "p": math.nan,
+           "scatter": math.sqrt(within / d2) if d2 > 0 else math.nan}
+    if d1 >= 1 and d2 >= 1 and within > 0:
+        F = (between / d1) / (within / d2)
+        res.update(F=F, p=float(f_dist.sf(F, d1, d2)))
+    return res
+
+
 def fit_eq7_fixed(k_n, z, sigma, alpha_n=0.5):
     """Eq. 7 with the exponent fixed: z = z_inf + a (k_n / K_REF)^(-alpha_n), linear in (z_inf, a).
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from ..analysis.fits import pooled_scatter
+from ..analysis.fits import one_way_anova, pooled_scatter
 from ..config import KEYS
 from .runs import NAN, SHORT, families, fmt_pm
 
@@ -29,7 +29,9 @@ def contrast(members, vary):
     -------
     None without a set at the default, else dict: ``vary`` (short name), ``reference`` (its set id)
     and ``value``, ``rows``: per other set ``set``, ``value``, ``n_seeds``, ``n_ref`` and per quantity
-    {``diff``, ``err``, ``t``, ``p``, ``dof``} (err, t and p nan without pooled degrees of freedom).
+    {``diff``, ``err``, ``t``, ``p``, ``dof``} (err, t and p nan without pooled degrees of freedom); with
+    two other sets or more ``among``: their ``sets``, ``values`` and per quantity a one-way analysis of
+    variance among them (``one_way_anova``: do the sets away from the default differ among themselves?).
     """
     from scipy import stats
 
@@ -54,6 +56,11 @@ def contrast(members, vary):
             p = float(2 * stats.t.sf(abs(t), dof)) if math.isfinite(t) else NAN
             row[q] = {"diff": d, "err": err, "t": t, "p": p, "dof": dof}
         out["rows"].append(row)
+    others = [s for s in members if s is not ref]
+    if len(others) >= 2:
+        # among the sets away from the default (the paper's K0 = 20-100, say): one-way analysis of variance
+        out["among"] = {"sets": [s.id for s in others], "values": [s.params[vary] for s in others],
+                        **{q: one_way_anova([[r.q[q] for r in s.runs] for s in others]) for q in QUANTITIES}}
     return out
 
 
@@ -91,4 +98,13 @@ def section(entries, fam_text):
     head = ["changed", "sets", "family", "seeds", "Δz", "p (z)", "Δφ", "p (φ)"]
     L += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     L += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
+    among = [e for e in entries if "among" in e]
+    if among:
+        L += ["", "Among the sets away from the default (one-way analysis of variance against their pooled seed "
+              "scatter):", ""]
+        for e in among:
+            a = e["among"]
+            ps = "; ".join(f"{q}: F = {a[q]['F']:.2f} ({a[q]['dof'][0]}, {a[q]['dof'][1]}), p = {a[q]['p']:.2g}"
+                           if math.isfinite(a[q]["p"]) else f"{q}: not tested (no seed scatter)" for q in QUANTITIES)
+            L.append(f"- {e['vary']} = {', '.join(map(str, a['values']))} ({', '.join(a['sets'])}): {ps}")
     return L + [""]

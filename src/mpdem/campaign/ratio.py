@@ -17,7 +17,8 @@ import math
 
 import numpy as np
 
-from .runs import NAN, families, fmt_pm, read_table
+from ..analysis.fits import one_way_anova
+from .runs import families, fmt_pm, read_table
 
 POINTS = (0.1, 0.2, 0.3, 0.5)        # F_t / F_n at which the cumulative fraction is compared
 QUANTITIES = ("ratio_mean",) + tuple(f"below_{x:g}" for x in POINTS)   # tested for the collapse
@@ -58,33 +59,6 @@ def run_numbers(run):
     return out
 
 
-def anova(groups):
-    """One-way analysis of variance of the values in ``groups``.
-
-    Parameters
-    ----------
-    groups : list of sequences of floats, one per set (a set may hold one value)
-
-    Returns
-    -------
-    dict: ``F``, ``dof`` [S - 1, n - S], ``p`` (the F distribution's upper tail), ``scatter``
-    (the pooled within-set standard deviation); F and p nan where n - S < 1 or the scatter is 0.
-    """
-    from scipy import stats
-
-    g = [np.asarray(v, float) for v in groups if len(v)]
-    n, S = sum(len(v) for v in g), len(g)
-    allv = np.concatenate(g) if g else np.zeros(0)
-    within = sum(float(((v - v.mean()) ** 2).sum()) for v in g)
-    between = sum(len(v) * float((v.mean() - allv.mean()) ** 2) for v in g)
-    d1, d2 = S - 1, n - S
-    res = {"F": NAN, "dof": [d1, d2], "p": NAN, "scatter": math.sqrt(within / d2) if d2 > 0 else NAN}
-    if d1 >= 1 and d2 >= 1 and within > 0:
-        F = (between / d1) / (within / d2)
-        res.update(F=F, p=float(stats.f.sf(F, d1, d2)))
-    return res
-
-
 def family_test(members):
     """The collapse test of one family (sets equal in all but mu; those of mu >= 1 are used).
 
@@ -108,7 +82,7 @@ def family_test(members):
         return dict(e, status="not tested", reason="one seed in every set: no seed scatter to test against")
     for q in QUANTITIES + (CONTROL,):
         groups = [[x[q] for x in xs] for _, xs in use]
-        a = anova(groups)
+        a = one_way_anova(groups)
         a["mean"] = [float(np.mean(v)) for v in groups]
         a["err"] = [a["scatter"] / math.sqrt(len(v)) for v in groups]
         e["quantities"][q] = a
