@@ -82,6 +82,12 @@ def test_bins_whose_edges_miss_the_points_are_refused_by_name(tmp_path):
     run = make_run(tmp_path / "r", 2.0, 1, F_n, F_t, bins=7)
     with pytest.raises(ValueError, match="0.1 is not an upper bin edge"):
         ratio.run_numbers(run)
+    # in a family the run is left out, with the reason, and the test goes on without it
+    good = [make_run(tmp_path / f"g{mu}_{sd}", mu, sd, *draw(rng, 500)[:2]) for mu in (2.0, 10.0) for sd in (1, 2)]
+    sets = [Set(f"S{mu:g}", {k: v for k, v in g[0].params.items() if k != "run.seed"} | {"run.seed": 0}, g)
+            for mu, g in ((2.0, good[:2] + [run]), (10.0, good[2:]))]
+    e = ratio.family_test(sets)
+    assert e["status"] == "tested" and e["n_seeds"] == [2, 2] and "not an upper bin edge" in e["left_out"][0]
 
 
 def test_a_run_without_the_ratio_table_gives_nothing(tmp_path):

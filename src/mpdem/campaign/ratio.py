@@ -64,18 +64,31 @@ def family_test(members):
 
     Returns
     -------
-    dict: ``sets``, ``mu``, ``n_seeds``, ``n_contacts`` (per set, summed over its runs);
+    dict: ``sets``, ``mu``, ``n_seeds``, ``n_contacts`` (per set, summed over its runs), ``left_out``
+    (why runs whose tables do not serve were left out);
     ``quantities`` {name: {``mean`` [per set], ``err`` [pooled scatter / sqrt(seeds)], ``F``,
     ``dof``, ``p``}} for QUANTITIES and CONTROL; ``status`` ("tested", or "not tested" with
     ``reason``); when tested ``p_min`` (the smallest p of QUANTITIES), ``p_bonferroni``
     (p_min x their number, at most 1) and ``collapses`` (p_bonferroni > LEVEL).
     """
-    use = [(s, [x for x in (run_numbers(r) for r in s.runs) if x is not None]) for s in members
-           if s.p("mu") >= 1]
-    use = [(s, xs) for s, xs in use if xs]
+    left_out, use = [], []
+    for s in members:
+        if s.p("mu") < 1:
+            continue
+        xs = []
+        for r in s.runs:
+            try:
+                x = run_numbers(r)
+            except ValueError as err:       # bins whose edges miss the points: that run is left out, said why
+                left_out.append(str(err))
+                continue
+            if x is not None:
+                xs.append(x)
+        if xs:
+            use.append((s, xs))
     e = {"sets": [s.id for s, _ in use], "mu": [s.p("mu") for s, _ in use],
          "n_seeds": [len(xs) for _, xs in use], "n_contacts": [int(sum(x["n"] for x in xs)) for _, xs in use],
-         "quantities": {}}
+         "quantities": {}, "left_out": left_out}
     if len(use) < 2:
         return dict(e, status="not tested", reason=f"{len(use)} set(s) of mu >= 1 with F_t/F_n tables (2 needed)")
     if sum(e["n_seeds"]) - len(use) < 1:
@@ -124,6 +137,7 @@ def section(entries, fam_text):
             + (f"smallest p {e['p_min']:.2g}, Bonferroni {e['p_bonferroni']:.2g}: "
                + ("**collapses**" if e["collapses"] else "**does not collapse**")
                if e["status"] == "tested" else f"not tested ({e['reason']})")))
+        L += [f"  - left out: {why}" for why in e.get("left_out", [])]
         if e["status"] != "tested":
             continue
         head = ["quantity"] + [f"μ = {m:g}" for m in e["mu"]] + ["F (dof)", "p"]
