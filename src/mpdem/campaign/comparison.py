@@ -18,7 +18,7 @@ from ..io import rundir
 from ..analysis import fits
 from . import contrasts, depth, paper, ratio
 from .figures import FIGURES
-from .runs import NAN, families, fmt_kn, fmt_pm
+from .runs import NAN, families, fmt_kn, fmt_pm, md_table as _table
 
 # findings written by hand beside the results, copied into the README by every collect
 NOTES = "NOTES.md"
@@ -173,12 +173,6 @@ _BASE = {"z": 3, "alpha": 3, "z_inf": 3, "alpha_n": 3}   # decimals shown at lea
 def _quoted(v, err=None):
     """A paper value as quoted (no digits added)."""
     return v if isinstance(v, str) else f"{v!r}" + ("" if err is None else f" ± {err!r}")
-
-
-def _table(head, rows):
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
-    return "\n".join(out)
 
 
 def _collapse_text(e):

@@ -15,7 +15,7 @@ import math
 
 from ..analysis.fits import one_way_anova, pooled_scatter
 from ..config import KEYS
-from .runs import NAN, SHORT, families, fmt_pm
+from .runs import NAN, SHORT, families, fmt_pm, md_table
 
 VARY = ("pour.K0", "contact.model", "pour.phi_i", "contact.gamma_t")
 QUANTITIES = ("z", "phi")
@@ -95,9 +95,7 @@ def section(entries, fam_text):
             rows.append(cells)
     if not rows:
         return L + ["No set differs from another in one of these settings alone.", ""]
-    head = ["changed", "sets", "family", "seeds", "Δz", "p (z)", "Δφ", "p (φ)"]
-    L += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    L += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
+    L.append(md_table(["changed", "sets", "family", "seeds", "Δz", "p (z)", "Δφ", "p (φ)"], rows))
     among = [e for e in entries if "among" in e]
     if among:
         L += ["", "Among the sets away from the default (one-way analysis of variance against their pooled seed "

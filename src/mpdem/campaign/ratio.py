@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from ..analysis.fits import one_way_anova
-from .runs import families, fmt_pm, read_table
+from .runs import families, fmt_pm, md_table, read_table
 
 POINTS = (0.1, 0.2, 0.3, 0.5)        # F_t / F_n at which the cumulative fraction is compared
 QUANTITIES = ("ratio_mean",) + tuple(f"below_{x:g}" for x in POINTS)   # tested for the collapse
@@ -145,6 +145,5 @@ def section(entries, fam_text):
         for q, a in e["quantities"].items():
             rows.append([LABEL[q]] + [fmt_pm(m, s, 4) for m, s in zip(a["mean"], a["err"])]
                         + [f"{a['F']:.2f} ({a['dof'][0]}, {a['dof'][1]})", f"{a['p']:.2g}"])
-        L += ["", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        L += ["| " + " | ".join(map(str, r)) + " |" for r in rows] + [""]
+        L += ["", md_table(head, rows), ""]
     return L + [""]

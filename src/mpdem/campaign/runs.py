@@ -170,6 +170,13 @@ def _digits(e, base):
     return min(max(base, 1 - math.floor(math.log10(e))), 8)
 
 
+def md_table(head, rows):
+    """A Markdown table (one string) of a header and rows of cells ('|' in a cell becomes '/')."""
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    out += ["| " + " | ".join(str(c).replace("|", "/") for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
 def fmt_pm(m, e=NAN, base=3, n=None):
     """'m ± e' (digits from e), 'm (1 seed)' without an error, '—' without a value."""
     if not isinstance(m, (int, float)) or not math.isfinite(m):
