@@ -116,6 +116,38 @@ def one_way_anova(groups):
     return res
 
 
+def two_way_anova(table):
+    """Two-way analysis of variance without replication: does the column (a seed, say) shift every row
+    (a set) alike?
+
+    Parameters
+    ----------
+    table : (a, b) array of floats, a >= 2 rows (blocks) by b >= 2 columns (treatments), complete
+
+    Returns
+    -------
+    dict: ``F``, ``dof`` [b - 1, (a - 1)(b - 1)], ``p`` (the F distribution's upper tail) for the columns'
+    effect against the rows-by-columns residual, which holds any interaction; ``effects`` (b,): the
+    columns' means less the grand mean; ``scatter``: the residual's standard deviation. F and p nan
+    when the residual is 0.
+    """
+    Y = np.asarray(table, float)
+    a, b = Y.shape
+    if a < 2 or b < 2 or not np.all(np.isfinite(Y)):
+        raise ValueError(f"a complete table of >= 2 x 2 finite values is needed, not {a} x {b}")
+    grand = Y.mean()
+    rows, cols = Y.mean(axis=1, keepdims=True), Y.mean(axis=0, keepdims=True)
+    resid = float(((Y - rows - cols + grand) ** 2).sum())
+    between = a * float(((cols - grand) ** 2).sum())
+    d1, d2 = b - 1, (a - 1) * (b - 1)
+    res = {"F": math.nan, "dof": [d1, d2], "p": math.nan, "effects": (cols[0] - grand).tolist(),
+           "scatter": math.sqrt(resid / d2)}
+    if resid > 0:
+        F = (between / d1) / (resid / d2)
+        res.update(F=F, p=float(f_dist.sf(F, d1, d2)))
+    return res
+
+
 def fit_eq7_fixed(k_n, z, sigma, alpha_n=0.5):
     """Eq. 7 with the exponent fixed: z = z_inf + a (k_n / K_REF)^(-alpha_n), linear in (z_inf, a).
 

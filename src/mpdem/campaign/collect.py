@@ -35,7 +35,7 @@ import numpy as np
 from ..io import rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
-from . import contrasts, depth, paper, pooled, ratio
+from . import contrasts, depth, paper, pooled, ratio, samples
 from .comparison import comparisons, write_readme
 from .figures import make_figures
 from ..analysis.report import PACKING, SUMMARY, AnalysisError
@@ -396,13 +396,13 @@ def _alpha_check(e, members):
 
 
 def make_fits(sets):
-    """{'eq7', 'eq9', 'overlap', 'alpha', 'P_f', 'depth', 'ratio', 'contrasts'}: lists; eq. 7 per
+    """{'eq7', 'eq9', 'overlap', 'alpha', 'P_f', 'depth', 'ratio', 'contrasts'}: lists, 'samples': a dict; eq. 7 per
     family with >= 2 values of k_n, eq. 9 per family with >= 2 values of phi_i, the overlap fit per family
     of k_n (any number of k_n), alpha, P(f) and the depth windows pooled over the seeds of each set, the
     F_t/F_n collapse per family of mu (``ratio.tests``), the sets that differ in one setting from the
-    one at its default (``contrasts.contrasts``)."""
+    one at its default (``contrasts.contrasts``), whether the runs are independent samples (``samples.tests``)."""
     out = {"eq7": [], "eq9": [], "overlap": [], "alpha": [], "P_f": [], "depth": [], "ratio": ratio.tests(sets),
-           "contrasts": contrasts.contrasts(sets)}
+           "contrasts": contrasts.contrasts(sets), "samples": samples.tests(sets)}
     for fam, members in families(sets, "contact.k_n"):
         out["overlap"].append(dict(family=fam, **pooled.overlap_fit(members)))
     for s in sets:

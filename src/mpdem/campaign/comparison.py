@@ -16,7 +16,7 @@ import numpy as np
 
 from ..io import rundir
 from ..analysis import fits
-from . import contrasts, depth, paper, ratio
+from . import contrasts, depth, paper, ratio, samples
 from .figures import FIGURES
 from .runs import NAN, families, fmt_kn, fmt_pm, md_table as _table
 
@@ -226,6 +226,7 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=()):
     L += _depth_section(windows)
     L += ratio.section(fit_res.get("ratio", []), _fam_text)
     L += contrasts.section(fit_res.get("contrasts", []), _fam_text)
+    L += samples.section(fit_res.get("samples", {}))
     L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
           "(fit weights 1/σ², σ = the family's pooled seed-to-seed scatter / √(seeds of the set); "
           "the free fit, then with α_n fixed: 1/2 at μ = 0, the paper's 1/4 with friction):", ""]
