@@ -75,7 +75,7 @@ bench: setup
 # then collect into analysis/results/dev. From nothing: rm -rf analysis/results/dev/runs first.
 DEV := analysis/sweeps/dev
 reproduce: setup
-	$(PY) -m mpdem sweep $(DEV)/fig2-4.tsv $(DEV)/fig7.tsv $(DEV)/fig9.tsv $(DEV)/spinners.tsv --config $(DEV)/dev.toml \
+	$(PY) -m mpdem sweep $(DEV)/fig2-4.tsv $(DEV)/fig7.tsv $(DEV)/fig7b.tsv $(DEV)/fig9.tsv $(DEV)/spinners.tsv --config $(DEV)/dev.toml \
 	  --out analysis/results/dev/runs --collect analysis/results/dev
 
 # The tables, fits and figures of analysis/results/dev again, from its committed summaries alone.

@@ -42,11 +42,12 @@ def test_rows_are_named_and_set_as_the_cluster_helper_does(tmp_path):
 
 def test_the_development_tables():
     """analysis/sweeps/dev: N = 2000 in a 10 d box; the issue's mu x epsilon x 3 seeds, k_n ladder
-    for two families with 2 seeds, phi_i ladder with 2 seeds, and three of those rows again under the
-    translational stop rule (spinners.tsv); no run directory shared."""
+    for two families with 2 seeds, Fig. 7b's three other families to 2e7 with 2 seeds, phi_i ladder with 2
+    seeds, and three of those rows again under the translational stop rule (spinners.tsv); no run directory
+    shared."""
     rows = sweep.plan(sorted(str(t) for t in DEV.glob("*.tsv")), str(DEV / "dev.toml"))
     cfgs = {r.name: config.load(str(DEV / "dev.toml"), r.sets).values for r in rows}
-    assert len(cfgs) == len(rows) == 60 + 16 + 12 + 3
+    assert len(cfgs) == len(rows) == 60 + 16 + 16 + 12 + 3
     assert all(v["pour.N"] == 2000 and v["box.L_x"] == v["box.L_y"] == 10 for v in cfgs.values())
     by_table = {}
     for r in rows:
@@ -62,6 +63,14 @@ def test_the_development_tables():
         by_kn.setdefault(v["contact.k_n"], set()).add(v["run.seed"])
     assert set(fam) == {(0.0, 0.88), (0.5, 0.88)}
     assert all(sorted(k) == [2e5, 2e6, 2e7, 2e8] and all(len(s) == 2 for s in k.values()) for k in fam.values())
+    fam = {}
+    for v in by_table["fig7b.tsv"]:
+        by_kn = fam.setdefault((v["contact.mu"], v["contact.epsilon"], v["stop.energy"]), {})
+        by_kn.setdefault(v["contact.k_n"], set()).add(v["run.seed"])
+    # [0.5, 0.26] at 2e5 is fig2-4.tsv's (seeds 1-3); mu = 10 on the translational energy from 2e5 on
+    assert fam == {(0.5, 0.5, "total"): {2e5: {2, 3}, 2e6: {2, 3}, 2e7: {2, 3}},
+                   (0.5, 0.26, "total"): {2e6: {2, 3}, 2e7: {2, 3}},
+                   (10.0, 0.26, "translational"): {2e5: {2, 3}, 2e6: {2, 3}, 2e7: {2, 3}}}
     assert sorted({v["pour.phi_i"] for v in by_table["fig9.tsv"]}) == [0.02, 0.05, 0.08, 0.13, 0.20, 0.30]
     # spinners.tsv: rows of the other tables, the stop rule on the translational energy the only change
     others = [v for t, vs in by_table.items() if t != "spinners.tsv" for v in vs]
