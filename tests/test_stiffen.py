@@ -180,3 +180,27 @@ def test_the_command_line_names_a_rise_past_a_decade(soft, tmp_path):
     assert "--k_n 500000" in p.stderr and "up to 200000" in p.stderr and not (tmp_path / "x").exists()
     p = cli("stiffen", tmp_path / "nothing", "--k_n", "2e5", check=1)
     assert "no final.h5" in p.stderr
+
+
+def test_the_ladder_script_refuses_a_start_that_is_not_its_pile(soft, tmp_path):
+    """analysis/sweeps/paper/ladder.sh FROM=RUN: a pile of another mu or seed, or a run without its final
+    state, is refused before any rung (exit 2) and nothing is written."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "analysis" / "sweeps" / "paper" / "ladder.sh"
+
+    def ladder(start, mu, seed):
+        env = {**os.environ, "PY": sys.executable, "FROM": str(start)}
+        return subprocess.run(["bash", str(script), mu, seed, str(tmp_path / "out")], env=env,
+                              capture_output=True, text=True, timeout=120)
+
+    p = ladder(soft, "0", "2")
+    assert p.returncode == 2 and "mu = 0.5, seed = 2, not MU = 0" in p.stdout + p.stderr
+    p = ladder(soft, "0.5", "3")
+    assert p.returncode == 2 and "not MU = 0.5, SEED = 3" in p.stdout + p.stderr
+    p = ladder(tmp_path / "nothing", "0.5", "2")
+    assert p.returncode == 2 and "not a converged run with its final.h5" in p.stdout
+    assert not any((tmp_path / "out").glob("kn*"))

@@ -6,6 +6,10 @@
 # the ladder (exit 3).
 #   bash analysis/sweeps/paper/ladder.sh MU SEED OUT [TOP] [CONFIG]
 #   bash analysis/sweeps/paper/ladder.sh 0 4 analysis/results/paper/runs/ladder-dev/mu0_s4 2e8 analysis/sweeps/dev/dev.toml
+#   FROM=analysis/results/paper/runs/size/mu0_eps0.88_kn2e5_phi0.13_s1_bed101_max_steps2e7 \
+#     bash analysis/sweeps/paper/ladder.sh 0 1 analysis/results/paper/runs/ladder-size/mu0_s1_bed101 2e8
+# FROM=RUN starts the ladder from a converged run instead of pouring OUT/kn2e5 (its final.h5 is the first rung's
+# start; MU and SEED are then only the ladder's labels and must match it): a pile already poured at the paper's size.
 # DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
 # before that much wall time (exit 75: run the script again to go on).
 # Each converged rung is analysed (mpdem analyze --packing). The committed rungs of analysis/results/paper keep
@@ -37,9 +41,23 @@ rung() {  # dir max_steps command...: the rung, unless it converged; a restart w
     return $rc
 }
 # the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt)
-rung "$out/kn2e5" 1e7 "$PY" -m mpdem run "$cfg" --set contact.mu="$mu" --set run.seed="$seed" \
-    --set output.checkpoint_seconds=600 || exit $?
-prev=$out/kn2e5
+if [ -n "${FROM:-}" ]; then
+    [ "$(status "$FROM")" = converged ] && [ -f "$FROM/final.h5" ] || {
+        echo "ladder: FROM=$FROM is not a converged run with its final.h5"; exit 2; }
+    "$PY" - "$FROM/config.toml" "$mu" "$seed" <<'PY' || exit 2
+import sys, tomllib
+c = tomllib.load(open(sys.argv[1], "rb"))
+mu, seed = c["contact"]["mu"], c["run"]["seed"]
+if (mu, seed) != (float(sys.argv[2]), int(sys.argv[3])):
+    sys.exit(f"ladder: FROM has mu = {mu}, seed = {seed}, not MU = {sys.argv[2]}, SEED = {sys.argv[3]}")
+PY
+    analyse "$FROM"
+    prev=$FROM
+else
+    rung "$out/kn2e5" 1e7 "$PY" -m mpdem run "$cfg" --set contact.mu="$mu" --set run.seed="$seed" \
+        --set output.checkpoint_seconds=600 || exit $?
+    prev=$out/kn2e5
+fi
 for k in 2e6 2e7 2e8 2e9; do
     rung "$out/kn$k" "$("$PY" -c "print(f'{5e6 * ($k / 2e5) ** 0.5:.3g}')")" \
         "$PY" -m mpdem stiffen "$prev" --k_n "$k" || exit $?
