@@ -1,5 +1,5 @@
 """Whether the runs of a set are independent samples: a seed's offset shared across sets, and beds
-against pours (docs/model.md 6.8).
+against pours (docs/analysis.md).
 
 A run's seed draws its bed (unless ``bed.seed`` is set apart) and its pour (insertion and initial
 velocities), and seed k lies on the same bed in every set. Two questions follow:
