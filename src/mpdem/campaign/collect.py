@@ -311,8 +311,8 @@ def group(runs, known=None):
     for key in sorted(by_key, key=lambda k: (_set_order(dict(k[0])), repr(k[1]))):
         kept = {}
         for r in by_key[key]:
-            # the sample: the pour's seed and the bed's (summaries before bed.seed: the run's seed)
-            seed = (r.params["run.seed"], r.s.get("bed_seed", r.params["run.seed"]))
+            # the sample: the pour's seed and the bed's
+            seed = (r.params["run.seed"], r.bed_seed)
             if seed in kept:
                 skipped.append({"path": r.path, "reason": f"duplicate: seed {seed[0]} (bed seed {seed[1]}) of this "
                                                           f"parameter set is {kept[seed].path} (the same sample)"})

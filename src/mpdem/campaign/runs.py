@@ -42,6 +42,11 @@ class AnalysedRun:
     def params(self):
         return self.s["params"]
 
+    @property
+    def bed_seed(self):
+        """The seed of the run's bed (summaries written before ``bed.seed`` existed: the run's seed)."""
+        return self.s.get("bed_seed", self.params["run.seed"])
+
 
 @dataclass
 class Set:

@@ -20,21 +20,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..analysis.fits import one_way_anova, two_way_anova
 from .runs import md_table
 
 QUANTITIES = ("z", "phi")
 
 
-def bed_of(run):
-    """The bed seed of a run (summaries written before ``bed.seed`` existed: the run's seed)."""
-    return run.s.get("bed_seed", run.params["run.seed"])
-
-
 def _own_bed(s):
     """{seed: run} of the set's runs on their own bed, with z and phi."""
     return {r.params["run.seed"]: r for r in s.runs
-            if bed_of(r) == r.params["run.seed"] and all(math.isfinite(r.q.get(q, math.nan)) for q in QUANTITIES)}
+            if r.bed_seed == r.params["run.seed"] and all(math.isfinite(r.q.get(q, math.nan)) for q in QUANTITIES)}
 
 
 def _best_seeds(own):
@@ -96,17 +93,15 @@ def bed_scatter(sets):
         by_seed = {}
         for r in s.runs:
             by_seed.setdefault(r.params["run.seed"], []).append(r)
-        if not any(len({bed_of(r) for r in g}) >= 2 for g in by_seed.values()):
+        if not any(len({r.bed_seed for r in g}) >= 2 for g in by_seed.values()):
             continue
-        e = {"set": s.id, "runs": [[r.params["run.seed"], bed_of(r), r.q.get("z"), r.q.get("phi")] for r in s.runs]}
+        e = {"set": s.id, "runs": [[r.params["run.seed"], r.bed_seed, r.q.get("z"), r.q.get("phi")] for r in s.runs]}
         own = _own_bed(s)
         for q in QUANTITIES:
             e[q] = one_way_anova([[r.q[q] for r in g if math.isfinite(r.q.get(q, math.nan))]
                                   for g in by_seed.values()])
             v = [r.q[q] for r in own.values()]
-            m = sum(v) / len(v) if v else math.nan
-            e[q]["seed_scatter"] = (math.sqrt(sum((x - m) ** 2 for x in v) / (len(v) - 1))
-                                    if len(v) >= 2 else math.nan)
+            e[q]["seed_scatter"] = float(np.std(v, ddof=1)) if len(v) >= 2 else math.nan
         out.append(e)
     return out
 
