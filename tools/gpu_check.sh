@@ -14,11 +14,13 @@
 #   PARTS="..."   which parts run, in this order whatever the order named (default all but profile):
 #       bench (the GPU on the 20k table, a thread a row and an entry, and its tiles; BENCH_CPU=1 the CPU too), pour (with POUR_MINUTES),
 #       digests (CPU against GPU on the example at mu = 0.5 and 0, the LAMMPS pile with Hooke and Hertz, a
-#       flow-arrest pile, a stiffening rung), switch (a restart that switches device, run to run, 2 ranks),
+#       flow-arrest pile, a stiffening rung), quick (of those the example at mu = 0.5 alone, a thread a row and
+#       a thread an entry: a minute), switch (a restart that switches device, run to run, 2 ranks),
 #       pytest (the engine tests compiled for the GPU), profile (Nsight Compute's launch, occupancy, throughput
 #       and stall sections of the fused steps and the list build, where `ncu` is found), anatomy
 #       (tools/gpu_anatomy.py: a fused step with the rows and over no rows, blocks of 128 and 256, a thread a row
 #       and a thread an entry), rows (ROWS: sweep tables run on the GPU, below)
+#   TILE=none  no bench of the 7 x 7 tiles (a minute of the bench part)
 #   WORK=DIR   where the runs go (default $OUT/work; emptied first unless KEEP_WORK=1)
 # SIZE=small runs every check on tiny piles (a dry run, e.g. under NUMBA_ENABLE_CUDASIM=1 without a GPU).
 set -uo pipefail
@@ -45,7 +47,7 @@ if [ "$SIZE" = small ]; then
     STIFF=(--k_n 2e4 --set run.max_steps=100 --set stiffen.ramp_time=0.02 --set stiffen.update_interval=0.005)
     FLOWT=0.1
 else
-    EX=(); EXSTEPS=30000; LSTEPS=2000; BSTEPS=2000; TSTEPS=200; TILE=7x7
+    EX=(); EXSTEPS=30000; LSTEPS=2000; BSTEPS=2000; TSTEPS=200; TILE=${TILE:-7x7}
     POUR=(--set pour.N=20000 --set box.L_x=20 --set box.L_y=20); PSTEPS=20000
     STIFF=(--k_n 2e6 --set run.max_steps=3000 --set stiffen.ramp_time=0.05)
     FLOWT=1.5
@@ -90,8 +92,10 @@ if has bench; then
         $PY -m mpdem bench --table "$TABLE" --device gpu --set engine.gpu_threads=entry --steps $BSTEPS \
             > "$OUT/bench-gpu-entry.log" 2>&1
         say "bench 20k gpu, a thread an entry: $(tail -1 "$OUT/bench-gpu-entry.log")"
-        $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
-        say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
+        if [ "$TILE" != none ]; then
+            $PY -m mpdem bench --table "$TABLE" --device gpu --steps $TSTEPS --tile $TILE > "$OUT/bench-gpu-tile.log" 2>&1
+            say "bench $TILE tiles gpu: $(tail -1 "$OUT/bench-gpu-tile.log")"
+        fi
     else
         say "bench: no table at $TABLE"
     fi
@@ -112,6 +116,16 @@ if has pour && [ "${POUR_MINUTES:-0}" -gt 0 ]; then
     tail -3 "$w/whole.log" | tee -a "$SUM"
 fi
 # 3. the digests, CPU against GPU
+entry_digest() {  # the forces a thread an entry (engine.gpu_threads = "entry") against the CPU run of the first pile
+    read -r de se < <(run example-mu0.5-entry gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set engine.gpu_threads=entry)
+    dc=$(digest "$w/example-mu0.5-cpu")
+    v=DIFFER; [ -n "$dc" ] && [ "$dc" = "$de" ] && v=equal
+    say "digest example-mu0.5, a thread an entry ($EXSTEPS steps): cpu ${dc:0:16} gpu ${de:0:16} (${se} s): $v"
+}
+if has quick && ! has digests; then
+    compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
+    entry_digest
+fi
 if has digests; then
     compare example-mu0.5 $EXSTEPS "${EX[@]}" --set contact.mu=0.5
     compare example-mu0 $EXSTEPS "${EX[@]}" --set contact.mu=0
@@ -120,11 +134,7 @@ if has digests; then
     compare lammps-hertz $LSTEPS "${LMP[@]}" --set contact.mu=0.5 --set contact.model=hertz --set bed.wall=true
     # flow arrest (docs/model.md 5.5): poured onto a bed tilted by 25 degrees, levelled halfway
     compare flow-arrest $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set flow.incline=25 --set flow.time=$FLOWT
-    # the forces a thread an entry (engine.gpu_threads = "entry") against the CPU run of the first pile
-    read -r de se < <(run example-mu0.5-entry gpu $EXSTEPS "${EX[@]}" --set contact.mu=0.5 --set engine.gpu_threads=entry)
-    dc=$(digest "$w/example-mu0.5-cpu")
-    v=DIFFER; [ -n "$dc" ] && [ "$dc" = "$de" ] && v=equal
-    say "digest example-mu0.5, a thread an entry ($EXSTEPS steps): cpu ${dc:0:16} gpu ${de:0:16} (${se} s): $v"
+    entry_digest
     # a stiffening rung of that pile (docs/model.md 6.6: the ramp's laws, the history rescaled) on both devices
     for dev in cpu gpu; do
         $PY -m mpdem stiffen "$w/example-mu0.5-cpu" "${STIFF[@]}" --out "$w/stiff-$dev" --force --quiet --device $dev \
@@ -194,15 +204,25 @@ if has anatomy && [ -n "$TABLE" ] && [ -f "$TABLE" ]; then
     done
 fi
 # 8. PARTS=rows: the rows of sweep tables (ROWS, under ROWS_CONFIG; ROWS_SET="key=value ..." beside them) on the GPU,
-# one after the other, until ROWS_SECONDS (default 400) are spent; then the sweep stops them with a checkpoint. Each
+# one after the other, until ROWS_SECONDS (default 400) are spent, or until ROWS_UNTIL seconds after this script's
+# start where that is set (leave the device call's own limit a minute beyond it: a row still starting when the time
+# is up may take up to ROWS_KILL_AFTER, default 30 s, to stop, and a call killed before the packing below brings
+# nothing back, a row finished in it included); ROWS_FROM=DIR: row directories (their config.toml and newest checkpoint, or
+# analysis/summary.json for a row to skip) copied in first, so that the rows go on from there; then the sweep stops them with a checkpoint. Each
 # row's directory comes back as $OUT/<row>.tgz (at most 8 files come back from the device: keep the rows few): its
 # run and analysis files with final.h5, or, where it did not finish, its newest checkpoint to go on from with
 # `mpdem sweep` or `mpdem restart` on any machine (the digest does not depend on the device).
 if has rows && [ -n "${ROWS:-}" ]; then
     t=$SECONDS
+    mkdir -p "$w/rows"
+    [ -n "${ROWS_FROM:-}" ] && cp -r "$ROWS_FROM"/. "$w/rows/"
+    rsec=${ROWS_SECONDS:-400}
+    [ -n "${ROWS_UNTIL:-}" ] && rsec=$((ROWS_UNTIL - (SECONDS - t0)))
+    [ "$rsec" -lt 30 ] && rsec=30
+    say "rows: $rsec s"
     rs=(); for kv in ${ROWS_SET:-}; do rs+=(--set "$kv"); done
     # shellcheck disable=SC2086  # ROWS: several tables
-    timeout -s TERM --kill-after=120 "${ROWS_SECONDS:-400}" $PY -m mpdem sweep $ROWS ${ROWS_CONFIG:+--config "$ROWS_CONFIG"} \
+    timeout -s TERM --kill-after="${ROWS_KILL_AFTER:-30}" "$rsec" $PY -m mpdem sweep $ROWS ${ROWS_CONFIG:+--config "$ROWS_CONFIG"} \
         --out "$w/rows" --set engine.device=gpu "${rs[@]}" --jobs 1 --no-collect --progress 60 > "$OUT/rows.log" 2>&1
     say "rows ($ROWS): sweep exit status $? after $((SECONDS - t)) s"
     grep "^sweep: " "$OUT/rows.log" | tail -n 12 | tee -a "$SUM"
