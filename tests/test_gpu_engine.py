@@ -208,7 +208,7 @@ def test_every_operation_of_a_twin_is_explicitly_rounded():
 def test_no_gpu_is_one_clear_error(monkeypatch):
     monkeypatch.setattr(runtime, "SIMULATOR", False)
     monkeypatch.setattr(runtime.cuda, "is_available", lambda: False)
-    with pytest.raises(DeviceError, match="engine.device = 'gpu': no CUDA GPU"):
+    with pytest.raises(DeviceError, match="engine.device = 'gpu': no CUDA GPU.*`--device cpu` runs the same"):
         gpu.Engine(State(np.arange(1), np.zeros((1, 3))), physics(), Domain(None))
 
 

@@ -55,7 +55,9 @@ def _kernels():
         raise DeviceError(f"engine.device = 'gpu' needs numba-cuda (pip install 'mpdem[gpu]'): {e}") from None
     why = runtime.unavailable()
     if why:
-        raise DeviceError(f"engine.device = 'gpu': {why}")
+        # a run moved to a GPU at a restart keeps engine.device = "gpu" in its config.toml
+        raise DeviceError(f"engine.device = 'gpu': {why}; `--device cpu` runs the same trajectory on the CPU, "
+                          "a restart of a run made on a GPU too")
     from ..kernels.gpu import lists, step
     return runtime, step, lists
 
