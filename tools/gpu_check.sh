@@ -207,9 +207,10 @@ fi
 # one after the other, until ROWS_SECONDS (default 400) are spent, or until ROWS_UNTIL seconds after this script's
 # start where that is set (leave the device call's own limit a minute beyond it: a row still starting when the time
 # is up may take up to ROWS_KILL_AFTER, default 30 s, to stop, and a call killed before the packing below brings
-# nothing back, a row finished in it included); ROWS_FROM=DIR: row directories (their config.toml and newest checkpoint, or
+# back only the rows finished by then); ROWS_FROM=DIR: row directories (their config.toml and newest checkpoint, or
 # analysis/summary.json for a row to skip) copied in first, so that the rows go on from there; then the sweep stops them with a checkpoint. Each
-# row's directory comes back as $OUT/<row>.tgz (at most 8 files come back from the device: keep the rows few): its
+# row this call ran comes back as $OUT/<row>.tgz, packed as soon as it is finished and analysed, the others when the
+# sweep has stopped (at most 8 files come back from the device: keep the rows few): its
 # run and analysis files with final.h5, or, where it did not finish, its newest checkpoint to go on from with
 # `mpdem sweep` or `mpdem restart` on any machine (the digest does not depend on the device).
 if has rows && [ -n "${ROWS:-}" ]; then
@@ -221,18 +222,36 @@ if has rows && [ -n "${ROWS:-}" ]; then
     [ "$rsec" -lt 30 ] && rsec=30
     say "rows: $rsec s"
     rs=(); for kv in ${ROWS_SET:-}; do rs+=(--set "$kv"); done
+    touch "$w/rows.start"
+    mkdir -p "$w/pack"
+    pack_row() {  # a row's directory as $OUT/<row>.tgz: the newest checkpoint alone, none once it has its final.h5
+        local d=${1%/} n ck c
+        n=$(basename "$d")
+        ck=$(ls "$d"/checkpoints/ckpt-*.h5 2>/dev/null | sort | tail -1)
+        for c in "$d"/checkpoints/ckpt-*.h5; do
+            [ -f "$c" ] && { [ -f "$d/final.h5" ] || [ "$c" != "$ck" ]; } && rm -f "$c"
+        done
+        tar -czf "$w/pack/$n.tgz" -C "$w/rows" "$n" && mv "$w/pack/$n.tgz" "$OUT/$n.tgz"
+    }
+    # a row finished and analysed is packed at once, so that a call cut off later still brings it back
+    ( while sleep 10; do
+        for d in "$w"/rows/*/; do
+            [ ! -f "$OUT/$(basename "$d").tgz" ] && grep -qE "^sweep: $(basename "$d"): (done|not converged)" "$OUT/rows.log" 2>/dev/null &&
+                pack_row "$d"
+        done
+      done ) &
+    watcher=$!
     # shellcheck disable=SC2086  # ROWS: several tables
     timeout -s TERM --kill-after="${ROWS_KILL_AFTER:-30}" "$rsec" $PY -m mpdem sweep $ROWS ${ROWS_CONFIG:+--config "$ROWS_CONFIG"} \
         --out "$w/rows" --set engine.device=gpu "${rs[@]}" --jobs 1 --no-collect --progress 60 > "$OUT/rows.log" 2>&1
     say "rows ($ROWS): sweep exit status $? after $((SECONDS - t)) s"
+    kill "$watcher" 2>/dev/null; wait "$watcher" 2>/dev/null
     grep "^sweep: " "$OUT/rows.log" | tail -n 12 | tee -a "$SUM"
     for d in "$w"/rows/*/; do
         n=$(basename "$d")
-        ck=$(ls "$d"checkpoints/ckpt-*.h5 2>/dev/null | sort | tail -1)
-        for c in "$d"checkpoints/ckpt-*.h5; do   # the newest checkpoint alone, and none once the run has its final.h5
-            [ -f "$c" ] && { [ -f "$d/final.h5" ] || [ "$c" != "$ck" ]; } && rm -f "$c"
-        done
-        tar -czf "$OUT/$n.tgz" -C "$w/rows" "$n"
+        # the rows this call ran (not those it was given and did not reach, nor the skip marks of finished ones)
+        [ -n "$(find "$d" -type f -newer "$w/rows.start" | head -1)" ] || continue
+        [ -f "$OUT/$n.tgz" ] || pack_row "$d"
         say "    $n: $(tail -1 "$d/thermo.csv" 2>/dev/null | cut -d, -f1,3) $(ls "$d" | tr '\n' ' ')"
     done
 fi
