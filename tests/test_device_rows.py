@@ -68,7 +68,7 @@ def test_unpack_keeps_the_local_config_and_only_the_newest_checkpoint(tmp_path, 
     write(runs / going / "thermo.csv", "short")
     write(runs / going / "checkpoints" / "ckpt-00001.h5", "old")
     write(runs / going / "checkpoints" / "ckpt-00002.h5", "old")
-    a = tgz(tmp_path, going, {"config.toml": 'device = "gpu"', "thermo.csv": "longer",
+    a = tgz(tmp_path, going, {"config.toml": 'device = "gpu"', "thermo.csv": "longer", ".lock": "device pid",
                               "checkpoints/ckpt-00003.h5": "newest"})
     b = tgz(tmp_path, fresh, {"config.toml": 'device = "gpu"', "summary.json": "{}", "packing.npz": "p",
                               "final.h5": "f", "analysis/summary.json": "{}", "analysis/gofr.csv": "g",
@@ -78,6 +78,7 @@ def test_unpack_keeps_the_local_config_and_only_the_newest_checkpoint(tmp_path, 
     assert (runs / going / "config.toml").read_text() == 'device = "cpu"'
     assert (runs / going / "thermo.csv").read_text() == "longer"
     assert sorted(os.listdir(runs / going / "checkpoints")) == ["ckpt-00003.h5"]
+    assert not (runs / going / ".lock").exists()
     assert sorted(removed) == [f"runs/{going}/checkpoints/ckpt-00001.h5", f"runs/{going}/checkpoints/ckpt-00002.h5"]
     assert (runs / fresh / "config.toml").read_text() == 'device = "gpu"'     # none here to keep
     assert to_commit == [f"runs/{going}/config.toml", f"runs/{going}/checkpoints/ckpt-00003.h5",

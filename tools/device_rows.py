@@ -102,8 +102,8 @@ def unpack(runs, archives):
                 rel = os.path.relpath(root, src)
                 os.makedirs(os.path.join(dst, rel), exist_ok=True)
                 for f in files:
-                    if rel == "." and f == "config.toml" and keep_config:
-                        continue
+                    if rel == "." and (f == ".lock" or (f == "config.toml" and keep_config)):
+                        continue    # the device's run lock, or its config (engine.device = "gpu")
                     shutil.copy2(os.path.join(root, f), os.path.join(dst, rel, f))
         to_commit += [os.path.normpath(p) for p in _results(dst)]
     return removed, to_commit

@@ -231,7 +231,7 @@ if has rows && [ -n "${ROWS:-}" ]; then
         for c in "$d"/checkpoints/ckpt-*.h5; do
             [ -f "$c" ] && { [ -f "$d/final.h5" ] || [ "$c" != "$ck" ]; } && rm -f "$c"
         done
-        tar -czf "$w/pack/$n.tgz" -C "$w/rows" "$n" && mv "$w/pack/$n.tgz" "$OUT/$n.tgz"
+        tar -czf "$w/pack/$n.tgz" --exclude=.lock -C "$w/rows" "$n" && mv "$w/pack/$n.tgz" "$OUT/$n.tgz"
     }
     # a row finished and analysed is packed at once, so that a call cut off later still brings it back
     ( while sleep 10; do
