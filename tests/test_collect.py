@@ -499,6 +499,30 @@ def test_the_rungs_of_a_stiffening_ladder_are_one_family_apart_from_the_poured_p
     assert ladder[0]["stiffened x"] == 10.0 and [s.params["contact.k_n"] for s in ladder[1]] == [2e6, 2e7]
 
 
+def test_a_family_across_k_n_keeps_an_epsilon_that_differs_in_its_last_bit(tmp_path):
+    """Summaries written before 2026-11-27 (late night) hold epsilon as gamma_n's round trip, which
+    differs in the last bit at some k_n (0.5 -> 0.49999999999999994 at 2e5 and 2e7, not at 2e6): read,
+    it is the value given, and the three sets are one family across k_n."""
+    from mpdem.campaign.runs import AnalysedRun, families
+    rng = np.random.default_rng(14)
+    root = tmp_path / "runs"
+    for k_n, z, eps in ((2e5, 4.82, 0.49999999999999994), (2e6, 4.73, 0.5), (2e7, 4.69, 0.49999999999999994)):
+        for seed in (2, 3):
+            p = params(mu=0.5, epsilon=0.5, k_n=k_n, seed=seed)
+            p["contact.epsilon"] = eps
+            make_run(root / f"kn{k_n:g}_s{seed}", p, z + 0.001 * seed, 0.60, 0.5, rng)
+    runs = [AnalysedRun(str(d), json.loads((d / "analysis/summary.json").read_text())) for d in sorted(root.iterdir())]
+    assert {r.params["contact.epsilon"] for r in runs} == {0.5}
+    sets, _, _ = co.group(runs)
+    assert len(sets) == 3
+    (fam, members), = families(sets, "contact.k_n")
+    assert fam["epsilon"] == 0.5 and [s.params["contact.k_n"] for s in members] == [2e5, 2e6, 2e7]
+    # and were the run's value kept as read, the family's floats to 10 digits still join them
+    key = [dict(s.params, **{"contact.epsilon": e}) for s, e in zip(members, (0.49999999999999994, 0.5, 0.5))]
+    from mpdem.campaign.runs import family_key
+    assert len({family_key(k, "contact.k_n") for k in key}) == 1
+
+
 def test_a_run_on_another_bed_is_another_sample(tmp_path):
     """``bed.seed`` apart from run.seed: one pour seed on two beds is two samples of the set; the
     same pair of seeds again is the same sample (a duplicate). Summaries written before bed.seed

@@ -5,7 +5,7 @@ import re
 import pytest
 
 from mpdem import config
-from mpdem.config import ConfigError
+from mpdem.config import ConfigError, gamma_n_from_epsilon, restitution
 
 
 def cfg(**sets):
@@ -88,6 +88,17 @@ def test_gamma_n_and_epsilon_must_agree():
     assert c.contact.epsilon == pytest.approx(0.883, abs=1e-3)
     with pytest.raises(ConfigError, match="disagree"):
         cfg(**{"contact.gamma_n": "50.0", "contact.epsilon": "0.5"})
+
+
+def test_epsilon_given_beside_its_gamma_n_stays_as_given():
+    """A run's config.toml holds epsilon and the gamma_n made from it; read back, epsilon is the one given,
+    not gamma_n's round trip (which differs in the last bit for 0.1 at every k_n, 0.5 at most)."""
+    for eps, k_n in ((0.1, 2e5), (0.5, 2e7), (0.26, 2e8)):
+        g = gamma_n_from_epsilon(eps, k_n)
+        assert restitution(g, k_n) != eps                    # the round trip this guards against
+        c = cfg(**{"contact.k_n": repr(k_n), "contact.epsilon": repr(eps), "contact.gamma_n": repr(g)})
+        assert c.contact.epsilon == eps and c.contact.gamma_n == g
+        assert "contact.epsilon" not in c.derived
 
 
 def test_resolved_config_round_trips(tmp_path):

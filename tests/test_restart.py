@@ -278,3 +278,16 @@ def test_one_writer_per_run_directory(straight, tmp_path):
     p = mpdem("restart", stale, check=0)
     assert "taking over the lock of pid 999999 on elsewhere" in p.stdout + p.stderr
     assert summary(stale)["digest"] == ref
+
+
+def test_a_run_whose_epsilon_does_not_survive_gamma_n_restarts(tmp_path):
+    """epsilon = 0.1 comes back from its gamma_n as 0.09999999999999998: config.toml (epsilon and the
+    gamma_n made from it) must still read as the checkpoint's config, and the restart give the straight
+    digest (before 2026-11-27, late night, such a restart was refused: "does not match")."""
+    small = ["box.L_x=4", "box.L_y=4", "pour.N=40", "contact.epsilon=0.1", "output.checkpoint_every=150"]
+    args = [a for kv in small for a in ("--set", kv)]
+    mpdem("run", *args, "--set", "run.max_steps=300", "--out", tmp_path / "straight", "--quiet", check=3)
+    mpdem("run", *args, "--set", "run.max_steps=150", "--out", tmp_path / "split", "--quiet", check=3)
+    mpdem("restart", tmp_path / "split", "--set", "run.max_steps=300", "--quiet", check=3)
+    assert summary(tmp_path / "split")["digest"] == summary(tmp_path / "straight")["digest"]
+    assert summary(tmp_path / "split")["segments"] == 2

@@ -204,3 +204,17 @@ def test_the_ladder_script_refuses_a_start_that_is_not_its_pile(soft, tmp_path):
     p = ladder(tmp_path / "nothing", "0.5", "2")
     assert p.returncode == 2 and "not a converged run with its final.h5" in p.stdout
     assert not any((tmp_path / "out").glob("kn*"))
+
+
+def test_a_ramp_read_back_from_its_config_toml_has_the_same_laws(tmp_path):
+    """A rung's config.toml holds epsilon and gamma_n; a restart reads it back, and its ramp makes every
+    tread's gamma_n from that epsilon: the same laws as the straight run's, also for an epsilon whose
+    round trip through gamma_n is not exact (0.1)."""
+    cfg = cfg_of(run__initial_file="x.h5", contact__k_n=2e6, contact__epsilon=0.1, stiffen__k_n_from=2e5,
+                 stiffen__ramp_time=1.0, stiffen__update_interval=0.01, run__max_steps=10)
+    (tmp_path / "config.toml").write_text(cfg.to_toml())
+    again = mpdem.load_config(tmp_path / "config.toml")
+    assert again.contact.epsilon == cfg.contact.epsilon == 0.1
+    law = make_law(2e6, cfg.contact.k_t, cfg.contact.gamma_n, 0.0, 0.5, cfg.integration.dt)
+    a, b = stiffen.Ramp(cfg, law), stiffen.Ramp(again, law)
+    assert all(a.law(s) == b.law(s) for s in range(0, a.end + 2, 7))

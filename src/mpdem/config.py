@@ -561,11 +561,16 @@ def resolve(raw):
     else:
         g = vals["contact.gamma_n"]
         need("contact.gamma_n", 0 <= g < gcrit, f"0 <= gamma_n < 2 sqrt(2 k_n / m) = {gcrit:.6g} (critical damping)")
-        if "contact.epsilon" in raw and not math.isclose(restitution(g, k_n), eps, rel_tol=1e-9, abs_tol=1e-12):
-            raise ConfigError(f"contact.gamma_n = {g!r} and contact.epsilon = {eps!r} disagree "
-                              f"(gamma_n gives epsilon = {restitution(g, k_n):.6g}); give only one of them")
-        vals["contact.epsilon"] = restitution(g, k_n)
-        derived.add("contact.epsilon")
+        if "contact.epsilon" in raw:
+            if not math.isclose(restitution(g, k_n), eps, rel_tol=1e-9, abs_tol=1e-12):
+                raise ConfigError(f"contact.gamma_n = {g!r} and contact.epsilon = {eps!r} disagree "
+                                  f"(gamma_n gives epsilon = {restitution(g, k_n):.6g}); give only one of them")
+            # both given and agreeing (a run's own config.toml): epsilon stays as given, not as gamma_n's round
+            # trip (0.5 -> 0.49999999999999994 at some k_n), so that a stiffening ramp's gamma_n, made from it,
+            # is the same after a restart, and a family of runs keeps one epsilon
+        else:
+            vals["contact.epsilon"] = restitution(g, k_n)
+            derived.add("contact.epsilon")
     gamma_n = vals["contact.gamma_n"]
     need("contact.gamma_t", vals["contact.gamma_t"] >= 0, "gamma_t >= 0")
     mu = vals["contact.mu"]
