@@ -222,7 +222,7 @@ if has rows && [ -n "${ROWS:-}" ]; then
     [ "$rsec" -lt 30 ] && rsec=30
     say "rows: $rsec s"
     rs=(); for kv in ${ROWS_SET:-}; do rs+=(--set "$kv"); done
-    touch "$w/rows.start"
+    touch "$w/rows.start"; rm -f "$w/rows.end"
     mkdir -p "$w/pack"
     pack_row() {  # a row's directory as $OUT/<row>.tgz: the newest checkpoint alone, none once it has its final.h5
         local d=${1%/} n ck c
@@ -234,7 +234,8 @@ if has rows && [ -n "${ROWS:-}" ]; then
         tar -czf "$w/pack/$n.tgz" --exclude=.lock -C "$w/rows" "$n" && mv "$w/pack/$n.tgz" "$OUT/$n.tgz"
     }
     # a row finished and analysed is packed at once, so that a call cut off later still brings it back
-    ( while sleep 10; do
+    ( while [ ! -f "$w/rows.end" ]; do
+        sleep 5
         for d in "$w"/rows/*/; do
             [ ! -f "$OUT/$(basename "$d").tgz" ] && grep -qE "^sweep: $(basename "$d"): (done|not converged)" "$OUT/rows.log" 2>/dev/null &&
                 pack_row "$d"
@@ -245,7 +246,8 @@ if has rows && [ -n "${ROWS:-}" ]; then
     timeout -s TERM --kill-after="${ROWS_KILL_AFTER:-30}" "$rsec" $PY -m mpdem sweep $ROWS ${ROWS_CONFIG:+--config "$ROWS_CONFIG"} \
         --out "$w/rows" --set engine.device=gpu "${rs[@]}" --jobs 1 --no-collect --progress 60 > "$OUT/rows.log" 2>&1
     say "rows ($ROWS): sweep exit status $? after $((SECONDS - t)) s"
-    kill "$watcher" 2>/dev/null; wait "$watcher" 2>/dev/null
+    # the watcher ends after its round in hand (a row it is packing is packed whole, never twice)
+    touch "$w/rows.end"; wait "$watcher" 2>/dev/null
     grep "^sweep: " "$OUT/rows.log" | tail -n 12 | tee -a "$SUM"
     for d in "$w"/rows/*/; do
         n=$(basename "$d")

@@ -134,8 +134,7 @@ def _sig(x):
 def family_key(params, vary, extra=None):
     """What a family of sets that differ only in ``vary`` (a PARAM_KEYS key) shares.
 
-    Floats are compared to 10 significant digits. For ``contact.k_n`` the parameters
-    that follow k_n enter as the scale-free
+    For ``contact.k_n`` the parameters that follow k_n enter as the scale-free
     k_t/k_n, gamma_n/sqrt(k_n) and gamma_t/gamma_n (10 significant digits) and
     dt is left out, and so does a stiffened pile's ``stiffen.k_n_from``, as the
     rung's rise k_n / k_n_from (the rungs of one ladder are one family, apart from
@@ -147,10 +146,7 @@ def family_key(params, vary, extra=None):
     tuple of (name, value) pairs, short names.
     """
     skip = {"run.seed", vary} | (set(FOLLOW_K_N) if vary == "contact.k_n" else set())
-    # floats to 10 significant digits: a derived value (epsilon from gamma_n, in summaries written before
-    # 2026-11-27) may differ from its family's in the last bit
-    key = [(SHORT[k], _sig(params[k]) if isinstance(params[k], float) else params[k]) for k in PARAM_KEYS
-           if k not in skip]
+    key = [(SHORT[k], params[k]) for k in PARAM_KEYS if k not in skip]
     extra = dict(extra or {})
     if vary == "contact.k_n":
         k, g_n, g_t = params["contact.k_n"], params["contact.gamma_n"], params["contact.gamma_t"]
