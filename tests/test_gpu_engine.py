@@ -99,6 +99,32 @@ def test_steps_in_one_launch_give_the_steps_bits(case):
     assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
 
 
+@pytest.mark.parametrize("grid", range(len(GRIDS)))
+def test_every_step_record_of_one_launch_is_the_cpu_engines(grid):
+    """Each StepInfo of ``run_quiet`` (its overlap, contact count and height range), and the overlap
+    and contacts after it, equal the CPU engine's, step by step across list rebuilds: the host path's
+    evaluation at a rebuild step starts from neutral reductions, not the sum (and larger overlap) of
+    the evaluation before it."""
+    phys = CASES["mu0.5-gamma_t"]
+    x, v, omega, fixed, L = tight_lattice(m=5)
+    records = []
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, GRIDS[grid])):
+        st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
+        eng = engine(st, phys, Domain(None), **kw)
+        eng.start()
+        infos = []
+        for _ in range(4):      # a rebuild inside each stretch, and a contact count read between
+            infos += eng.run_quiet(6)
+            infos.append(eng.info._replace(n_contacts=eng.contacts()))
+        records.append((eng.n_rebuilds, infos, eng.last_overlap, eng.contacts()))
+    (r_c, want, o_c, n_c), (r_g, got, o_g, n_g) = records
+    assert r_g >= 3 and r_c >= 3, "the steps must pass through rebuilds"
+    assert len(got) == len(want) == 28
+    for s, (a, b) in enumerate(zip(want, got)):
+        assert a == b, f"record {s}: CPU {a}, GPU {b}"
+    assert (o_g, n_g) == (o_c, n_c) and n_c > 0
+
+
 def test_a_law_that_changes_between_steps_gives_the_cpu_bits():
     """The stiffening ramp's laws (``stiffen``): a stiffer law every few steps, its first step
     rescaling each stored Delta s (``Law.ds_scale``), the steps between in one launch (``run_quiet``)

@@ -130,6 +130,9 @@ class Engine(EngineBase):
         self._dev = {}            # the GPU's arrays by name (``_upload``)
         # the step's reductions (``kernels.gpu.step``), and a pinned host copy the step reads
         self._red = self.cuda.to_device(np.array(self.k.NEUTRAL))
+        # whether ``_red``'s slots of ``forces`` are neutral (only ``kick_drift`` resets them: an evaluation
+        # after another with no step between, at ``start`` or a rebuild step of ``run_quiet``, resets them first)
+        self._red_fresh = True
         self._red_host = self.cuda.pinned_array(len(self.k.NEUTRAL))
         self._launchers = {}
         # the per-step reductions of ``run_quiet``'s launches, and their pinned host copy
@@ -402,6 +405,9 @@ class Engine(EngineBase):
         self._epoch += 1
         planes_d, kinds_d = self._device_planes()
         box = make_box(s.L_x, s.L_y)
+        if not self._red_fresh:
+            self._red.copy_to_device(np.array(k.NEUTRAL))
+        self._red_fresh = False
         if self.by_entry:
             self._launch("entry_forces", max(self._k, 1), d["row"], d["x"], d["v"], d["omega"], d["fixed"], d["nbr"],
                          d["hist"], d["stamp"], pair, keep_pairs, self._epoch, *box, self.law, increment, self._red)
@@ -424,6 +430,7 @@ class Engine(EngineBase):
         t = time.perf_counter()
         self._launch("kick_drift", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"],
                      p.dt, *make_box(s.L_x, s.L_y), self._kick_due, self._red)
+        self._red_fresh = True
         red = self._red.copy_to_host(self._red_host)
         self._kick_due = False
         s.slots_current = False
