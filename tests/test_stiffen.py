@@ -179,7 +179,7 @@ def test_the_command_line_names_a_rise_past_a_decade(soft, tmp_path):
     p = cli("stiffen", soft, "--k_n", "5e5", "--out", tmp_path / "x", check=1)
     assert "--k_n 500000" in p.stderr and "up to 200000" in p.stderr and not (tmp_path / "x").exists()
     p = cli("stiffen", tmp_path / "nothing", "--k_n", "2e5", check=1)
-    assert "no final.h5" in p.stderr
+    assert "neither final.h5 nor packing.npz" in p.stderr
 
 
 def test_the_ladder_script_refuses_a_start_that_is_not_its_pile(soft, tmp_path):
@@ -204,6 +204,41 @@ def test_the_ladder_script_refuses_a_start_that_is_not_its_pile(soft, tmp_path):
     p = ladder(tmp_path / "nothing", "0.5", "2")
     assert p.returncode == 2 and "not a converged run with its final.h5" in p.stdout
     assert not any((tmp_path / "out").glob("kn*"))
+
+
+def test_a_frictionless_pile_kept_as_its_packing_stiffens_from_rest_and_a_frictional_one_is_refused(soft, tmp_path):
+    """A committed run keeps its packing.npz, not its final.h5 (``initial.from_packing``): without friction
+    a rung starts from the packing's positions at rest, the settled pile (no tangential force needs a history);
+    with friction the packing is refused in one line before any work (its tangential springs are lost)."""
+    import shutil
+
+    from mpdem import initial
+    from mpdem.io import export
+
+    frictionless = mpdem.run(cfg_of(**{**SOFT, "contact__mu": 0.0}), tmp_path / "mu0")
+    assert frictionless.status == "converged"
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    export.export(str(tmp_path / "mu0" / "final.h5"), "packing")
+    for name in ("config.toml", "summary.json", "packing.npz"):
+        shutil.copy(tmp_path / "mu0" / name, kept / name)
+    cfg = stiffen.rung_config(str(kept), 2e5, RAMP + ["run.max_steps=400"])
+    assert cfg.run.initial_file == str(kept / "packing.npz") and cfg.stiffen.k_n_from == 2e4
+    got = initial.particles(cfg.run.initial_file, cfg)
+    want, _ = checkpoint.read_state(str(tmp_path / "mu0" / "final.h5"))
+    order = np.argsort(want["id"])
+    assert np.array_equal(got["id"], want["id"][order]) and np.array_equal(got["x"], want["x"][order])
+    assert np.array_equal(got["fixed"], want["fixed"][order]) and not got["v"].any() and not got["omega"].any()
+    assert np.abs(want["v"][want["fixed"] == 0]).max() > 0, "the state file's own velocities are left behind"
+    r = mpdem.run(cfg, tmp_path / "rung")
+    after, _ = checkpoint.read_state(str(tmp_path / "rung" / "final.h5"))
+    moved = np.abs(after["x"][np.argsort(after["id"])] - got["x"]).max()
+    assert r.steps == 400 and 0 < moved < 1e-3, f"the settled pile moved {moved} d in its first 400 steps"
+    # a frictional pile's packing: one line, nothing written
+    shutil.copy(soft / "config.toml", kept / "config.toml")
+    p = cli("stiffen", kept, "--k_n", "2e5", "--out", tmp_path / "frictional", check=1)
+    assert "keeps no contact histories" in p.stderr and "contact.mu = 0.5" in p.stderr
+    assert not (tmp_path / "frictional").exists()
 
 
 def test_a_ramp_read_back_from_its_config_toml_has_the_same_laws(tmp_path):

@@ -171,8 +171,10 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     from .driver.simulation import Run
     _threads(threads)
     net = _net(net)
+    from .initial import check_file
     try:
         cfg, initial = lammps.initial_for(config)
+        check_file(cfg)
     except (config_mod.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise AgreedError(str(e)) from None
     check_out(out, net, force)

@@ -53,9 +53,10 @@ SCHEMA = (
        "hard cap on time steps (required); a run that hits it is 'not converged'", int, restart=True, physics=False),
     _k("run", "seed", 1, "random seed of bed, insertion and initial velocities", int, physics=False, param=11),
     _k("run", "initial_file", "",
-       "start from this configuration instead of building one: an mpdem HDF5 state file, a text table `id x "
-       "y z [vx vy vz] [omegax omegay omegaz] [fixed]` (a header line names the columns), or a LAMMPS data "
-       "file (atom_style sphere) or text dump (recognised by their content)", str, physics=False),
+       "start from this configuration instead of building one: an mpdem HDF5 state file, a run's packing.npz "
+       "(at rest, no contact histories: contact.mu = 0 only), a text table `id x y z [vx vy vz] [omegax omegay "
+       "omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text "
+       "dump (recognised by their content)", str, physics=False),
     _k("run", "fixed_types", (),
        "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one",
        tuple, physics=False),

@@ -16,7 +16,7 @@ import numpy as np
 from . import bedcache, build, state, stiffen
 from .errors import InputError
 from .io import tables
-from .io import checkpoint, lammps
+from .io import checkpoint, lammps, packing
 
 
 @dataclass
@@ -63,8 +63,9 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
     Parameters
     ----------
     path : str
-        Text table (``tables.read_table``), mpdem state file, or LAMMPS data
-        file or text dump (``lammps.read``, types from ``run.fixed_types``).
+        Text table (``tables.read_table``), mpdem state file, packing file
+        (``from_packing``), or LAMMPS data file or text dump (``lammps.read``,
+        types from ``run.fixed_types``).
     cfg : Config
     all_fixed : bool
         Every particle is a bed sphere (``bed.file``).
@@ -83,6 +84,8 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
         raise InputError(f"initial file {path}: no such file")
     if checkpoint.is_state_file(path):
         t, _ = checkpoint.read_state(path)
+    elif packing.is_packing(path):
+        t = from_packing(path, cfg, log)
     elif lammps.kind(path):
         t = lammps_table
         if t is None or all_fixed:
@@ -100,6 +103,49 @@ def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
         raise InputError(f"initial file {path}: no mobile sphere: all {len(out['fixed'])} are bed "
                                f"spheres ({how})")
     return out
+
+
+def check_file(cfg):
+    """Refuse, before any work, a ``run.initial_file`` that is a packing file (``from_packing``) under
+    friction.
+
+    Raises
+    ------
+    InputError
+        Naming the file, contact.mu and what is accepted.
+    """
+    path = cfg.run.initial_file
+    if path and cfg.contact.mu > 0 and os.path.exists(path) and packing.is_packing(path):
+        raise InputError(f"run.initial_file {path}: a packing file keeps no contact histories, so a frictional "
+                         f"pile (contact.mu = {cfg.contact.mu:g}) would start with every tangential spring at zero"
+                         f" and settle again; accepted: contact.mu = 0, or a state file (final.h5, a checkpoint)")
+
+
+def from_packing(path, cfg, log=print):
+    """The particles of a packing file (``io.packing``, a run's kept ``packing.npz``), at rest.
+
+    A packing keeps positions, ids and bed flags, not velocities nor contact histories: the spheres
+    start at rest (a settled pile's speeds are of order sqrt(E_stop)) and every tangential spring at
+    zero. Without friction (contact.mu = 0) no tangential force depends on a history, so the pile is
+    the settled one; with friction its contacts carry no tangential load until they move, so the pile
+    settles again, a change of protocol: refused unless ``contact.mu`` = 0.
+
+    Returns
+    -------
+    dict: id (N,) int64, x, v, omega (N, 3) float64, fixed (N,) uint8.
+
+    Raises
+    ------
+    InputError
+        ``contact.mu`` > 0 (naming the file and the value).
+    """
+    check_file(cfg)
+    arrays, _ = packing.read(path)
+    x = np.ascontiguousarray(arrays["x"], dtype=np.float64)
+    log(f"read {path}: a packing of {len(x)} spheres ({int(arrays['fixed'].sum())} bed), at rest (a packing keeps"
+        f" no velocities)")
+    return {"id": np.asarray(arrays["id"], np.int64), "x": x, "v": np.zeros_like(x), "omega": np.zeros_like(x),
+            "fixed": np.asarray(arrays["fixed"], np.uint8)}
 
 
 def bed(cfg, net, log):

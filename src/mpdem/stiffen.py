@@ -26,7 +26,7 @@ import os
 
 from . import config
 from .errors import InputError
-from .io import checkpoint, rundir
+from .io import checkpoint, packing, rundir
 
 class Ramp:
     """The laws of a stiffening run, step by step.
@@ -115,7 +115,7 @@ class Ramp:
 
 
 def check_initial(cfg, path):
-    """Refuse a new run that would meet an mpdem state file's contacts with a stiffer spring
+    """Refuse a new run that would meet an mpdem state or packing file's contacts with a stiffer spring
     without the ramp, or whose ramp starts from another stiffness than the file's.
 
     Raises
@@ -123,9 +123,12 @@ def check_initial(cfg, path):
     InputError
         Naming the file, both stiffnesses and what to set.
     """
-    if not checkpoint.is_state_file(path):
+    if checkpoint.is_state_file(path):
+        attrs = checkpoint.read_attrs(path)
+    elif packing.is_packing(path):
+        attrs = packing.read(path)[1]
+    else:
         return      # a table or a LAMMPS file says nothing of its stiffness: stiffen.k_n_from is trusted
-    attrs = checkpoint.read_attrs(path)
     if "config" not in attrs:
         return
     try:
@@ -146,18 +149,22 @@ def check_initial(cfg, path):
 def rung_config(run, k_n, sets=()):
     """The config of a rung that stiffens the finished run ``run`` to ``k_n`` (``mpdem stiffen``): the
     run's own keys (those derived from k_n derived again), contact.k_n = ``k_n``, stiffen.k_n_from =
-    the run's k_n, run.initial_file = RUN/final.h5, then ``sets`` (``--set`` texts).
+    the run's k_n, run.initial_file = RUN/final.h5 (without one, the packing the run kept, RUN/packing.npz:
+    frictionless piles only, ``initial.from_packing``), then ``sets`` (``--set`` texts).
 
     Raises
     ------
     InputError
-        No final.h5 in ``run``, or ``k_n`` not above the run's by at most ten times (naming --k_n).
+        Neither final.h5 nor packing.npz in ``run``, or ``k_n`` not above the run's by at most ten times
+        (naming --k_n).
     ConfigError
-        From the config's own checks.
+        From the config's own checks (a packing of a frictional pile among them).
     """
     final = rundir.final_path(run)
     if not os.path.exists(final):
-        raise InputError(f"{run}: no final.h5; stiffen accepts a finished run's directory")
+        final = os.path.join(run, "packing.npz")
+    if not os.path.exists(final):
+        raise InputError(f"{run}: neither final.h5 nor packing.npz; stiffen accepts a finished run's directory")
     with open(os.path.join(run, "config.toml")) as fh:
         raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
     was = config.resolve(raw).contact.k_n

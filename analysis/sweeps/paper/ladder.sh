@@ -10,6 +10,8 @@
 #     bash analysis/sweeps/paper/ladder.sh 0 1 analysis/results/paper/runs/ladder-size/mu0_s1_bed101 2e8
 # FROM=RUN starts the ladder from a converged run instead of pouring OUT/kn2e5 (its final.h5 is the first rung's
 # start; MU and SEED are then only the ladder's labels and must match it): a pile already poured at the paper's size.
+# A committed run keeps its packing.npz, not its final.h5: at MU = 0 the ladder starts from that packing at rest
+# (no tangential force needs a history); a frictional pile needs its final.h5 (pour it again: the same bits).
 # DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
 # before that much wall time (exit 75: run the script again to go on).
 # Each converged rung is analysed (mpdem analyze --packing). The committed rungs of analysis/results/paper keep
@@ -42,8 +44,8 @@ rung() {  # dir max_steps command...: the rung, unless it converged; a restart w
 }
 # the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt)
 if [ -n "${FROM:-}" ]; then
-    [ "$(status "$FROM")" = converged ] && [ -f "$FROM/final.h5" ] || {
-        echo "ladder: FROM=$FROM is not a converged run with its final.h5"; exit 2; }
+    [ "$(status "$FROM")" = converged ] && { [ -f "$FROM/final.h5" ] || [ -f "$FROM/packing.npz" ]; } || {
+        echo "ladder: FROM=$FROM is not a converged run with its final.h5 (or packing.npz, frictionless)"; exit 2; }
     "$PY" - "$FROM/config.toml" "$mu" "$seed" <<'PY' || exit 2
 import sys, tomllib
 c = tomllib.load(open(sys.argv[1], "rb"))
@@ -60,7 +62,7 @@ else
 fi
 for k in 2e6 2e7 2e8 2e9; do
     rung "$out/kn$k" "$("$PY" -c "print(f'{5e6 * ($k / 2e5) ** 0.5:.3g}')")" \
-        "$PY" -m mpdem stiffen "$prev" --k_n "$k" || exit $?
+        "$PY" -m mpdem stiffen "$prev" --k_n "$k" --set output.checkpoint_seconds=600 || exit $?
     prev=$out/kn$k
     [ "$k" = "$top" ] && break
 done
