@@ -1,16 +1,31 @@
 """Compile every kernel of the GPU engine with numba-cuda for an H100 (sm_90), without a GPU.
 
 The simulator tests run the kernels as Python; this compiles them as a GPU would (numba-cuda's
-typing, lowering and NVVM), so a kernel that would not compile fails here, and checks the PTX of
-each: no fused multiply-add of float64 (``fma.rn.f64``), which would round once where the CPU
-engine rounds twice (docs/computing.md, "One law, two targets"). A control kernel written with
-plain operators must show FMAs, or the check proves nothing.
+typing, lowering and NVVM), so a kernel that would not compile fails here, and checks each twice
+for a fused multiply-add of float64, which would round once where the CPU engine rounds twice
+(docs/computing.md, "One law, two targets"):
+
+1. its PTX has no ``fma.rn.f64`` (NVVM's contractions);
+2. its SASS, assembled by ptxas as the driver would, has no DFMA that its explicit twin lacks: ptxas
+   may still contract a ``mul.f64`` followed by an ``add.f64`` that carry no rounding modifier. The
+   twin is the same PTX with every such plain float64 mul, add and sub given ``.rn`` (which ptxas
+   never contracts), so its DFMAs are those of correctly rounded division and square root, which
+   ptxas expands into DFMA sequences; one more DFMA in the kernel's own SASS is a contraction.
+
+Controls: a kernel written with plain operators must show ``fma.rn.f64`` in its PTX, and a PTX
+``mul.f64`` then ``add.f64`` must come out of ptxas as a DFMA that its twin does not have, or the
+checks prove nothing. Each kernel's registers, spills and shared memory (``ptxas -v``) are printed,
+with the blocks of 128 threads an H100 multiprocessor can hold at once by those resources.
 
 Run with a Python that has numba-cuda and the CUDA compiler wheels (``make test-gpu-compile``
 makes one, ``.venv-cuda``):  python tools/gpu_compile.py
 """
+import math
 import os
+import re
+import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -83,32 +98,151 @@ def cases():
     }
 
 
-def fmas(kernel, args):
-    """The PTX's fused float64 multiply-adds, and its length in lines."""
+# a float64 multiply then add with no rounding modifier: ptxas fuses them into one DFMA
+CONTROL_PTX = """.version 8.0
+.target sm_90
+.address_size 64
+.visible .entry control(.param .u64 p)
+{
+    .reg .b64 %rd<3>;
+    .reg .f64 %fd<5>;
+    ld.param.u64 %rd1, [p];
+    cvta.to.global.u64 %rd2, %rd1;
+    ld.global.f64 %fd1, [%rd2];
+    ld.global.f64 %fd2, [%rd2+8];
+    ld.global.f64 %fd3, [%rd2+16];
+    mul.f64 %fd4, %fd1, %fd2;
+    add.f64 %fd4, %fd4, %fd3;
+    st.global.f64 [%rd2+24], %fd4;
+    ret;
+}
+"""
+# a plain float64 mul, add or sub at the start of an instruction (a guard predicate allowed)
+PLAIN = re.compile(r"(?m)^(\s*(?:@!?%p\d+\s+)?)(mul|add|sub)\.f64\b")
+# an H100 multiprocessor: registers, warps, blocks and shared memory it holds at once; registers are
+# given to a warp in units of 256
+SM_REGISTERS, SM_WARPS, SM_BLOCKS, SM_SHARED, BLOCK_RESERVED = 65536, 64, 32, 233472, 1024
+
+
+def ptx_of(kernel, args):
+    """The kernel's PTX for CC."""
     ptx, _ = cuda.compile_ptx(kernel.py_func, tuple(numba.typeof(a) for a in args), cc=CC)
-    return ptx.count("fma.rn.f64"), ptx.count("\n")
+    return ptx
+
+
+def explicit_twin(ptx):
+    """The PTX with every plain float64 mul, add and sub rounded explicitly (``.rn``: never contracted)."""
+    return PLAIN.sub(r"\1\2.rn.f64", ptx)
+
+
+def toolkit():
+    """(ptxas, nvdisasm): the paths of NVIDIA's assembler and disassembler in the CUDA wheels
+    (``tools/setup_cuda.sh``), or None where one is missing."""
+    found = {}
+    for root in sys.path:
+        for name, sub in (("ptxas", "cuda_nvcc"), ("nvdisasm", "cu13"), ("nvdisasm", "cuda_nvdisasm")):
+            p = os.path.join(root, "nvidia", sub, "bin", name)
+            if name not in found and os.access(p, os.X_OK):
+                found[name] = p
+    return found.get("ptxas"), found.get("nvdisasm")
+
+
+def sass(ptx, tools):
+    """Assemble ``ptx`` for CC as a whole program (as the driver does), or relocatable where it calls
+    the device runtime (the cooperative kernel's grid barrier, linked at load), and disassemble it:
+    (DFMA count, ``resources``)."""
+    ptxas, nvdisasm = tools
+    with tempfile.TemporaryDirectory() as d:
+        src, cubin = os.path.join(d, "k.ptx"), os.path.join(d, "k.cubin")
+        with open(src, "w") as fh:
+            fh.write(ptx)
+        for mode in ([], ["-c"]):
+            p = subprocess.run([ptxas, f"-arch=sm_{CC[0]}{CC[1]}", *mode, "-v", "-o", cubin, src],
+                               capture_output=True, text=True)
+            if p.returncode == 0 or "Unresolved extern" not in p.stderr:
+                break
+        if p.returncode:
+            raise RuntimeError(f"ptxas: {p.stderr.strip()[-500:]}")
+        asm = subprocess.run([nvdisasm, cubin], capture_output=True, text=True, check=True).stdout
+    return len(re.findall(r"\bDFMA\b", asm)), resources(p.stderr, relocatable=bool(mode))
+
+
+def resources(log, relocatable=False):
+    """The entry's resources from ``ptxas -v``'s report (the last function it reports): registers, bytes
+    of spill stores and loads, of stack frame, and of static shared memory (None where the code is
+    relocatable: ptxas does not report it then)."""
+    def last(pattern):
+        got = re.findall(pattern, log)
+        return int(got[-1]) if got else 0
+    return {"registers": last(r"Used (\d+) registers"), "spill_stores": last(r"(\d+) bytes spill stores"),
+            "spill_loads": last(r"(\d+) bytes spill loads"), "stack": last(r"(\d+) bytes stack frame"),
+            "shared": None if relocatable else last(r"(\d+) bytes smem")}
+
+
+def resident_blocks(res, block=128):
+    """Blocks of ``block`` threads one H100 multiprocessor holds at once by the kernel's registers and
+    shared memory (an upper bound: the occupancy calculator's rules, not a measurement)."""
+    warps = block // 32
+    per_warp = math.ceil(max(res["registers"], 1) * 32 / 256) * 256
+    by_regs = SM_REGISTERS // (per_warp * warps)
+    by_shared = SM_SHARED // ((res["shared"] or 0) + BLOCK_RESERVED)
+    return min(SM_BLOCKS, SM_WARPS // warps, by_regs, by_shared)
+
+
+def check(name, kernel, args, tools):
+    """One kernel's line of the report; returns (ok, line)."""
+    ptx = ptx_of(kernel, args)
+    fused = ptx.count("fma.rn.f64")
+    dfma, res = sass(ptx, tools)
+    allowed, _ = sass(explicit_twin(ptx), tools)
+    extra = dfma - allowed
+    faults = ([f"{fused} fma.rn.f64 in the PTX"] if fused else []) + \
+        ([f"{extra} DFMA in the SASS beyond the explicit twin's {allowed} (ptxas contracted a mul and an add)"]
+         if extra > 0 else [])
+    spills = res["spill_stores"] + res["spill_loads"]
+    shared = "shared memory not reported (relocatable)" if res["shared"] is None else f"{res['shared']} B shared"
+    line = (f"{'; '.join(faults) if faults else 'ok'} ({ptx.count(chr(10))} lines of PTX; SASS: {res['registers']} "
+            f"registers, {spills} B spilled, {shared}, at most {resident_blocks(res)} blocks of 128 a "
+            f"multiprocessor; {dfma} DFMA, those of division and square root)")
+    return not faults, line, res
+
+
+def controls(tools):
+    """Both controls' counts: (fma.rn.f64 in the plain kernel's PTX, DFMA of the plain PTX, of its twin)."""
+    a = np.zeros(4)
+    ptx_fmas = ptx_of(_control, (a, a, a, a)).count("fma.rn.f64")
+    return ptx_fmas, sass(CONTROL_PTX, tools)[0], sass(explicit_twin(CONTROL_PTX), tools)[0]
 
 
 def main():
-    a = np.zeros(4)
-    control, _ = fmas(_control, (a, a, a, a))
-    if not control:
+    tools = toolkit()
+    if None in tools:
+        print(f"gpu_compile: ptxas or nvdisasm not found (ptxas {tools[0]}, nvdisasm {tools[1]}): run "
+              f"tools/setup_cuda.sh (make test-gpu-compile does)")
+        return 1
+    ptx_fmas, plain, twin = controls(tools)
+    if not ptx_fmas:
         print("gpu_compile: the control kernel shows no fma.rn.f64: the check cannot see a fused operation")
         return 1
+    if not (plain > twin == 0):
+        print(f"gpu_compile: the SASS control (mul.f64 then add.f64) shows {plain} DFMA, its explicit twin {twin}: "
+              f"the SASS check cannot see a contraction")
+        return 1
     bad = 0
-    for name, (kernel, args) in cases().items():
+    table = cases()
+    for name, (kernel, args) in table.items():
         t = time.perf_counter()
         try:
-            fused, lines = fmas(kernel, args)
+            ok, line, _ = check(name, kernel, args, tools)
         except Exception as e:   # the compiler's own message names the line and the types
             print(f"gpu_compile: {name}: does not compile: {type(e).__name__}: {e}")
             bad += 1
             continue
-        verdict = "ok" if not fused else f"{fused} fused multiply-adds"
-        print(f"gpu_compile: {name}: {verdict} ({lines} lines of PTX, {time.perf_counter() - t:.1f} s)")
-        bad += bool(fused)
-    print(f"gpu_compile: numba-cuda {cuda_version()}, sm_{CC[0]}{CC[1]}: {len(cases()) - bad} of {len(cases())} "
-          f"kernels compile with every float64 operation rounded on its own (the control fuses {control})")
+        print(f"gpu_compile: {name}: {line}, {time.perf_counter() - t:.1f} s")
+        bad += not ok
+    print(f"gpu_compile: numba-cuda {cuda_version()}, sm_{CC[0]}{CC[1]}: {len(table) - bad} of {len(table)} "
+          f"kernels compile with every float64 operation rounded on its own, in the PTX and in ptxas's SASS "
+          f"(the controls fuse {ptx_fmas} in the PTX and {plain} in the SASS, their twins {twin})")
     return 1 if bad else 0
 
 
