@@ -1,0 +1,97 @@
+"""The GPU variants' probe (``tools/gpu_probe.sh``, ``tools/gpu_probe.py``) run dry: every part of the one call
+a lent GPU gets, under numba's CUDA simulator (conftest.py) on a 125-sphere table, so that the call works
+the first time a GPU is at hand. The timings mean nothing here; the digests, the JSON and the table do.
+"""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from helpers import tight_lattice
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+import gpu_probe  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def small_table(tmp_path_factory):
+    """A jittered 5 x 5 x 5 lattice in contact, moving, its lowest layer the bed: a text table."""
+    x, v, _, fixed, _ = tight_lattice(m=5)
+    path = tmp_path_factory.mktemp("probe") / "small.txt"
+    x[:, :2] += 1.0     # inside the 20 d x 20 d box of the table bench's config
+    rows = ["id x y z vx vy vz fixed"] + [" ".join([str(i), *(repr(float(c)) for c in (*x[i], *v[i])), str(fixed[i])])
+                                          for i in range(len(x))]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def dry_run(small_table, tmp_path_factory):
+    out = tmp_path_factory.mktemp("probe") / "out"
+    env = {**os.environ, "PY": sys.executable, "SIZE": "small"}
+    p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
+                       capture_output=True, text=True, timeout=900)
+    return p, out
+
+
+def test_the_dry_run_measures_every_variant_at_two_shapes_and_checks_each_digest_against_the_cpus(dry_run):
+    p, out = dry_run
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    result = json.loads((out / "probe.json").read_text())
+    cpu = result["cpu"]
+    assert cpu["atoms"] == 125 and len(cpu["digest"]) == 64 and cpu["check_steps"] == 6
+    recs = result["variants"]
+    assert [(r["variant"], r["block"]) for r in recs] == [(v, b) for v in gpu_probe.VARIANTS
+                                                          for b in gpu_probe.SHAPES]
+    for r in recs:
+        assert "failed" not in r, r.get("failed")
+        assert r["digest"] == cpu["digest"] and r["same"], (r["variant"], r["block"])
+        assert len(r["step_us"]) == 2 and r["step_us_median"] > 0 and r["ns_atom_step"] > 0
+        assert len(r["rebuilds"]) == gpu_probe.REBUILDS and all(b["ms"] > 0 for b in r["rebuilds"])
+        assert r["big"]["atoms"] == 125 and r["big"]["ns_atom_step"] > 0
+        assert any(s.startswith("engine.gpu_threads=") for s in r["settings"])
+    assert result["all_same"] and result["races"] == []
+    assert result["anatomy"]["rc"] == 0 and any("run_quiet" in ln for ln in result["anatomy"]["lines"])
+    # the table is written, and printed last
+    table = (out / "probe.txt").read_text()
+    assert table.count("= CPU") == len(recs)
+    tail = p.stdout.strip().splitlines()
+    assert tail[-1].startswith("numba's CUDA simulator") and "CPU digest after 6 steps" in tail[-2]
+    assert "gpu_probe" in (out / "machine.txt").read_text()
+
+
+def test_a_digest_apart_from_the_cpus_or_between_shapes_is_reported_and_fails():
+    def rec(variant, block, digest):
+        return {"variant": variant, "block": block, "digest": digest, "step_us_median": 1.0, "ns_atom_step": 1.0,
+                "rebuilds": [{"ms": 1.0, "through_host": False}], "kernels": {}, "compile_s": 1.0}
+    result = {"cpu": {"digest": "a" * 64, "check_steps": 6, "atoms": 9}, "commit": "x", "repeats": 1, "steps": 1,
+              "tiles": "1x1", "big_steps": 1,
+              "variants": [rec("row", 128, "a" * 64), rec("row", 256, "a" * 64), rec("entry", 128, "a" * 64),
+                           rec("entry", 256, "b" * 64)]}
+    gpu_probe.verdicts(result)
+    assert not result["all_same"] and result["races"] == ["entry"]
+    lines = gpu_probe.table(result)
+    assert sum("DIFFERS from the CPU bbbb" in ln for ln in lines) == 1
+    assert any(ln.startswith("RACE: the block shapes of entry") for ln in lines)
+    result["variants"][3] = {"variant": "entry", "block": 256, "failed": "Traceback\nCudaAPIError: out of memory"}
+    gpu_probe.verdicts(result)
+    assert not result["all_same"]
+    assert any("failed: CudaAPIError: out of memory" in ln for ln in gpu_probe.table(result))
+
+
+@pytest.mark.parametrize("args, what", [
+    (["--tiles", "7"], "--tiles 7: accepted AxB"),
+    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of row, entry"),
+    (["--steps", "0"], "--steps 0: accepted a whole number >= 1"),
+])
+def test_bad_arguments_are_one_clear_error(small_table, tmp_path, args, what, capsys):
+    with pytest.raises(SystemExit) as e:
+        gpu_probe.main(["all", str(small_table), str(tmp_path), *args])
+    assert e.value.code == 2 and what in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        gpu_probe.main(["all", str(tmp_path / "none.txt"), str(tmp_path)])
+    assert "TABLE" in capsys.readouterr().err and not (tmp_path / "probe.json").exists()

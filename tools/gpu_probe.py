@@ -1,0 +1,331 @@
+"""One call that measures every GPU engine variant (docs/performance.md, "GPU variants"): the probe.
+
+    python tools/gpu_probe.py all TABLE OUT [--variants a,b] [--steps 1000] [--repeats 3] [--tiles 7x7]
+                                             [--big-steps 100] [--check-steps 200] [--set KEY=VALUE ...]
+    python tools/gpu_probe.py measure TABLE JSON --variant NAME ...      (one variant, in a process of its own)
+
+A variant is a set of ``engine.gpu_*`` switches (``VARIANTS``; a new one is a line there) run at two block
+shapes. Each runs in a fresh process, one after another on the GPU (a timing shares the GPU with nothing):
+
+- its kernels compiled and warmed on a tiny pile (``bench.warm_up_kernels``; the seconds it took);
+- from TABLE's pile, ``--check-steps`` steps as a run takes them, then the state's digest (x, v, omega, the
+  contact history): every variant and shape must give the CPU engine's digest (``cpu``, run first), and a
+  difference between two shapes of one variant is a race;
+- ``--steps`` steps timed ``--repeats`` times (CUDA events; the median): microseconds a step and nanoseconds
+  per atom-step (all atoms, the bed's too, as the bench counts);
+- five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th);
+- each launched kernel's registers, local (spill) memory, shared memory and the cooperative grid's blocks;
+- TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats`` times.
+
+Then ``tools/gpu_anatomy.py`` on the same machine (the baseline: machines of one kind differ by 15 %), and
+OUT/probe.json, OUT/probe.txt (the table), the table printed last. Exit 0 when every digest is the CPU's, 1
+otherwise, 2 on bad arguments. Under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, a small TABLE and
+``--tiles 1x1``) it is a dry run of all of that: the timings mean nothing there, the digests do.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "src"))
+
+# name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
+VARIANTS = {
+    "row": {"engine.gpu_threads": "row"},
+    "entry": {"engine.gpu_threads": "entry"},
+}
+# the two block shapes each variant runs at (threads per block)
+SHAPES = (128, 256)
+REBUILDS = 5
+
+
+def parse_tiles(text):
+    try:
+        nx, ny = (int(t) for t in text.lower().split("x"))
+        if nx < 1 or ny < 1:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--tiles {text}: accepted AxB with whole A, B >= 1 (e.g. 7x7)") from None
+    return nx, ny
+
+
+def parse_variants(text):
+    names = [t for t in text.split(",") if t]
+    unknown = [t for t in names if t not in VARIANTS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"--variants {text}: accepted a comma-separated choice of "
+                                         f"{', '.join(VARIANTS)}")
+    return names
+
+
+def arguments(argv):
+    ap = argparse.ArgumentParser(prog="gpu_probe", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for name in ("all", "measure"):
+        p = sub.add_parser(name)
+        p.add_argument("table", help="the bench's particle table (landed20k.txt.gz)")
+        p.add_argument("out", help="output folder (all) or JSON file (measure)")
+        p.add_argument("--steps", type=int, default=1000)
+        p.add_argument("--repeats", type=int, default=3)
+        p.add_argument("--tiles", type=parse_tiles, default=(7, 7))
+        p.add_argument("--big-steps", type=int, default=100)
+        p.add_argument("--check-steps", type=int, default=200)
+        p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                       help="a config item of the table's run (bench.table_config), e.g. box.L_x=5")
+        if name == "all":
+            p.add_argument("--variants", type=parse_variants, default=list(VARIANTS))
+            p.add_argument("--no-anatomy", action="store_true", help="leave out tools/gpu_anatomy.py")
+        else:
+            p.add_argument("--variant", required=True, choices=["cpu", *VARIANTS])
+            p.add_argument("--block", type=int, default=SHAPES[0])
+    a = ap.parse_args(argv)
+    for key in ("steps", "repeats", "big_steps", "check_steps"):
+        if getattr(a, key) < 1:
+            ap.error(f"--{key.replace('_', '-')} {getattr(a, key)}: accepted a whole number >= 1")
+    if not os.path.isfile(a.table):
+        ap.error(f"TABLE {a.table}: no such file")
+    return a
+
+
+class Clock:
+    """Seconds of GPU work between ``start`` and ``stop`` (CUDA events), or of the host's clock under the
+    simulator or on the CPU."""
+
+    def __init__(self, cuda):
+        self.cuda = cuda
+        self.events = cuda is not None and hasattr(cuda, "event_elapsed_time")
+
+    def start(self):
+        if self.events:
+            self.e0, self.e1 = self.cuda.event(), self.cuda.event()
+            self.e0.record()
+        self.t0 = time.perf_counter()
+
+    def stop(self):
+        if self.events:
+            self.e1.record()
+            self.e1.synchronize()
+            return self.cuda.event_elapsed_time(self.e0, self.e1) / 1e3
+        return time.perf_counter() - self.t0
+
+
+def kernel_resources(eng):
+    """Each launched kernel's registers a thread, local memory a thread (spills), static shared memory a
+    block, and (the fused steps) the cooperative grid's blocks; {} under the simulator."""
+    out = {}
+    for name, kernel in getattr(eng, "_launchers", {}).items():
+        overloads = getattr(kernel, "overloads", None)
+        if not overloads:
+            continue
+        k = next(iter(overloads.values()))
+
+        def get(attr):
+            v = getattr(k, attr, None)
+            if v is None:
+                v = getattr(k, "get_" + attr, None)
+            try:
+                return int(v() if callable(v) else v) if v is not None else None
+            except Exception:     # a property this numba-cuda does not have
+                return None
+        out[name] = {"registers": get("regs_per_thread"), "local_bytes": get("local_mem_per_thread"),
+                     "shared_bytes": get("shared_mem_per_block")}
+    if out.get("advance") is not None and getattr(eng, "_coop_blocks", None):
+        out["advance"]["cooperative_blocks"] = int(eng._coop_blocks)
+    return out
+
+
+def measure(a):
+    """One variant at one block shape (or the CPU engine's digest): a dict for the JSON."""
+    from mpdem.bench import load_table, set_up_process, table_config, warm_up_kernels
+    from mpdem.decomp import Domain
+    from mpdem.engine import make_engine
+    from mpdem.engine.base import Physics
+    from mpdem.io import checkpoint
+
+    set_up_process()
+    device = "cpu" if a.variant == "cpu" else "gpu"
+    sets = [*a.set, f"engine.gpu_block={a.block}"]
+    if device == "gpu":
+        sets += [f"{k}={v}" for k, v in VARIANTS[a.variant].items()]
+    cfg = table_config(sets)
+    phys = Physics.from_config(cfg)
+    threads, block = cfg.engine.gpu_threads, cfg.engine.gpu_block
+    rec = {"variant": a.variant, "block": block, "device": device, "settings": sets}
+    t = time.perf_counter()
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads)
+    rec["compile_s"] = time.perf_counter() - t
+
+    def engine(tile):
+        whole, L_x, L_y = load_table(a.table, cfg, tile, say=lambda m: None)
+        dom = Domain.from_config(None, cfg)
+        st = dom.scatter(whole, L_x, L_y)
+        eng = make_engine(st, phys, dom, device, block, threads)
+        eng.start()
+        return eng, st, len(whole["id"])
+
+    eng, st, atoms = engine((1, 1))
+    rec["atoms"] = atoms
+    eng.advance(a.check_steps)
+    rec["digest"] = checkpoint.digest(checkpoint.gather_state(st))
+    rec["check_steps"] = a.check_steps
+    if device == "cpu":
+        return rec
+    rec["device_name"] = eng.device_name
+    cuda = None if eng._simulator else eng.cuda
+    clock = Clock(cuda)
+    times = []
+    for _ in range(a.repeats):
+        clock.start()
+        eng.run_quiet(a.steps)
+        eng.complete()
+        times.append(clock.stop())
+    rec["step_us"] = [1e6 * s / a.steps for s in times]
+    rec["step_us_median"] = statistics.median(rec["step_us"])
+    rec["ns_atom_step"] = 1e3 * rec["step_us_median"] / atoms
+    rebuilds = []
+    for _ in range(REBUILDS):
+        host = not eng.n_rebuilds % 20 if hasattr(eng, "n_rebuilds") else None
+        clock.start()
+        eng.rebuild()
+        rebuilds.append({"ms": 1e3 * clock.stop(), "through_host": bool(host)})
+        eng.advance(1)
+    rec["rebuilds"] = rebuilds
+    rec["kernels"] = kernel_resources(eng)
+    del eng, st
+    if a.tiles != (1, 1) or a.big_steps:
+        big, _, n_big = engine(a.tiles)
+        big.advance(min(10, a.big_steps))
+        times = []
+        for _ in range(a.repeats):
+            clock.start()
+            big.run_quiet(a.big_steps)
+            big.complete()
+            times.append(clock.stop())
+        rec["big"] = {"tiles": list(a.tiles), "atoms": n_big, "steps": a.big_steps,
+                      "ns_atom_step": 1e9 * statistics.median(times) / (a.big_steps * n_big)}
+    return rec
+
+
+def run_one(a, variant, block, path):
+    """``measure`` in a process of its own; its record, or one that says why it failed."""
+    cmd = [sys.executable, os.path.abspath(__file__), "measure", a.table, path, "--variant", variant,
+           "--block", str(block), "--steps", str(a.steps), "--repeats", str(a.repeats),
+           "--tiles", "x".join(map(str, a.tiles)), "--big-steps", str(a.big_steps),
+           "--check-steps", str(a.check_steps)] + [f"--set={s}" for s in a.set]
+    t = time.perf_counter()
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode or not os.path.exists(path):
+        return {"variant": variant, "block": block, "failed": (p.stderr or p.stdout).strip()[-2000:],
+                "wall_s": time.perf_counter() - t}
+    with open(path) as fh:
+        rec = json.load(fh)
+    rec["wall_s"] = time.perf_counter() - t
+    return rec
+
+
+def anatomy(a):
+    """tools/gpu_anatomy.py's lines on the table (today's engine, block 128, a thread a row)."""
+    p = subprocess.run([sys.executable, os.path.join(HERE, "gpu_anatomy.py"), a.table, str(a.steps), "128", "row"],
+                       capture_output=True, text=True)
+    return {"rc": p.returncode, "lines": [ln for ln in (p.stdout + p.stderr).splitlines() if ln.strip()][-20:]}
+
+
+def verdicts(result):
+    """Each GPU record's ``same``: its digest is the CPU's; and the races: variants whose shapes differ."""
+    ref = result["cpu"].get("digest")
+    races = []
+    for rec in result["variants"]:
+        rec["same"] = "digest" in rec and rec["digest"] == ref
+    by_variant = {}
+    for rec in result["variants"]:
+        by_variant.setdefault(rec["variant"], set()).add(rec.get("digest"))
+    races = sorted(v for v, d in by_variant.items() if len(d) > 1)
+    result["races"] = races
+    result["all_same"] = ref is not None and all(r["same"] for r in result["variants"])
+    return result
+
+
+def table(result):
+    """The summary table (text lines)."""
+    head = (f"{'variant':<10} {'block':>5} {'us/step':>9} {'ns/atom-step':>12} {'big ns':>8} {'rebuild ms':>10} "
+            f"{'regs':>5} {'local B':>7} {'coop':>5} {'compile s':>9}  digest")
+    lines = [head, "-" * len(head)]
+    for r in result["variants"]:
+        if "failed" in r:
+            lines.append(f"{r['variant']:<10} {r['block']:>5}  failed: {r['failed'].splitlines()[-1][:80]}")
+            continue
+        gpu_rebuilds = [b["ms"] for b in r["rebuilds"] if not b["through_host"]] or [b["ms"] for b in r["rebuilds"]]
+        adv = r["kernels"].get("advance", {})
+        big = r.get("big", {}).get("ns_atom_step")
+
+        def num(v, fmt):
+            return format(v, fmt) if v is not None else "-"
+        lines.append(f"{r['variant']:<10} {r['block']:>5} {r['step_us_median']:>9.2f} {r['ns_atom_step']:>12.3f} "
+                     f"{num(big, '8.3f'):>8} {statistics.median(gpu_rebuilds):>10.2f} "
+                     f"{num(adv.get('registers'), 'd'):>5} {num(adv.get('local_bytes'), 'd'):>7} "
+                     f"{num(adv.get('cooperative_blocks'), 'd'):>5} {r['compile_s']:>9.1f}  "
+                     f"{'= CPU' if r['same'] else 'DIFFERS from the CPU ' + str(r.get('digest'))[:16]}")
+    cpu = result["cpu"]
+    lines.append(f"CPU digest after {cpu.get('check_steps')} steps of {cpu.get('atoms')} atoms: "
+                 f"{str(cpu.get('digest', cpu.get('failed')))[:16]}")
+    if result["races"]:
+        lines.append(f"RACE: the block shapes of {', '.join(result['races'])} give different digests")
+    name = next((r.get("device_name") for r in result["variants"] if r.get("device_name")), "?")
+    lines.append(f"{name}, {result['commit']}; us/step the median of {result['repeats']} x {result['steps']} steps "
+                 f"(CUDA events), big = {result['tiles']} tiles, {result['big_steps']} steps")
+    return lines
+
+
+def commit():
+    p = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE)
+    return p.stdout.strip() or "?"
+
+
+def run_all(a):
+    os.makedirs(a.out, exist_ok=True)
+    t = time.perf_counter()
+    result = {"commit": commit(), "steps": a.steps, "repeats": a.repeats, "tiles": "x".join(map(str, a.tiles)),
+              "big_steps": a.big_steps, "check_steps": a.check_steps, "sets": a.set}
+    print(f"gpu_probe: the CPU engine's digest ({a.check_steps} steps)", flush=True)
+    result["cpu"] = run_one(a, "cpu", SHAPES[0], os.path.join(a.out, "cpu.json"))
+    result["variants"] = []
+    for v in a.variants:
+        for block in SHAPES:
+            print(f"gpu_probe: {v}, block {block}", flush=True)
+            result["variants"].append(run_one(a, v, block, os.path.join(a.out, f"{v}-{block}.json")))
+    if not a.no_anatomy:
+        print("gpu_probe: tools/gpu_anatomy.py (the baseline)", flush=True)
+        result["anatomy"] = anatomy(a)
+    verdicts(result)
+    result["wall_s"] = time.perf_counter() - t
+    lines = table(result)
+    with open(os.path.join(a.out, "probe.json"), "w") as fh:
+        json.dump(result, fh, indent=1)
+    with open(os.path.join(a.out, "probe.txt"), "w") as fh:
+        fh.write("\n".join(lines + [""] + result.get("anatomy", {}).get("lines", [])) + "\n")
+    for ln in result.get("anatomy", {}).get("lines", []):
+        print(ln)
+    print("\n".join(lines))
+    return 0 if result["all_same"] and not result["races"] else 1
+
+
+def main(argv=None):
+    a = arguments(argv)
+    if a.cmd == "measure":
+        rec = measure(a)
+        tmp = a.out + ".tmp"
+        with open(tmp, "w") as fh:
+            json.dump(rec, fh, indent=1)
+        os.replace(tmp, a.out)
+        return 0
+    return run_all(a)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
