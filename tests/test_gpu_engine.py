@@ -24,9 +24,10 @@ from mpdem.state import State
 
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
-# second takes a thread an entry for the forces (``engine.gpu_threads``).
-GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry")])
+# second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``).
+GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry"),
+          dict(block=4, blocks=2, threads="chunk8")] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry"), dict(block=64, threads="chunk16")])
 
 
 def physics(mu=0.5, model="hooke", **kw):
@@ -77,16 +78,19 @@ def test_gpu_engine_steps_the_cpu_engines_bits(case):
     assert got.last_overlap == want.last_overlap > 0
 
 
-@pytest.mark.parametrize("case", ["mu0", "hertz-wall"])
+ONE_LAUNCH = ["mu0", "mu0.5-gamma_t", "hertz-wall"]
+
+
+@pytest.mark.parametrize("case", ONE_LAUNCH)
 def test_steps_in_one_launch_give_the_steps_bits(case):
     """``run_quiet`` (the steps in cooperative launches, each ending at a step that needs a rebuild,
     which the host finishes) gives the bits and the step records of the CPU engine's steps, a
-    thread a row (frictionless) and a thread an entry (the wall)."""
+    thread a row (frictionless), a thread an entry (friction) and chunks of rows (Hertz, the wall)."""
     phys = CASES[case]
     want, st_c = stepped(cpu.Engine, phys, 30)
     x, v, omega, fixed, L = tight_lattice(m=5)
     st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
-    eng = gpu.Engine(st, phys, Domain(None), **GRIDS[["mu0", "hertz-wall"].index(case)])
+    eng = gpu.Engine(st, phys, Domain(None), **GRIDS[ONE_LAUNCH.index(case)])
     eng.start()
     infos = eng.run_quiet(29)
     assert len(infos) == 29 and st.step == 29 and eng.n_rebuilds >= 3

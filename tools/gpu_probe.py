@@ -5,7 +5,8 @@
     python tools/gpu_probe.py measure TABLE JSON --variant NAME ...      (one variant, in a process of its own)
 
 A variant is a set of ``engine.gpu_*`` switches (``VARIANTS``; a new one is a line there) run at two block
-shapes. Each runs in a fresh process, one after another on the GPU (a timing shares the GPU with nothing):
+shapes (``--shapes``). Each runs in a fresh process, one after another on the GPU (a timing shares the GPU
+with nothing):
 
 - its kernels compiled and warmed on a tiny pile (``bench.warm_up_kernels``; the seconds it took);
 - from TABLE's pile, ``--check-steps`` steps as a run takes them, then the state's digest (x, v, omega, the
@@ -39,6 +40,8 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
     "entry": {"engine.gpu_threads": "entry"},
+    "chunk16": {"engine.gpu_threads": "chunk16"},
+    "chunk32": {"engine.gpu_threads": "chunk32"},
 }
 # the two block shapes each variant runs at (threads per block)
 SHAPES = (128, 256)
@@ -64,6 +67,17 @@ def parse_variants(text):
     return names
 
 
+def parse_shapes(text):
+    try:
+        shapes = [int(t) for t in text.split(",") if t]
+        if not shapes or any(b < 32 or b > 1024 or b & (b - 1) for b in shapes):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shapes {text}: accepted comma-separated powers of two from 32 to "
+                                         f"1024 (threads per block)") from None
+    return shapes
+
+
 def arguments(argv):
     ap = argparse.ArgumentParser(prog="gpu_probe", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -80,6 +94,8 @@ def arguments(argv):
                        help="a config item of the table's run (bench.table_config), e.g. box.L_x=5")
         if name == "all":
             p.add_argument("--variants", type=parse_variants, default=list(VARIANTS))
+            p.add_argument("--shapes", type=parse_shapes, default=list(SHAPES),
+                           help="threads per block each variant runs at (default 128,256)")
             p.add_argument("--no-anatomy", action="store_true", help="leave out tools/gpu_anatomy.py")
         else:
             p.add_argument("--variant", required=True, choices=["cpu", *VARIANTS])
@@ -296,7 +312,7 @@ def run_all(a):
     result["cpu"] = run_one(a, "cpu", SHAPES[0], os.path.join(a.out, "cpu.json"))
     result["variants"] = []
     for v in a.variants:
-        for block in SHAPES:
+        for block in a.shapes:
             print(f"gpu_probe: {v}, block {block}", flush=True)
             result["variants"].append(run_one(a, v, block, os.path.join(a.out, f"{v}-{block}.json")))
     if not a.no_anatomy:

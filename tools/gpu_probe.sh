@@ -6,7 +6,8 @@
 # Some 3-5 minutes on an H100; for a bare machine with a GPU and no network (python3 with numpy, numba,
 # numba-cuda, scipy, h5py). Exit 0 when every digest is the CPU's.
 #   bash tools/gpu_probe.sh TABLE [OUT]      TABLE: the bench's landed20k.txt.gz; OUT default ./gpu_probe_out
-#   VARIANTS=row,entry  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100  CHECK_STEPS=200   (the defaults)
+#   VARIANTS=row,entry,chunk16,chunk32  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
+#   CHECK_STEPS=200   (the defaults)
 #   SIZE=small  a dry run on a small table (under NUMBA_ENABLE_CUDASIM=1 without a GPU: `make test` runs it)
 # On a lent machine (docs/gpu.md): `bash tools/device_slim.sh on` before the call, `off` after; the call:
 #   bash tools/gpu_probe.sh .devdata/landed20k.txt.gz "$OUT/probe"
@@ -18,10 +19,12 @@ OUT=${2:-${OUT:-$PWD/gpu_probe_out}}
 export PYTHONPATH=$PWD/src${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
 if [ "${SIZE:-full}" = small ]; then
     STEPS=${STEPS:-4} REPEATS=${REPEATS:-2} TILES=${TILES:-1x1} BIG_STEPS=${BIG_STEPS:-2} CHECK_STEPS=${CHECK_STEPS:-6}
+    SHAPES=${SHAPES:-128}   # the simulator runs any shape as a few threads: one is enough there
 fi
 args=(--steps "${STEPS:-1000}" --repeats "${REPEATS:-3}" --tiles "${TILES:-7x7}" --big-steps "${BIG_STEPS:-100}"
       --check-steps "${CHECK_STEPS:-200}")
 [ -n "${VARIANTS:-}" ] && args+=(--variants "$VARIANTS")
+[ -n "${SHAPES:-}" ] && args+=(--shapes "$SHAPES")
 mkdir -p "$OUT"
 { echo "gpu_probe $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null || echo "gpu: none"

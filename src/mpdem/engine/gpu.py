@@ -36,6 +36,8 @@ from .order import sort_rows
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
 # launches; a 20k pile runs some thousands of steps a second)
 BATCH = 1000
+# engine.gpu_threads: how the forces take the GPU's threads (``Engine``)
+THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -84,11 +86,12 @@ class Engine(EngineBase):
     blocks : int or None
         Blocks a launch at most (each thread then takes several rows); None for one row a thread.
         The tests under numba's simulator use a few threads: it runs each as a Python thread.
-    threads : {"row", "entry"}
+    threads : {"row", "entry", "chunk8", "chunk16", "chunk32", "chunk64"}
         How the contact forces take the threads (``engine.gpu_threads``): a thread a row computes and
         sums its list's contacts (``kernels.gpu.step.forces``), or a thread an entry computes one
-        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``);
-        no effect on results.
+        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``),
+        or a block owns chunks of R rows (``chunkR``), its threads computing the chunk's entries, then,
+        after a block barrier, a thread a row summing them (``chunk_forces``); no effect on results.
 
     Attributes
     ----------
@@ -100,9 +103,11 @@ class Engine(EngineBase):
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row"):
         runtime, self.k, self.kl = _kernels()
-        if threads not in ("row", "entry"):
-            raise ValueError(f"threads = {threads!r}: accepted 'row' or 'entry'")
-        self.by_entry = threads == "entry"
+        if threads not in THREADS:
+            raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
+        # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
+        self.chunk_rows = int(threads[len("chunk"):]) if threads.startswith("chunk") else 0
+        self.by_entry = threads != "row"
         self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
@@ -408,7 +413,13 @@ class Engine(EngineBase):
         if not self._red_fresh:
             self._red.copy_to_device(np.array(k.NEUTRAL))
         self._red_fresh = False
-        if self.by_entry:
+        if self.chunk_rows:
+            chunks = -(-s.n_own // self.chunk_rows)
+            self._launch("chunk_forces", s.n_own, self.chunk_rows, d["row"], d["x"], d["v"], d["omega"], d["f"],
+                         d["torque"], d["fixed"], d["start"], d["nbr"], d["hist"], d["stamp"], pair, keep_pairs,
+                         d["wall_ds"], planes_d, kinds_d, self._epoch, *box, self.law, increment, self._red,
+                         grid=self._grid(chunks * self.block))
+        elif self.by_entry:
             self._launch("entry_forces", max(self._k, 1), d["row"], d["x"], d["v"], d["omega"], d["fixed"], d["nbr"],
                          d["hist"], d["stamp"], pair, keep_pairs, self._epoch, *box, self.law, increment, self._red)
             self._launch("row_sums", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
@@ -485,7 +496,7 @@ class Engine(EngineBase):
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
-                    max(self._k, 1), d.get("row", d["nbr"]))
+                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows)
             self._launch("advance", *args, grid=self._cooperative_grid(args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
@@ -528,7 +539,11 @@ class Engine(EngineBase):
                 except (AttributeError, StopIteration):
                     # one block a multiprocessor is resident whatever the kernel's resources
                     self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
-        blocks, block = self._grid(max(self.state.n_own, self._k) if self.by_entry else self.state.n_own)
+        n = self.state.n_own
+        if self.chunk_rows:
+            blocks, block = self._grid(-(-n // self.chunk_rows) * self.block)
+        else:
+            blocks, block = self._grid(max(n, self._k) if self.by_entry else n)
         return min(blocks, self._coop_blocks), block
 
     def complete(self):

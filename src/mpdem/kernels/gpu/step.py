@@ -2,7 +2,9 @@
 
 One thread a row (``forces``), or a thread an entry then a thread a row
 (``entry_forces`` and ``row_sums``: more threads for the GPU, the entries'
-forces through its memory). Each row's entries are those of its full
+forces through its memory), or blocks that own chunks of rows (``chunk_forces``:
+the block's threads over the chunk's entries, a block barrier, then a thread a
+row; no grid barrier between). Each row's entries are those of its full
 neighbour list, in partner-id order, summed in that order: the pair's law from i's
 side is the exact negative of the law from j's side (``kernels/law.py``:
 mirror-exact separations, symmetric sums), so the row's sum is the CPU
@@ -413,6 +415,65 @@ def _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds
     max_into(red, RED_OVERLAP, deepest, room)
 
 
+@cuda.jit
+def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
+                 kinds, epoch, L_x, L_y, hx, hy, law, increment, red):
+    """``forces`` by chunks of ``rows`` rows: block b takes chunks b, b + blocks, ... (chunk c: rows
+    c rows .. (c + 1) rows - 1); its threads compute the chunk's entries a thread an entry into ``pair``
+    (as ``entry_forces``), then, after a block barrier, a thread a row sums its entries in list order
+    and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
+    ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
+    room = cuda.shared.array(BLOCK_MAX, np.float64)
+    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    if cuda.grid(1) == 0:
+        red[RED_D2] = NEUTRAL[RED_D2]
+        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
+        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
+        red[RED_BAD] = NEUTRAL[RED_BAD]
+    _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
+                 kinds, np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
+                 increment, red, room, iroom)
+
+
+@device_cuda
+def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
+                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
+    """This block's chunks of ``chunk_forces`` and their reductions into ``red`` (every thread of the block
+    calls it: the chunks' loop is the same for the whole block, so is its barrier)."""
+    t = cuda.threadIdx.x
+    nt = cuda.blockDim.x
+    deepest = 0.0
+    contacts = 0
+    for c in range(cuda.blockIdx.x, (n_own + rows - 1) // rows, cuda.gridDim.x):
+        r0 = c * rows
+        r1 = min(r0 + rows, n_own)
+        for e in range(start[r0] + t, start[r1], nt):
+            i = row[e]
+            if fixed[i]:
+                continue
+            k, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x[i, 0], x[i, 1], x[i, 2], x, v, omega, fixed,
+                                                              nbr, hist, stamp, now, before, L_x, L_y, hx, hy, law,
+                                                              increment)
+            if k:
+                contacts += 1
+                deepest = max(deepest, delta)
+                _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
+            elif keep:
+                _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        # the chunk's entries in pair and stamp, seen by the threads that sum its rows
+        cuda.syncthreads()
+        for i in range(r0 + t, r1, nt):
+            if fixed[i]:
+                for a in range(3):
+                    f[i, a] = 0.0
+                    torque[i, a] = 0.0
+                continue
+            deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds,
+                                            now, law, increment))
+    max_into(red, RED_OVERLAP, deepest, room)
+    sum_into(red, RED_CONTACTS, contacts, iroom)
+
+
 @device_cuda
 def _go_on(red, half_skin, room):
     """Whether every row of ``red``'s step moved less than ``half_skin`` [d] since ``x_ref`` with a
@@ -431,7 +492,7 @@ def _go_on(red, half_skin, room):
 
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row):
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -443,8 +504,9 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     whole, step s has drifted, and its ``rec[s]`` says why (the caller finishes it). ``rec`` is
     (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. With ``by_entry`` the forces are
     ``entry_forces`` then ``row_sums`` (``pair`` has room for every one of the ``n_entries``
-    entries, ``row`` their rows), a grid barrier between. The same arithmetic as the step's
-    kernels, so the same bits.
+    entries, ``row`` their rows), a grid barrier between; with ``chunk_rows`` > 0 they are
+    ``chunk_forces``'s chunks of that many rows (``row`` and ``pair`` as with ``by_entry``), no grid
+    barrier between. The same arithmetic as the step's kernels, so the same bits.
     """
     grid = cuda.cg.this_grid()
     room = cuda.shared.array(BLOCK_MAX, np.float64)
@@ -465,7 +527,10 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
             break
         now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
         before = np.uint32((epoch + s) & 0xFFFFFFFF)
-        if by_entry:
+        if chunk_rows > 0:
+            _chunk_phase(n_own, chunk_rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False,
+                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, iroom)
+        elif by_entry:
             _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
                          hx, hy, law, True, rec[s], room, iroom)
             grid.sync()
