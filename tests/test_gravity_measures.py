@@ -103,6 +103,49 @@ def test_bed_bed_overlaps_are_not_contacts_and_do_not_weigh_on_the_backbone():
     assert bb["kept"].all() and bb["counts"][~bed].min() >= 1
 
 
+def test_a_pile_resting_on_the_wall_under_a_sparse_bed_is_held_by_it():
+    # a simple cubic pile, no bed sphere under it: its lowest layer rests on the wall (bed.wall, the plane
+    # z = 0), which the pair list does not hold. Without the plane as a support a frictionless lowest
+    # layer cannot hold its weight (its other contacts are level or from above) and the cascade takes
+    # every sphere: "100 % rattlers". With friction the level contacts' cones hold it, which is why only
+    # frictionless piles showed it.
+    from mpdem import planes
+    x, L = simple_cubic(4, 8, 1.0 - 1e-4)
+    fixed = np.zeros(len(x), np.uint8)
+    held = bulk.bulk_summary(x, fixed, L, L, mu=0.0, rattlers="force", planes=(planes.WALL,))
+    assert held["rattler_fraction"] == 0.0 and held["z_no_rattlers"] == held["z"] and "rattler_note" not in held
+    lost = bulk.bulk_summary(x, fixed, L, L, mu=0.0, rattlers="force")
+    assert lost["rattler_fraction"] == 1.0 and math.isnan(lost["z_no_rattlers"])
+    assert lost["rattler_note"] == bulk.NO_BACKBONE and bulk.rattlers_text(lost) == bulk.NO_BACKBONE
+    assert bulk.rattlers_text(held) == f"{held['z']:.3f} (0.0% rattlers)"
+    assert bulk.bulk_summary(x, fixed, L, L, mu=0.5, rattlers="force")["rattler_fraction"] == 0.0
+    # the plane's contacts pass the same force cut: a plane far below supports nothing
+    pk = bulk.Packing(x, fixed, L, L, 0.0, planes=(planes.Plane((0.0, 0.0, 1.0), -1.0),))
+    assert len(pk.plane_contacts()[0]) == 0
+
+
+def test_a_frictionless_pile_loaded_from_a_lammps_dump_onto_the_wall_has_a_backbone(tmp_path):
+    # as a frictionless pile settled by LAMMPS on the wall under a sparse bed, loaded from its dump
+    # (run.initial_file, run.fixed_types, bed.wall), stepped once and analysed: rattlers by the force rule
+    from helpers import mpdem as cli
+    x, L = simple_cubic(4, 8, 1.0 - 1e-4)
+    bed = np.array([[0.5, 0.5, -2.0], [2.5, 2.5, -2.0]])      # a sparse bed, out of reach below the wall
+    rows = [f"{i + 1} 1 {a!r} {b!r} {c!r} 0.5" for i, (a, b, c) in enumerate(x.tolist())]
+    rows += [f"{len(x) + i + 1} 2 {a!r} {b!r} {c!r} 0.5" for i, (a, b, c) in enumerate(bed.tolist())]
+    dump = tmp_path / "pile.dump"
+    dump.write_text(f"ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{len(rows)}\nITEM: BOX BOUNDS pp pp ff\n0 {L!r}\n"
+                    f"0 {L!r}\n-3 12\nITEM: ATOMS id type x y z radius\n" + "\n".join(rows) + "\n")
+    run = tmp_path / "run"
+    cli("run", "--set", f'run.initial_file="{dump}"', "--set", "run.fixed_types=[2]", "--set", "bed.wall=true",
+        "--set", "contact.mu=0", "--set", "run.max_steps=1", "--set", "analysis.margin_bottom=1.0",
+        "--set", "analysis.margin_top=1.0", "--out", run, check=3)
+    p = cli("analyze", run, "--no-plots")
+    import json
+    s = json.loads((run / "analysis" / "summary.json").read_text())
+    assert s["rattler_fraction"] == 0.0 and s["backbone"]["z"] > 0 and "% rattlers" in p.stdout
+    assert "rattler_note" not in s
+
+
 # ---- contact forces --------------------------------------------------------------
 
 def test_contact_forces_take_the_files_forces_with_the_sign_of_each_pair():

@@ -66,6 +66,12 @@ def of_physics(physics):
     return ((FLOOR,) if physics.floor else ()) + ((WALL,) if physics.wall else ()) + extra
 
 
+def of_config(cfg):
+    """The planes a run of ``cfg`` has besides the bed-making floor: the wall under the bed
+    (``bed.wall``), which a pile resting on a sparse bed leans on (the analyses' supports)."""
+    return (WALL,) if cfg.bed.wall else ()
+
+
 def arrays(planes):
     """The kernels' arrays of ``planes``: (P, 4) float64 normals and offsets, (P,) int64 kinds."""
     geo = np.array([p.normal + (p.offset,) for p in planes], dtype=np.float64).reshape(-1, 4)

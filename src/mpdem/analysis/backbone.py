@@ -16,7 +16,11 @@ contacts' directions (at mu = 0: along the normals; at mu > 0: inside each
 Coulomb cone, approximated from inside by a pyramid of ``CONE_SIDES`` edges)
 sum to m g up (non-negative least squares, residual below ``BALANCE_TOL``).
 It needs no force values, only directions, so it holds for any load from
-above. The bed is never removed.
+above. The bed is never removed, nor is a plane the pile rests on (the wall
+under a sparse bed, ``bulk.Packing.planes``): a sphere's contact with one is a
+support like a contact with a bed sphere (and dropped by the same force cut).
+Without those supports a frictionless pile that rests on the wall loses its
+lowest layer, and then, layer by layer, every sphere.
 """
 from __future__ import annotations
 
@@ -65,7 +69,7 @@ def balances_weight(u, mu, up=UP):
     return res < BALANCE_TOL
 
 
-def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0.01, up=UP):
+def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0.01, up=UP, supports=None):
     """Spheres and contacts that carry the pile's weight.
 
     Parameters
@@ -77,6 +81,9 @@ def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0
     removable : (n_rows,) bool, False for spheres never removed (the bed)
     mu : friction coefficient
     force_fraction : contacts with F_n < force_fraction x ref_force are dropped first
+    supports : (rows (A,), nrm (A, 3), F_n (A,), ref_force (A,)) or None
+        Contacts of spheres with fixed boundaries (planes), never removed: unit normals into the
+        sphere, their forces and reference forces (the same cut).
 
     Returns
     -------
@@ -95,6 +102,15 @@ def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0
     sign = np.concatenate([np.ones(M), -np.ones(M)])
     order = np.argsort(ends, kind="stable")
     start = np.searchsorted(ends[order], np.arange(n_rows + 1))
+    # each sphere's supports that pass the cut (rows sorted, their normals alike)
+    if supports is None:
+        s_rows, s_nrm = np.zeros(0, np.int64), np.zeros((0, 3))
+    else:
+        s_rows, s_nrm, s_F, s_ref = supports
+        strong = np.asarray(s_F) >= force_fraction * np.asarray(s_ref)
+        by = np.argsort(np.asarray(s_rows)[strong], kind="stable")
+        s_rows, s_nrm = np.asarray(s_rows, np.int64)[strong][by], np.asarray(s_nrm)[strong][by]
+    s_start = np.searchsorted(s_rows, np.arange(n_rows + 1))
     todo = np.flatnonzero(removable)
     while todo.size:
         live = ~weak & kept[pairs[:, 0]] & kept[pairs[:, 1]]
@@ -105,7 +121,10 @@ def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0
             mine = order[start[s]:start[s + 1]]
             c = which[mine]
             on = live[c]
-            if not balances_weight(sign[mine][on, None] * nrm[c[on]], mu, up):
+            u = sign[mine][on, None] * nrm[c[on]]
+            if s_start[s + 1] > s_start[s]:
+                u = np.concatenate([u, s_nrm[s_start[s]:s_start[s + 1]]])
+            if not balances_weight(u, mu, up):
                 drop.append(s)
         if not drop:
             break
@@ -127,13 +146,26 @@ def of_packing(pk, cf, h, band_width, force_fraction):
     ----------
     pk : Packing; cf : its ContactForces; h : free surface [d]; band_width : [d]
 
+    The contacts with ``pk.planes`` (``Packing.plane_contacts``) are supports, their elastic forces
+    (cf.k_n, cf.model) compared with the mean of the pairs' forces in the band at the sphere's height.
+
     Returns
     -------
-    dict: kept, live, counts, weak (as ``backbone``) and ref_force (M,) [m g]
+    dict: kept, live, counts, weak (as ``backbone``), ref_force (M,) [m g], and plane_supports: the
+    contacts with planes that pass the cut
     """
-    from .contacts import band_index, local_mean, n_bands
+    from .contacts import band_index, elastic_normal, local_mean, n_bands
     B = n_bands(h, pk.z_bed, band_width)
     mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
-    ref = local_mean(cf.F_n, band_index(mid, h, band_width, B), B)
-    kept, live, counts, weak = backbone(len(pk.x), pk.pairs, cf.nrm, cf.F_n, ref, pk.mobile, pk.mu, force_fraction)
-    return {"kept": kept, "live": live, "counts": counts, "weak": weak, "ref_force": ref}
+    band = band_index(mid, h, band_width, B)
+    ref = local_mean(cf.F_n, band, B)
+    rows, nrm, delta = pk.plane_contacts()
+    supports = None
+    if len(rows):
+        means = np.bincount(band, weights=cf.F_n, minlength=B) / np.maximum(np.bincount(band, minlength=B), 1)
+        s_ref = means[band_index(pk.x[rows, 2], h, band_width, B)]
+        supports = (rows, nrm, elastic_normal(delta, cf.k_n, cf.model), s_ref)
+    kept, live, counts, weak = backbone(len(pk.x), pk.pairs, cf.nrm, cf.F_n, ref, pk.mobile, pk.mu, force_fraction,
+                                        supports=supports)
+    n_sup = 0 if supports is None else int((supports[2] >= force_fraction * supports[3]).sum())
+    return {"kept": kept, "live": live, "counts": counts, "weak": weak, "ref_force": ref, "plane_supports": n_sup}

@@ -162,6 +162,18 @@ def coordination(counts, kept, counts_nr, bulk):
     }
 
 
+# what the summaries say instead of "100 % rattlers" when the force rule keeps no sphere of the bulk
+NO_BACKBONE = ("not measured: no sphere of the bulk holds its weight on the contacts the force rule sees (a "
+               "support it does not see, such as a plane other than bed.wall, or forces of another state)")
+
+
+def rattlers_text(s):
+    """'z_nr (f % rattlers)' of a bulk summary ``s`` (``Packing.measure``), or why the rule could not say."""
+    if s.get("rattler_note"):
+        return s["rattler_note"]
+    return f"{s['z_no_rattlers']:.3f} ({100 * s['rattler_fraction']:.1f}% rattlers)"
+
+
 class Packing:
     """A static packing with its contacts, ready for the bulk measurements.
 
@@ -170,6 +182,9 @@ class Packing:
     x : (n, 3) positions [d]; fixed : (n,) 1 for bed spheres
     L_x, L_y : box [d]; mu : friction (sets the default rattler threshold)
     n_min : threshold of the count rule; -1 = 4 for mu = 0, 2 for mu > 0
+    planes : sequence of ``planes.Plane``
+        Flat boundaries the pile rests on besides its bed (``planes.of_config``: the wall under the
+        bed); their contacts support the backbone's spheres (``plane_contacts``).
 
     Contacts (``pairs``, ``r``): every overlapping pair with a mobile sphere in it;
     two bed spheres overlap where the bed froze, but they never interact.
@@ -179,8 +194,9 @@ class Packing:
     the force-based backbone (docs/model.md 6.2), the default of the analysis.
     """
 
-    def __init__(self, x, fixed, L_x, L_y, mu, n_min=-1):
+    def __init__(self, x, fixed, L_x, L_y, mu, n_min=-1, planes=()):
         self.x = np.ascontiguousarray(x, dtype=np.float64)
+        self.planes = tuple(planes)
         self.fixed = np.asarray(fixed).astype(bool)
         self.mobile = ~self.fixed
         if not self.mobile.any():
@@ -198,6 +214,22 @@ class Packing:
         self.kept_count, self.counts_count = remove_rattlers(n, self.pairs, self.mobile, self.n_min)
         self.rule = "count"
         self.kept, self.counts_nr = self.kept_count, self.counts_count
+
+    def plane_contacts(self):
+        """The mobile spheres' contacts with ``planes``: rows (A,) int64, unit normals into the
+        sphere (A, 3) (the plane's), overlaps (A,) [d]."""
+        rows, nrm, delta = [], [], []
+        mob = np.flatnonzero(self.mobile)
+        for p in self.planes:
+            n = np.asarray(p.normal)
+            d = R - (self.x[mob] @ n - p.offset)
+            on = d > 0.0
+            rows.append(mob[on])
+            nrm.append(np.broadcast_to(n, (int(on.sum()), 3)))
+            delta.append(d[on])
+        if not rows:
+            return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+        return np.concatenate(rows).astype(np.int64), np.concatenate(nrm), np.concatenate(delta)
 
     def use_backbone(self, kept, counts):
         """Rattlers from now on by the force-based backbone (``backbone.of_packing``)."""
@@ -220,6 +252,8 @@ class Packing:
             c = coordination(self.counts, self.kept_count, self.counts_count, bulk)
             out["count_rule"] = {"n_min": self.n_min, "z_no_rattlers": c["z_no_rattlers"],
                                  "rattler_fraction": c["rattler_fraction"]}
+            if bulk.any() and not (self.kept & bulk).any():
+                out["rattler_note"] = NO_BACKBONE
         out["phi"] = packing_fraction(self.x[self.mobile, 2], self.L_x, self.L_y, z1, z2)
         in_bulk = bulk[self.pairs[:, 0]] | bulk[self.pairs[:, 1]]
         overl = 1.0 - self.r[in_bulk]
@@ -235,7 +269,7 @@ class Packing:
 
 def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_min=-1,
                  profile_bin=0.5, tall_pile=40.0, packing=None, rattlers="count", k_n=2e5, model="hooke",
-                 force_fraction=0.01, band_width=2.5):
+                 force_fraction=0.01, band_width=2.5, planes=()):
     """Bulk z, z without rattlers, rattler fraction and phi_f of a packing.
 
     Parameters
@@ -247,6 +281,7 @@ def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_
     packing : Packing of the same arguments, if already built
     rattlers : 'force' (the backbone, with the elastic normal forces of the overlaps:
         k_n, model, force_fraction, band_width) or 'count' (n_min)
+    planes : the planes the pile rests on besides its bed (``Packing``)
 
     Returns
     -------
@@ -254,7 +289,7 @@ def bulk_summary(x, fixed, L_x, L_y, mu, margin_bottom=-1.0, margin_top=-1.0, n_
     z_bed, margins, n_min, phi_plateau, P(z) with and without rattlers,
     median and maximum bulk overlap, the rule ``rattlers``.
     """
-    pk = packing or Packing(x, fixed, L_x, L_y, mu, n_min)
+    pk = packing or Packing(x, fixed, L_x, L_y, mu, n_min, planes)
     reg = pk.region(margin_bottom, margin_top, profile_bin, tall_pile)
     if rattlers == "force":
         from . import backbone, contacts

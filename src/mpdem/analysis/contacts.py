@@ -30,6 +30,8 @@ class ContactForces:
     F_t : (M, 3) tangential force on i [m g] (zero where the file has none)
     zeta : (M,) |F_t| / (mu F_n); nan at mu = 0 or F_n <= 0
     from_file : (M,) bool, the pair's forces came from the file's contact list
+    k_n : float, model : str
+        The law the elastic forces were made with (a plane's contacts are made with it too).
     """
     nrm: np.ndarray
     branch: np.ndarray
@@ -38,6 +40,8 @@ class ContactForces:
     F_t: np.ndarray
     zeta: np.ndarray
     from_file: np.ndarray
+    k_n: float = 2e5
+    model: str = "hooke"
 
     @property
     def force(self):
@@ -92,7 +96,7 @@ def contact_forces(pk, arrays, k_n, mu, model="hooke"):
     with np.errstate(invalid="ignore", divide="ignore"):
         ft = np.sqrt(np.einsum("ij,ij->i", F_t, F_t))
         zeta = np.where((F_n > 0) & (mu > 0), ft / (mu * F_n), np.nan) if mu > 0 else np.full(len(i), np.nan)
-    return ContactForces(nrm, branch, delta, F_n, F_t, zeta, from_file)
+    return ContactForces(nrm, branch, delta, F_n, F_t, zeta, from_file, float(k_n), model)
 
 
 def n_bands(h, z_bed, width):

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import (backbone, bands, bulk, contacts, fabric, fits, flow, gofr, jackknife, mobilisation, nearcontact, order,
                surface)
+from .. import planes
 
 
 @dataclass
@@ -70,7 +71,8 @@ class Sample:
 def sample(arrays, attrs, cfg):
     """The ``Sample`` of a state: the packing, its slab, contact forces and backbone."""
     a, c = cfg.analysis, cfg.contact
-    pk = bulk.Packing(arrays["x"], arrays["fixed"], float(attrs["L_x"]), float(attrs["L_y"]), c.mu, a.n_min)
+    pk = bulk.Packing(arrays["x"], arrays["fixed"], float(attrs["L_x"]), float(attrs["L_y"]), c.mu, a.n_min,
+                      planes.of_config(cfg))
     reg = pk.region(a.margin_bottom, a.margin_top, a.profile_bin, a.tall_pile)
     cf = contacts.contact_forces(pk, arrays, c.k_n, c.mu, c.model)
     bb = backbone.of_packing(pk, cf, reg["h"], a.band_width, a.force_fraction)

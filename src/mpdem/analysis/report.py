@@ -32,7 +32,7 @@ from .. import config
 from ..io import rundir
 from ..io.checkpoint import StateFileError
 from ..errors import AnalysisError
-from . import bands, flow
+from . import bands, bulk, flow
 from .measures import measure
 
 SUMMARY = "summary.json"
@@ -265,8 +265,8 @@ def describe(s):
           + ", ".join(f"{w['depth_lo']:g}-{w['depth_hi']:g} d {w['z']:.3f} +- {w['z_err']:.3f}" for w in wins)
           if wins else "")
     return (f"bulk z in [{s['z1']:.2f}, {s['z2']:.2f}] ({s['n_bulk']} particles): z = {s['z']:.3f}, "
-            f"without rattlers ({s['rattlers']} rule) {s['z_no_rattlers']:.3f} "
-            f"({100 * s['rattler_fraction']:.1f}% rattlers), backbone z = {s['backbone']['z']:.3f}{zi}, "
+            f"without rattlers ({s['rattlers']} rule) {bulk.rattlers_text(s)}, "
+            f"backbone z = {s['backbone']['z']:.3f}{zi}, "
             f"phi = {s['phi']:.4f}\n"
             f"margins halved: z = {s['halved_margins']['z']:.3f}, phi = {s['halved_margins']['phi']:.4f}; "
             f"crystal-like {100 * s['order']['crystal_fraction']:.1f}%\n"

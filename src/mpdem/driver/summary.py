@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from .. import analysis
+from .. import analysis, planes
 from ..io import checkpoint
 from ..io import rundir
 
@@ -112,10 +112,11 @@ def write(end, arrays, cfg, out, final, log):
         bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], end.L_x, end.L_y, cfg.contact.mu,
                                      a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile,
                                      rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
-                                     force_fraction=a.force_fraction, band_width=a.band_width)
+                                     force_fraction=a.force_fraction, band_width=a.band_width,
+                                     planes=planes.of_config(cfg))
         summary["bulk"] = bulk
-        log(f"bulk: z = {bulk['z']:.3f} (without rattlers {bulk['z_no_rattlers']:.3f} by the {bulk['rattlers']} rule, "
-            f"rattlers {100 * bulk['rattler_fraction']:.1f}%), phi = {bulk['phi']:.4f}, "
+        log(f"bulk: z = {bulk['z']:.3f} (without rattlers by the {bulk['rattlers']} rule "
+            f"{analysis.bulk.rattlers_text(bulk)}), phi = {bulk['phi']:.4f}, "
             f"{bulk['n_bulk']} particles in z in [{bulk['z1']:.2f}, {bulk['z2']:.2f}], "
             f"surface h = {bulk['h']:.2f}")
     except ValueError as e:
