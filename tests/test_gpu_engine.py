@@ -24,10 +24,11 @@ from mpdem.state import State
 
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
-# second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``).
+# second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``)
+# with its kernels compiled under a register cap (``engine.gpu_max_registers``).
 GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry"),
-          dict(block=4, blocks=2, threads="chunk8")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry"), dict(block=64, threads="chunk16")])
+          dict(block=4, blocks=2, threads="chunk8", max_registers=64)] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry"), dict(block=64, threads="chunk16", max_registers=64)])
 
 
 def physics(mu=0.5, model="hooke", **kw):
@@ -254,6 +255,9 @@ def test_each_rank_on_a_node_takes_its_own_gpu():
 def test_gpu_block_is_checked_before_any_work(tmp_path):
     r = mpdem("run", "--set", "engine.gpu_block=48", "--set", "run.max_steps=10", "--out", tmp_path / "r", check=1)
     assert "engine.gpu_block = 48: accepted a power of two from 32 to 1024" in r.stderr
+    r = mpdem("run", "--set", "engine.gpu_max_registers=16", "--set", "run.max_steps=10", "--out", tmp_path / "s",
+              check=1)
+    assert "engine.gpu_max_registers = 16: accepted 0 (the compiler's choice) or 32 to 255" in r.stderr
     assert "Traceback" not in r.stderr
 
 

@@ -16,6 +16,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import gpu_probe  # noqa: E402
 
+DRY = ("row", "chunk16-r64")
+
 
 @pytest.fixture(scope="module")
 def small_table(tmp_path_factory):
@@ -32,7 +34,9 @@ def small_table(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dry_run(small_table, tmp_path_factory):
     out = tmp_path_factory.mktemp("probe") / "out"
-    env = {**os.environ, "PY": sys.executable, "SIZE": "small"}
+    # two variants (a thread a row; chunks under a register cap) carry the probe's every path; the
+    # variants' own bits are test_gpu_engine.py's
+    env = {**os.environ, "PY": sys.executable, "SIZE": "small", "VARIANTS": ",".join(DRY)}
     p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
                        capture_output=True, text=True, timeout=900)
     return p, out
@@ -45,14 +49,15 @@ def test_the_dry_run_measures_every_variant_and_checks_each_digest_against_the_c
     cpu = result["cpu"]
     assert cpu["atoms"] == 125 and len(cpu["digest"]) == 64 and cpu["check_steps"] == 6
     recs = result["variants"]
-    assert [(r["variant"], r["block"]) for r in recs] == [(v, 128) for v in gpu_probe.VARIANTS]
+    assert [(r["variant"], r["block"]) for r in recs] == [(v, 128) for v in DRY]
     for r in recs:
         assert "failed" not in r, r.get("failed")
         assert r["digest"] == cpu["digest"] and r["same"], (r["variant"], r["block"])
         assert len(r["step_us"]) == 2 and r["step_us_median"] > 0 and r["ns_atom_step"] > 0
         assert len(r["rebuilds"]) == gpu_probe.REBUILDS and all(b["ms"] > 0 for b in r["rebuilds"])
         assert r["big"]["atoms"] == 125 and r["big"]["ns_atom_step"] > 0
-        assert any(s.startswith("engine.gpu_threads=") for s in r["settings"])
+        assert [f"{k}={v}" for k, v in gpu_probe.VARIANTS[r["variant"]].items()] == r["settings"][-len(
+            gpu_probe.VARIANTS[r["variant"]]):]
     assert result["all_same"] and result["races"] == []
     assert result["anatomy"]["rc"] == 0 and any("run_quiet" in ln for ln in result["anatomy"]["lines"])
     # the table is written, and printed last
@@ -80,6 +85,10 @@ def test_a_digest_apart_from_the_cpus_or_between_shapes_is_reported_and_fails():
     gpu_probe.verdicts(result)
     assert not result["all_same"]
     assert any("failed: CudaAPIError: out of memory" in ln for ln in gpu_probe.table(result))
+    # a variant the budget left out says so, and is no fault
+    result["variants"][3] = {"variant": "entry", "block": 256, "skipped": "the budget: 400 s spent of 420"}
+    gpu_probe.verdicts(result)
+    assert result["all_same"] and any("skipped: the budget" in ln for ln in gpu_probe.table(result))
 
 
 @pytest.mark.parametrize("args, what", [

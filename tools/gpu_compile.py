@@ -149,7 +149,11 @@ def toolkit():
     return found.get("ptxas"), found.get("nvdisasm")
 
 
-def sass(ptx, tools):
+# the register caps swept for the fused step (engine.gpu_max_registers): its registers and spills under each
+CAPS = (64, 80, 96)
+
+
+def sass(ptx, tools, max_registers=0):
     """Assemble ``ptx`` for CC as a whole program (as the driver does), or relocatable where it calls
     the device runtime (the cooperative kernel's grid barrier, linked at load), and disassemble it:
     (DFMA count, ``resources``)."""
@@ -159,7 +163,8 @@ def sass(ptx, tools):
         with open(src, "w") as fh:
             fh.write(ptx)
         for mode in ([], ["-c"]):
-            p = subprocess.run([ptxas, f"-arch=sm_{CC[0]}{CC[1]}", *mode, "-v", "-o", cubin, src],
+            cap = [f"--maxrregcount={max_registers}"] if max_registers else []
+            p = subprocess.run([ptxas, f"-arch=sm_{CC[0]}{CC[1]}", *mode, *cap, "-v", "-o", cubin, src],
                                capture_output=True, text=True)
             if p.returncode == 0 or "Unresolved extern" not in p.stderr:
                 break
@@ -242,6 +247,13 @@ def main():
             continue
         print(f"gpu_compile: {name}: {line}, {time.perf_counter() - t:.1f} s")
         bad += not ok
+    kernel, args = table["step.advance"]
+    ptx = ptx_of(kernel, args)
+    for cap in CAPS:
+        res = sass(ptx, tools, cap)[1]
+        print(f"gpu_compile: step.advance under engine.gpu_max_registers = {cap}: {res['registers']} registers, "
+              f"{res['spill_stores']} B spill stores, {res['spill_loads']} B spill loads, {res['stack']} B stack, "
+              f"at most {resident_blocks(res)} blocks of 128 a multiprocessor")
     print(f"gpu_compile: numba-cuda {cuda_version()}, sm_{CC[0]}{CC[1]}: {len(table) - bad} of {len(table)} "
           f"kernels compile with every float64 operation rounded on its own, in the PTX and in ptxas's SASS "
           f"(the controls fuse {ptx_fmas} in the PTX and {plain} in the SASS, their twins {twin})")

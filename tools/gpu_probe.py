@@ -42,6 +42,10 @@ VARIANTS = {
     "entry": {"engine.gpu_threads": "entry"},
     "chunk16": {"engine.gpu_threads": "chunk16"},
     "chunk32": {"engine.gpu_threads": "chunk32"},
+    # a register cap lets more blocks of the cooperative grid be resident, at the price of spills
+    # (make test-gpu-compile prints the fused step's spills under 64, 80 and 96)
+    "chunk16-r80": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 80},
+    "chunk16-r64": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 64},
 }
 # the two block shapes each variant runs at (threads per block)
 SHAPES = (128, 256)
@@ -97,6 +101,9 @@ def arguments(argv):
             p.add_argument("--shapes", type=parse_shapes, default=list(SHAPES),
                            help="threads per block each variant runs at (default 128,256)")
             p.add_argument("--no-anatomy", action="store_true", help="leave out tools/gpu_anatomy.py")
+            p.add_argument("--budget", type=float, default=420.0,
+                           help="seconds of the call: a variant that would start past them (by the longest "
+                                "one so far) is skipped and says so (default 420)")
         else:
             p.add_argument("--variant", required=True, choices=["cpu", *VARIANTS])
             p.add_argument("--block", type=int, default=SHAPES[0])
@@ -171,17 +178,17 @@ def measure(a):
         sets += [f"{k}={v}" for k, v in VARIANTS[a.variant].items()]
     cfg = table_config(sets)
     phys = Physics.from_config(cfg)
-    threads, block = cfg.engine.gpu_threads, cfg.engine.gpu_block
+    threads, block, regs = cfg.engine.gpu_threads, cfg.engine.gpu_block, cfg.engine.gpu_max_registers
     rec = {"variant": a.variant, "block": block, "device": device, "settings": sets}
     t = time.perf_counter()
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads, regs)
     rec["compile_s"] = time.perf_counter() - t
 
     def engine(tile):
         whole, L_x, L_y = load_table(a.table, cfg, tile, say=lambda m: None)
         dom = Domain.from_config(None, cfg)
         st = dom.scatter(whole, L_x, L_y)
-        eng = make_engine(st, phys, dom, device, block, threads)
+        eng = make_engine(st, phys, dom, device, block, threads, regs)
         eng.start()
         return eng, st, len(whole["id"])
 
@@ -256,25 +263,29 @@ def verdicts(result):
     """Each GPU record's ``same``: its digest is the CPU's; and the races: variants whose shapes differ."""
     ref = result["cpu"].get("digest")
     races = []
-    for rec in result["variants"]:
+    ran = [r for r in result["variants"] if "skipped" not in r]
+    for rec in ran:
         rec["same"] = "digest" in rec and rec["digest"] == ref
     by_variant = {}
-    for rec in result["variants"]:
+    for rec in ran:
         by_variant.setdefault(rec["variant"], set()).add(rec.get("digest"))
     races = sorted(v for v, d in by_variant.items() if len(d) > 1)
     result["races"] = races
-    result["all_same"] = ref is not None and all(r["same"] for r in result["variants"])
+    result["all_same"] = ref is not None and all(r["same"] for r in ran)
     return result
 
 
 def table(result):
     """The summary table (text lines)."""
-    head = (f"{'variant':<10} {'block':>5} {'us/step':>9} {'ns/atom-step':>12} {'big ns':>8} {'rebuild ms':>10} "
+    head = (f"{'variant':<12} {'block':>5} {'us/step':>9} {'ns/atom-step':>12} {'big ns':>8} {'rebuild ms':>10} "
             f"{'regs':>5} {'local B':>7} {'coop':>5} {'compile s':>9}  digest")
     lines = [head, "-" * len(head)]
     for r in result["variants"]:
+        if "skipped" in r:
+            lines.append(f"{r['variant']:<12} {r['block']:>5}  skipped: {r['skipped']}")
+            continue
         if "failed" in r:
-            lines.append(f"{r['variant']:<10} {r['block']:>5}  failed: {r['failed'].splitlines()[-1][:80]}")
+            lines.append(f"{r['variant']:<12} {r['block']:>5}  failed: {r['failed'].splitlines()[-1][:80]}")
             continue
         gpu_rebuilds = [b["ms"] for b in r["rebuilds"] if not b["through_host"]] or [b["ms"] for b in r["rebuilds"]]
         adv = r["kernels"].get("advance", {})
@@ -282,7 +293,7 @@ def table(result):
 
         def num(v, fmt):
             return format(v, fmt) if v is not None else "-"
-        lines.append(f"{r['variant']:<10} {r['block']:>5} {r['step_us_median']:>9.2f} {r['ns_atom_step']:>12.3f} "
+        lines.append(f"{r['variant']:<12} {r['block']:>5} {r['step_us_median']:>9.2f} {r['ns_atom_step']:>12.3f} "
                      f"{num(big, '8.3f'):>8} {statistics.median(gpu_rebuilds):>10.2f} "
                      f"{num(adv.get('registers'), 'd'):>5} {num(adv.get('local_bytes'), 'd'):>7} "
                      f"{num(adv.get('cooperative_blocks'), 'd'):>5} {r['compile_s']:>9.1f}  "
@@ -311,10 +322,18 @@ def run_all(a):
     print(f"gpu_probe: the CPU engine's digest ({a.check_steps} steps)", flush=True)
     result["cpu"] = run_one(a, "cpu", SHAPES[0], os.path.join(a.out, "cpu.json"))
     result["variants"] = []
+    longest = result["cpu"].get("wall_s", 0.0)
     for v in a.variants:
         for block in a.shapes:
+            spent = time.perf_counter() - t
+            if spent + longest > a.budget:
+                result["variants"].append({"variant": v, "block": block,
+                                           "skipped": f"the budget: {spent:.0f} s spent of {a.budget:.0f}"})
+                continue
             print(f"gpu_probe: {v}, block {block}", flush=True)
-            result["variants"].append(run_one(a, v, block, os.path.join(a.out, f"{v}-{block}.json")))
+            rec = run_one(a, v, block, os.path.join(a.out, f"{v}-{block}.json"))
+            longest = max(longest, rec.get("wall_s", 0.0))
+            result["variants"].append(rec)
     if not a.no_anatomy:
         print("gpu_probe: tools/gpu_anatomy.py (the baseline)", flush=True)
         result["anatomy"] = anatomy(a)

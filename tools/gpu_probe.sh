@@ -7,7 +7,8 @@
 # numba-cuda, scipy, h5py). Exit 0 when every digest is the CPU's.
 #   bash tools/gpu_probe.sh TABLE [OUT]      TABLE: the bench's landed20k.txt.gz; OUT default ./gpu_probe_out
 #   VARIANTS=row,entry,chunk16,chunk32  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
-#   CHECK_STEPS=200   (the defaults)
+#   CHECK_STEPS=200  BUDGET=420 (seconds: a variant that would start past them is skipped, and says so)
+#   (the defaults)
 #   SIZE=small  a dry run on a small table (under NUMBA_ENABLE_CUDASIM=1 without a GPU: `make test` runs it)
 # On a lent machine (docs/gpu.md): `bash tools/device_slim.sh on` before the call, `off` after; the call:
 #   bash tools/gpu_probe.sh .devdata/landed20k.txt.gz "$OUT/probe"
@@ -25,6 +26,7 @@ args=(--steps "${STEPS:-1000}" --repeats "${REPEATS:-3}" --tiles "${TILES:-7x7}"
       --check-steps "${CHECK_STEPS:-200}")
 [ -n "${VARIANTS:-}" ] && args+=(--variants "$VARIANTS")
 [ -n "${SHAPES:-}" ] && args+=(--shapes "$SHAPES")
+[ -n "${BUDGET:-}" ] && args+=(--budget "$BUDGET")
 mkdir -p "$OUT"
 { echo "gpu_probe $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null || echo "gpu: none"

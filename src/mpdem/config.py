@@ -162,6 +162,10 @@ SCHEMA = (
        "32, 64: a block owns chunks of R particles, its threads compute the chunk's contacts, then after a block "
        "barrier a thread a particle sums its own in list order: no grid barrier between); no effect on results",
        str, ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64"), restart=True, physics=False),
+    _k("engine", "gpu_max_registers", 0,
+       "registers a thread at most for the GPU engine's step kernels (ptxas's -maxrregcount: more resident "
+       "blocks, perhaps spills); 0 = the compiler's choice, else 32 to 255; no effect on results",
+       int, restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
@@ -544,6 +548,8 @@ def resolve(raw):
 
     block = vals["engine.gpu_block"]
     need("engine.gpu_block", 32 <= block <= 1024 and block & (block - 1) == 0, "a power of two from 32 to 1024")
+    regs = vals["engine.gpu_max_registers"]
+    need("engine.gpu_max_registers", regs == 0 or 32 <= regs <= 255, "0 (the compiler's choice) or 32 to 255")
     k_n = vals["contact.k_n"]
     need("contact.k_n", k_n > 0, "k_n > 0")
     if not 1e3 <= k_n <= 1e10:

@@ -53,10 +53,11 @@ def require(device):
         gpu_require()
 
 
-def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row"):
-    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block`` and
-    ``gpu_threads``: the GPU engine's threads per block and its threads of the forces
-    (``engine.gpu_block``, ``engine.gpu_threads``; no effect on results)."""
+def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0):
+    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``,
+    ``gpu_threads`` and ``gpu_max_registers``: the GPU engine's threads per block, its threads of the
+    forces and its kernels' register cap (``engine.gpu_*``; no effect on results)."""
     if device == "gpu":
-        return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads)
+        return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads,
+                                    max_registers=gpu_max_registers)
     return engine_class(device)(state, physics, domain)

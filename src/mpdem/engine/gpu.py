@@ -92,6 +92,9 @@ class Engine(EngineBase):
         contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``),
         or a block owns chunks of R rows (``chunkR``), its threads computing the chunk's entries, then,
         after a block barrier, a thread a row summing them (``chunk_forces``); no effect on results.
+    max_registers : int
+        The step's kernels compiled with at most this many registers a thread (``engine.gpu_max_registers``;
+        0: the compiler's choice); no effect on results.
 
     Attributes
     ----------
@@ -101,8 +104,13 @@ class Engine(EngineBase):
         ``domain.comm_seconds``.
     """
 
-    def __init__(self, state, physics, domain, block=128, blocks=None, threads="row"):
+    def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0):
         runtime, self.k, self.kl = _kernels()
+        if not (max_registers == 0 or 32 <= max_registers <= 255):
+            raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
+        # the step's kernels compiled with at most this many registers a thread (0: the compiler's choice)
+        self.max_registers = int(max_registers)
+        self._capped = runtime.capped
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -168,6 +176,8 @@ class Engine(EngineBase):
         kernel = self._launchers.get(name)
         if kernel is None:
             kernel = getattr(self.k, name)
+            if self.max_registers:
+                kernel = self._capped(kernel, self.max_registers)
             specialize = getattr(kernel, "specialize", None)   # not in numba's simulator
             if specialize is not None:
                 kernel = specialize(*args)
@@ -532,7 +542,8 @@ class Engine(EngineBase):
             if self._simulator:     # numba's simulator runs a cooperative grid of one block only
                 self._coop_blocks = 1
             else:
-                spec = self._launchers.setdefault("advance", self.k.advance.specialize(*args))
+                kernel = self._capped(self.k.advance, self.max_registers) if self.max_registers else self.k.advance
+                spec = self._launchers.setdefault("advance", kernel.specialize(*args))
                 try:
                     overload = next(iter(spec.overloads.values()))
                     self._coop_blocks = max(int(overload.max_cooperative_grid_blocks(self.block)), 1)

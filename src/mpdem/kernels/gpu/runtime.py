@@ -53,6 +53,21 @@ def device_cuda(fn):
     return call
 
 
+_CAPPED = {}
+
+
+def capped(kernel, max_registers):
+    """``kernel`` (a ``cuda.jit`` kernel) compiled on its own with at most ``max_registers`` registers a
+    thread (ptxas's -maxrregcount: fewer registers, more resident blocks, perhaps spills; the same
+    arithmetic, so the same bits); one dispatcher per kernel and cap. Under the simulator, which has
+    no registers, a dispatcher of its own all the same."""
+    key = (kernel.py_func, max_registers)
+    if key not in _CAPPED:
+        jit = cuda.jit() if SIMULATOR else cuda.jit(max_registers=max_registers)
+        _CAPPED[key] = jit(kernel.py_func)
+    return _CAPPED[key]
+
+
 # the launcher's rank of this process among those on its node
 LOCAL_RANK_VARS = ("OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID", "PMI_LOCAL_RANK", "SLURM_LOCALID",
                    "PALS_LOCAL_RANKID")
