@@ -25,10 +25,14 @@ from mpdem.state import State
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
 # second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``)
-# with its kernels compiled under a register cap (``engine.gpu_max_registers``).
-GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry"),
-          dict(block=4, blocks=2, threads="chunk8", max_registers=64)] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry"), dict(block=64, threads="chunk16", max_registers=64)])
+# with its kernels compiled under a register cap (``engine.gpu_max_registers``); the last three reduce a
+# fused step's values in one tree a phase (``engine.gpu_reductions``).
+GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry", reductions="fused"),
+          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused"),
+          dict(block=2, blocks=3, reductions="fused")] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry", reductions="fused"),
+               dict(block=64, threads="chunk16", max_registers=64, reductions="fused"),
+               dict(block=256, reductions="fused")])
 
 
 def physics(mu=0.5, model="hooke", **kw):

@@ -77,7 +77,7 @@ def cases():
         "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, planes, kinds,
                                       5, *box, law, True, red)),
         "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds,
-                                        5, *box, law, True, 0.1, 4, rec, True, 4, nbr, 16)),
+                                        5, *box, law, True, 0.1, 4, rec, True, 4, nbr, 16, True)),
         "step.chunk_forces": (step.chunk_forces, (n, 16, nbr, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair,
                                                   True, x, planes, kinds, 5, *box, law, True, red)),
         "step.entry_forces": (step.entry_forces, (4, nbr, x, x, x, fixed, nbr, hist, stamp, pair, True, 5, *box, law,

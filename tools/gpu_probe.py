@@ -46,6 +46,9 @@ VARIANTS = {
     # (make test-gpu-compile prints the fused step's spills under 64, 80 and 96)
     "chunk16-r80": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 80},
     "chunk16-r64": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 64},
+    # a phase's reductions in one tree of barriers
+    "row-fused": {"engine.gpu_threads": "row", "engine.gpu_reductions": "fused"},
+    "chunk16-fused": {"engine.gpu_threads": "chunk16", "engine.gpu_reductions": "fused"},
 }
 # the two block shapes each variant runs at (threads per block)
 SHAPES = (128, 256)
@@ -178,17 +181,18 @@ def measure(a):
         sets += [f"{k}={v}" for k, v in VARIANTS[a.variant].items()]
     cfg = table_config(sets)
     phys = Physics.from_config(cfg)
-    threads, block, regs = cfg.engine.gpu_threads, cfg.engine.gpu_block, cfg.engine.gpu_max_registers
+    e = cfg.engine
+    threads, block, regs, reductions = e.gpu_threads, e.gpu_block, e.gpu_max_registers, e.gpu_reductions
     rec = {"variant": a.variant, "block": block, "device": device, "settings": sets}
     t = time.perf_counter()
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads, regs)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads, regs, reductions)
     rec["compile_s"] = time.perf_counter() - t
 
     def engine(tile):
         whole, L_x, L_y = load_table(a.table, cfg, tile, say=lambda m: None)
         dom = Domain.from_config(None, cfg)
         st = dom.scatter(whole, L_x, L_y)
-        eng = make_engine(st, phys, dom, device, block, threads, regs)
+        eng = make_engine(st, phys, dom, device, block, threads, regs, reductions)
         eng.start()
         return eng, st, len(whole["id"])
 

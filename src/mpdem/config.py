@@ -166,6 +166,10 @@ SCHEMA = (
        "registers a thread at most for the GPU engine's step kernels (ptxas's -maxrregcount: more resident "
        "blocks, perhaps spills); 0 = the compiler's choice, else 32 to 255; no effect on results",
        int, restart=True, physics=False),
+    _k("engine", "gpu_reductions", "tree",
+       "the GPU engine's fused steps' block reductions: 'tree' (a tree of barriers a value) or 'fused' (a phase's "
+       "values in one tree: a third of the barriers); no effect on results", str, ("tree", "fused"), restart=True,
+       physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",

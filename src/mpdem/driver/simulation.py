@@ -180,7 +180,7 @@ class Run:
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
         self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block,
-                                  cfg.engine.gpu_threads, cfg.engine.gpu_max_registers)
+                                  cfg.engine.gpu_threads, cfg.engine.gpu_max_registers, cfg.engine.gpu_reductions)
         # laws that change with the step: a stiffening ramp (``stiffen``) or a flow phase (``flowarrest``; the
         # config allows one of them), None without; the engine's law is the step's
         self.schedule = (stiffen.Ramp.from_config(cfg, self.physics.law)

@@ -53,11 +53,13 @@ def require(device):
         gpu_require()
 
 
-def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0):
+def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0,
+                gpu_reductions="tree"):
     """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``,
-    ``gpu_threads`` and ``gpu_max_registers``: the GPU engine's threads per block, its threads of the
-    forces and its kernels' register cap (``engine.gpu_*``; no effect on results)."""
+    ``gpu_threads``, ``gpu_max_registers`` and ``gpu_reductions``: the GPU engine's threads per block,
+    its threads of the forces, its kernels' register cap and its fused steps' reductions
+    (``engine.gpu_*``; no effect on results)."""
     if device == "gpu":
         return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads,
-                                    max_registers=gpu_max_registers)
+                                    max_registers=gpu_max_registers, reductions=gpu_reductions)
     return engine_class(device)(state, physics, domain)

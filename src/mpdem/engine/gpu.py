@@ -38,6 +38,8 @@ from .order import sort_rows
 BATCH = 1000
 # engine.gpu_threads: how the forces take the GPU's threads (``Engine``)
 THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
+# engine.gpu_reductions
+REDUCTIONS = ("tree", "fused")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -95,6 +97,9 @@ class Engine(EngineBase):
     max_registers : int
         The step's kernels compiled with at most this many registers a thread (``engine.gpu_max_registers``;
         0: the compiler's choice); no effect on results.
+    reductions : {"tree", "fused"}
+        The fused steps' block reductions (``engine.gpu_reductions``): a tree a value, or a phase's
+        values in one tree (``kernels.gpu.reduce``); no effect on results.
 
     Attributes
     ----------
@@ -104,13 +109,18 @@ class Engine(EngineBase):
         ``domain.comm_seconds``.
     """
 
-    def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0):
+    def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
+                 reductions="tree"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
         # the step's kernels compiled with at most this many registers a thread (0: the compiler's choice)
         self.max_registers = int(max_registers)
         self._capped = runtime.capped
+        if reductions not in REDUCTIONS:
+            raise ValueError(f"reductions = {reductions!r}: accepted {', '.join(map(repr, REDUCTIONS))}")
+        # the fused steps' reductions: one tree a phase ("fused") or one a value ("tree")
+        self.fused = reductions == "fused"
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -506,7 +516,7 @@ class Engine(EngineBase):
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
-                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows)
+                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused)
             self._launch("advance", *args, grid=self._cooperative_grid(args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False

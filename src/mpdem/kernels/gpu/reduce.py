@@ -1,6 +1,11 @@
 """Reductions over a block's threads and into global slots, exact whatever order the blocks run in:
 max, min, and integer sums (an integer sum kept in float64 is exact below 2**53).
 
+One value a tree (``max_into``, ``min_into``, ``sum_into``: log2(block) + 2 barriers each), or a
+step's values in one tree (``drift_into``: the drift's three extremes; ``contact_into``: the forces'
+largest overlap and contact count), the same results with a third or a half of the barriers. The
+fused ones need ``ROOM`` float64 of shared room.
+
 A block has at most ``BLOCK_MAX`` threads, a power of two; every thread of the block calls these
 (they wait at the block's barriers). They read ``cuda``, so they are ``runtime.device_cuda``.
 """
@@ -9,6 +14,8 @@ import numpy as np
 from .runtime import cuda, device_cuda
 
 BLOCK_MAX = 1024
+# shared float64 slots of the fused reductions: three values a thread
+ROOM = 3 * BLOCK_MAX
 
 
 @device_cuda
@@ -31,9 +38,10 @@ def block_max(value, room):
 
 @device_cuda
 def block_sum(value, room):
-    """The sum of the int64 ``value`` over the block's threads, in thread 0; as ``block_max``."""
+    """The sum of the int ``value`` over the block's threads, in thread 0; as ``block_max`` (``room``
+    float64: the integer sums are exact below 2**53, so the order does not matter)."""
     t = cuda.threadIdx.x
-    room[t] = value
+    room[t] = np.float64(value)
     cuda.syncthreads()
     s = cuda.blockDim.x // 2
     while s > 0:
@@ -64,7 +72,59 @@ def min_into(red, k, value, room):
 
 @device_cuda
 def sum_into(red, k, value, room):
-    """red[k] += the sum of the block's int64 ``value``s (as float64: exact below 2**53)."""
+    """red[k] += the sum of the block's int ``value``s (as float64: exact below 2**53); ``room`` float64,
+    the same a ``max_into`` before it used (each ends at a barrier)."""
     value = block_sum(value, room)
-    if cuda.threadIdx.x == 0 and value != 0:
-        cuda.atomic.add(red, k, np.float64(value))
+    if cuda.threadIdx.x == 0 and value != 0.0:
+        cuda.atomic.add(red, k, value)
+
+
+@device_cuda
+def _tree(room, t, n, k_max, k_sum):
+    """Reduce ``room``'s first ``k_max`` columns (of BLOCK_MAX slots each) by max and the next ``k_sum``
+    by sum over the block's ``n`` threads into slot 0 of each column, in one tree (every thread calls)."""
+    cuda.syncthreads()
+    s = n // 2
+    while s > 0:
+        if t < s:
+            for k in range(k_max):
+                o = k * BLOCK_MAX + t
+                if room[o + s] > room[o]:
+                    room[o] = room[o + s]
+            for k in range(k_max, k_max + k_sum):
+                o = k * BLOCK_MAX + t
+                room[o] += room[o + s]
+        cuda.syncthreads()
+        s //= 2
+
+
+@device_cuda
+def drift_into(red, k_d2, d2, k_hi, z_hi, k_lo, z_lo, room):
+    """red[k_d2] = max(red[k_d2], the block's ``d2``), red[k_hi] likewise with ``z_hi``, red[k_lo] =
+    min(red[k_lo], the block's ``z_lo``): ``max_into``, ``max_into``, ``min_into`` in one tree.
+    ``room`` (ROOM,) float64 shared."""
+    t = cuda.threadIdx.x
+    room[t] = d2
+    room[BLOCK_MAX + t] = z_hi
+    room[2 * BLOCK_MAX + t] = -z_lo
+    _tree(room, t, cuda.blockDim.x, 3, 0)
+    if t == 0:
+        cuda.atomic.max(red, k_d2, room[0])
+        cuda.atomic.max(red, k_hi, room[BLOCK_MAX])
+        cuda.atomic.min(red, k_lo, -room[2 * BLOCK_MAX])
+    cuda.syncthreads()
+
+
+@device_cuda
+def contact_into(red, k_max, value, k_sum, count, room):
+    """red[k_max] = max(red[k_max], the block's ``value``s), red[k_sum] += the sum of its int ``count``s:
+    ``max_into`` and ``sum_into`` in one tree (the counts as float64, exact below 2**53)."""
+    t = cuda.threadIdx.x
+    room[t] = value
+    room[BLOCK_MAX + t] = np.float64(count)
+    _tree(room, t, cuda.blockDim.x, 1, 1)
+    if t == 0:
+        cuda.atomic.max(red, k_max, room[0])
+        if room[BLOCK_MAX] != 0.0:
+            cuda.atomic.add(red, k_sum, room[BLOCK_MAX])
+    cuda.syncthreads()

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .reduce import BLOCK_MAX, max_into, min_into, sum_into
+from .reduce import BLOCK_MAX, ROOM, contact_into, drift_into, max_into, min_into, sum_into
 from .runtime import cuda, device, device_cuda
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
@@ -89,13 +89,14 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy
     if cuda.grid(1) == 0:
         red[RED_OVERLAP] = NEUTRAL[RED_OVERLAP]
         red[RED_CONTACTS] = NEUTRAL[RED_CONTACTS]
-    _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room)
+    _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room, False)
 
 
 @device_cuda
-def _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room):
+def _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room, fused):
     """This thread's rows of ``kick_drift`` (i, i + threads, ...), their reductions into ``red``'s
-    slots RED_D2, RED_ZMIN, RED_ZMAX and RED_BAD (every thread of the block calls it)."""
+    slots RED_D2, RED_ZMIN, RED_ZMAX and RED_BAD (every thread of the block calls it); ``fused``: the
+    three extremes in one tree (``reduce.drift_into``)."""
     d2 = 0.0
     z_lo = math.inf
     z_hi = -math.inf
@@ -110,9 +111,12 @@ def _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, 
             d2 = max(d2, di)
             z_lo = min(z_lo, z)
             z_hi = max(z_hi, z)
-    max_into(red, RED_D2, d2, room)
-    max_into(red, RED_ZMAX, z_hi, room)
-    min_into(red, RED_ZMIN, z_lo, room)
+    if fused:
+        drift_into(red, RED_D2, d2, RED_ZMAX, z_hi, RED_ZMIN, z_lo, room)
+    else:
+        max_into(red, RED_D2, d2, room)
+        max_into(red, RED_ZMAX, z_hi, room)
+        min_into(red, RED_ZMIN, z_lo, room)
     if bad:
         cuda.atomic.add(red, RED_BAD, np.float64(bad))
 
@@ -309,7 +313,6 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
     if cuda.grid(1) == 0:
         red[RED_D2] = NEUTRAL[RED_D2]
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
@@ -317,12 +320,12 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         red[RED_BAD] = NEUTRAL[RED_BAD]
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, red, room, iroom)
+                 increment, red, room, False)
 
 
 @device_cuda
 def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
-                 now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
+                 now, before, L_x, L_y, hx, hy, law, increment, red, room, fused):
     """This thread's rows of ``forces`` (i, i + threads, ...) with the stamps ``now`` and ``before``,
     their reductions into ``red``'s slots RED_OVERLAP and RED_CONTACTS (every thread of the block
     calls it)."""
@@ -338,8 +341,11 @@ def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, 
                           kinds, now, before, L_x, L_y, hx, hy, law, increment)
         deepest = max(deepest, d)
         contacts += c
-    max_into(red, RED_OVERLAP, deepest, room)
-    sum_into(red, RED_CONTACTS, contacts, iroom)
+    if fused:
+        contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
+    else:
+        max_into(red, RED_OVERLAP, deepest, room)
+        sum_into(red, RED_CONTACTS, contacts, room)
 
 
 @cuda.jit
@@ -354,19 +360,18 @@ def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
     of ``kick_drift`` to ``NEUTRAL``. Other arguments as ``forces``'s; any grid.
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
     if cuda.grid(1) == 0:
         red[RED_D2] = NEUTRAL[RED_D2]
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
         red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
         red[RED_BAD] = NEUTRAL[RED_BAD]
     _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, np.uint32(epoch & 0xFFFFFFFF),
-                 np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law, increment, red, room, iroom)
+                 np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law, increment, red, room, False)
 
 
 @device_cuda
 def _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx, hy,
-                 law, increment, red, room, iroom):
+                 law, increment, red, room, fused):
     """This thread's entries of ``entry_forces`` (e, e + threads, ...), their reductions into
     ``red`` (every thread of the block calls it)."""
     deepest = 0.0
@@ -383,8 +388,11 @@ def _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
             _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
         elif keep:
             _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    max_into(red, RED_OVERLAP, deepest, room)
-    sum_into(red, RED_CONTACTS, contacts, iroom)
+    if fused:
+        contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
+    else:
+        max_into(red, RED_OVERLAP, deepest, room)
+        sum_into(red, RED_CONTACTS, contacts, room)
 
 
 @cuda.jit
@@ -424,7 +432,6 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
     and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
     ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
     if cuda.grid(1) == 0:
         red[RED_D2] = NEUTRAL[RED_D2]
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
@@ -432,12 +439,12 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
         red[RED_BAD] = NEUTRAL[RED_BAD]
     _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
                  kinds, np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, red, room, iroom)
+                 increment, red, room, False)
 
 
 @device_cuda
 def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, iroom):
+                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, fused):
     """This block's chunks of ``chunk_forces`` and their reductions into ``red`` (every thread of the block
     calls it: the chunks' loop is the same for the whole block, so is its barrier)."""
     t = cuda.threadIdx.x
@@ -470,8 +477,11 @@ def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
                 continue
             deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds,
                                             now, law, increment))
-    max_into(red, RED_OVERLAP, deepest, room)
-    sum_into(red, RED_CONTACTS, contacts, iroom)
+    if fused:
+        contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
+    else:
+        max_into(red, RED_OVERLAP, deepest, room)
+        sum_into(red, RED_CONTACTS, contacts, room)
 
 
 @device_cuda
@@ -492,7 +502,8 @@ def _go_on(red, half_skin, room):
 
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows):
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
+            fused):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -506,11 +517,13 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     ``entry_forces`` then ``row_sums`` (``pair`` has room for every one of the ``n_entries``
     entries, ``row`` their rows), a grid barrier between; with ``chunk_rows`` > 0 they are
     ``chunk_forces``'s chunks of that many rows (``row`` and ``pair`` as with ``by_entry``), no grid
-    barrier between. The same arithmetic as the step's kernels, so the same bits.
+    barrier between. With ``fused`` each phase's reductions take one tree (``reduce.drift_into``,
+    ``reduce.contact_into``) instead of one a value: the same results. The same arithmetic as the
+    step's kernels, so the same bits.
     """
     grid = cuda.cg.this_grid()
-    room = cuda.shared.array(BLOCK_MAX, np.float64)
-    iroom = cuda.shared.array(BLOCK_MAX, np.int64)
+    # the block's reductions (the fused trees need ROOM slots; the sums share the maxima's slots)
+    room = cuda.shared.array(ROOM, np.float64)
     first = cuda.grid(1)
     if first == 0:
         for a in range(6):
@@ -518,7 +531,7 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     grid.sync()
     for s in range(n_steps):
         _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, law.dt, L_x, L_y, hx, hy, pending or s > 0, rec[s],
-                     room)
+                     room, fused)
         if first == 0 and s + 1 < n_steps:
             for a in range(6):
                 rec[s + 1, a] = NEUTRAL[a]
@@ -529,14 +542,14 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
         before = np.uint32((epoch + s) & 0xFFFFFFFF)
         if chunk_rows > 0:
             _chunk_phase(n_own, chunk_rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False,
-                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, iroom)
+                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused)
         elif by_entry:
             _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
-                         hx, hy, law, True, rec[s], room, iroom)
+                         hx, hy, law, True, rec[s], room, fused)
             grid.sync()
             _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, True,
                        rec[s], room)
         else:
             _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes,
-                         kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, iroom)
+                         kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused)
         grid.sync()
