@@ -168,7 +168,7 @@ SCHEMA = (
        int, restart=True, physics=False),
     _k("engine", "gpu_reductions", "tree",
        "the GPU engine's fused steps' block reductions: 'tree' (a tree of barriers a value) or 'fused' (a phase's "
-       "values in one tree: a third of the barriers); no effect on results", str, ("tree", "fused"), restart=True,
+       "values in one tree: fewer than half the barriers); no effect on results", str, ("tree", "fused"), restart=True,
        physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "

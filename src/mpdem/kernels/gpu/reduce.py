@@ -3,7 +3,7 @@ max, min, and integer sums (an integer sum kept in float64 is exact below 2**53)
 
 One value a tree (``max_into``, ``min_into``, ``sum_into``: log2(block) + 2 barriers each), or a
 step's values in one tree (``drift_into``: the drift's three extremes; ``contact_into``: the forces'
-largest overlap and contact count), the same results with a third or a half of the barriers. The
+largest overlap and contact count), the same results with fewer than half the barriers. The
 fused ones need ``ROOM`` float64 of shared room.
 
 A block has at most ``BLOCK_MAX`` threads, a power of two; every thread of the block calls these
