@@ -306,8 +306,13 @@ def test_no_gpu_ends_a_run_in_one_line(tmp_path):
     env = {"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""}
     r = pour(tmp_path / "r", "run.max_steps=10", "engine.device=gpu", check=1, env=env)
     assert "engine.device = 'gpu'" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
-    # refused before any work: no bed was made, no state file written
-    assert not list(tmp_path.glob("r/*.h5")) and not (tmp_path / "r" / "bed.txt").exists()
+    # refused before any work: no run directory made (no bed, no state file, no lock left behind)
+    assert not (tmp_path / "r").exists()
+    # a directory that was there stays, as it was
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept" / "notes.txt").write_text("mine")
+    pour(tmp_path / "kept", "run.max_steps=10", "engine.device=gpu", check=1, env=env)
+    assert sorted(p.name for p in (tmp_path / "kept").iterdir()) == ["notes.txt"]
 
 
 def test_a_stiffening_rung_on_the_gpu_is_the_cpu_rung(tmp_path):

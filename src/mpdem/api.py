@@ -177,7 +177,9 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
         check_file(cfg)
     except (config_mod.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
         raise AgreedError(str(e)) from None
-    check_out(out, net, force)
+    if cfg.engine.device == "gpu":
+        from .engine import gpu
+        gpu.require()       # no GPU here: one line, before the run directory is made
 
     def go(held):
         if held is not None and held.taken_over:
@@ -187,7 +189,26 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
         r = Run.new(cfg, out, net, lammps_initial=initial, quiet=quiet, walltime=walltime, margin=walltime_margin,
                     t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         return _go(r)
-    return _locked(out, net, go)
+    existed = net.on_root(os.path.exists, out)
+    try:
+        check_out(out, net, force)
+        return _locked(out, net, go)
+    except BaseException:
+        if not existed and net.rank == 0:
+            _remove_bare(out)
+        raise
+
+
+def _remove_bare(out):
+    """Remove the run directory ``out`` that this call made if a refusal left nothing in it but its
+    lock: a run refused before it starts leaves nothing behind (a log, or anything more, stays)."""
+    try:
+        if set(os.listdir(out)) <= {".lock"}:
+            for name in os.listdir(out):
+                os.remove(os.path.join(out, name))
+            os.rmdir(out)
+    except OSError:
+        pass
 
 
 def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, net=None, t_start=None,
