@@ -26,13 +26,14 @@ from mpdem.state import State
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
 # second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``)
 # with its kernels compiled under a register cap (``engine.gpu_max_registers``); the last three reduce a
-# fused step's values in one tree a phase (``engine.gpu_reductions``).
-GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry", reductions="fused"),
+# fused step's values in one tree a phase (``engine.gpu_reductions``); the second and the fourth sum the
+# stop rule's samples on the GPU (``engine.gpu_samples``).
+GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device"),
           dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused"),
-          dict(block=2, blocks=3, reductions="fused")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry", reductions="fused"),
+          dict(block=2, blocks=3, reductions="fused", samples="device")] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry", reductions="fused", samples="device"),
                dict(block=64, threads="chunk16", max_registers=64, reductions="fused"),
-               dict(block=256, reductions="fused")])
+               dict(block=256, reductions="fused", samples="device")])
 
 
 def physics(mu=0.5, model="hooke", **kw):
@@ -77,7 +78,7 @@ def test_gpu_engine_steps_the_cpu_engines_bits(case):
     for name in a:
         assert np.array_equal(a[name], b[name]), name
     assert checkpoint.digest(a) == checkpoint.digest(b)
-    assert got.kinetic() == want.kinetic()
+    assert got.kinetic() == want.kinetic() and got.kinetic(momentum=True) == want.kinetic(momentum=True)
     assert got.contacts() == want.contacts()
     assert got.force_ratio() == want.force_ratio()
     assert got.last_overlap == want.last_overlap > 0

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import gpu_probe  # noqa: E402
 
-DRY = ("row", "chunk16-r64")
+DRY = ("row", "chunk16-r64", "row-samples")
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +34,8 @@ def small_table(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dry_run(small_table, tmp_path_factory):
     out = tmp_path_factory.mktemp("probe") / "out"
-    # two variants (a thread a row; chunks under a register cap) carry the probe's every path; the
-    # variants' own bits are test_gpu_engine.py's
+    # three variants (a thread a row; chunks under a register cap; the samples on the GPU) carry the probe's
+    # every path; the variants' own bits are test_gpu_engine.py's
     env = {**os.environ, "PY": sys.executable, "SIZE": "small", "VARIANTS": ",".join(DRY)}
     p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
                        capture_output=True, text=True, timeout=900)
@@ -55,6 +55,7 @@ def test_the_dry_run_measures_every_variant_and_checks_each_digest_against_the_c
         assert r["digest"] == cpu["digest"] and r["same"], (r["variant"], r["block"])
         assert len(r["step_us"]) == 2 and r["step_us_median"] > 0 and r["ns_atom_step"] > 0
         assert len(r["rebuilds"]) == gpu_probe.REBUILDS and all(b["ms"] > 0 for b in r["rebuilds"])
+        assert r["sample_ms"] > 0
         assert r["big"]["atoms"] == 125 and r["big"]["ns_atom_step"] > 0
         assert [f"{k}={v}" for k, v in gpu_probe.VARIANTS[r["variant"]].items()] == r["settings"][-len(
             gpu_probe.VARIANTS[r["variant"]]):]
@@ -71,7 +72,7 @@ def test_the_dry_run_measures_every_variant_and_checks_each_digest_against_the_c
 def test_a_digest_apart_from_the_cpus_or_between_shapes_is_reported_and_fails():
     def rec(variant, block, digest):
         return {"variant": variant, "block": block, "digest": digest, "step_us_median": 1.0, "ns_atom_step": 1.0,
-                "rebuilds": [{"ms": 1.0, "through_host": False}], "kernels": {}, "compile_s": 1.0}
+                "rebuilds": [{"ms": 1.0, "through_host": False}], "kernels": {}, "compile_s": 1.0, "sample_ms": 1.0}
     result = {"cpu": {"digest": "a" * 64, "check_steps": 6, "atoms": 9}, "commit": "x", "repeats": 1, "steps": 1,
               "tiles": "1x1", "big_steps": 1,
               "variants": [rec("row", 128, "a" * 64), rec("row", 256, "a" * 64), rec("entry", 128, "a" * 64),

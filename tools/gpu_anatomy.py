@@ -29,7 +29,7 @@ def main(path, steps=1000, block=128, threads="row"):
     set_up_process()
     cfg = table_config([f"engine.gpu_block={block}", f"engine.gpu_threads={threads}"])
     phys = Physics.from_config(cfg)
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, "gpu", block, threads)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, "gpu", gpu_block=block, gpu_threads=threads)
     whole, L_x, L_y = load_table(path, cfg)
     dom = Domain.from_config(None, cfg)
     st = dom.scatter(whole, L_x, L_y)

@@ -48,7 +48,7 @@ class _Device:
 # no GPU here: device functions are compiled for CC, as the kernels are
 dispatcher.get_current_device = lambda: _Device()
 
-from mpdem.kernels.gpu import lists, step  # noqa: E402
+from mpdem.kernels.gpu import lists, samples, step  # noqa: E402
 from mpdem.kernels.law import MODEL_HERTZ, Law  # noqa: E402
 
 
@@ -68,6 +68,7 @@ def cases():
     start, nbr = np.zeros(n + 1, np.int64), np.zeros(4, np.int32)
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))
     red, rec, cells = np.zeros(6), np.zeros((4, 6)), np.zeros(n, np.int32)
+    acc = np.zeros((4, 72), np.int64)
     box = (10.0, 10.0, 5.0, 5.0)
     planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
@@ -84,6 +85,9 @@ def cases():
                                                   True, red)),
         "step.row_sums": (step.row_sums, (n, x, x, x, x, x, fixed, start, stamp, pair, x, planes, kinds, 5, law, True,
                                           red)),
+        "samples.kinetic_sums": (samples.kinetic_sums, (n, x, x, fixed, acc)),
+        "samples.balance_sums": (samples.balance_sums, (n, x, fixed, start, stamp, pair, np.uint32(5), acc)),
+        "samples.zero": (samples.zero, (acc,)),
         "lists.z_range": (lists.z_range, (n, x, np.zeros(2))),
         "lists.zero": (lists.zero, (n, cells)),
         "lists.bin_rows": (lists.bin_rows, (n, x, 3, 3, 3, 1.0, 1.0, 0.0, 1.2, cells, cells)),

@@ -15,6 +15,7 @@ with nothing):
 - ``--steps`` steps timed ``--repeats`` times (CUDA events; the median): microseconds a step and nanoseconds
   per atom-step (all atoms, the bed's too, as the bench counts);
 - five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th);
+- a stop-rule sample (``kinetic`` and ``force_ratio`` after an evaluation that kept its pairs), timed;
 - each launched kernel's registers, local (spill) memory, shared memory and the cooperative grid's blocks;
 - TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats`` times.
 
@@ -49,6 +50,8 @@ VARIANTS = {
     # a phase's reductions in one tree of barriers
     "row-fused": {"engine.gpu_threads": "row", "engine.gpu_reductions": "fused"},
     "chunk16-fused": {"engine.gpu_threads": "chunk16", "engine.gpu_reductions": "fused"},
+    # the stop rule's sums on the GPU (its cost is the table's "sample ms", not the steps')
+    "row-samples": {"engine.gpu_threads": "row", "engine.gpu_samples": "device"},
 }
 # the two block shapes each variant runs at (threads per block)
 SHAPES = (128, 256)
@@ -170,7 +173,7 @@ def measure(a):
     """One variant at one block shape (or the CPU engine's digest): a dict for the JSON."""
     from mpdem.bench import load_table, set_up_process, table_config, warm_up_kernels
     from mpdem.decomp import Domain
-    from mpdem.engine import make_engine
+    from mpdem.engine import gpu_options, make_engine
     from mpdem.engine.base import Physics
     from mpdem.io import checkpoint
 
@@ -181,18 +184,18 @@ def measure(a):
         sets += [f"{k}={v}" for k, v in VARIANTS[a.variant].items()]
     cfg = table_config(sets)
     phys = Physics.from_config(cfg)
-    e = cfg.engine
-    threads, block, regs, reductions = e.gpu_threads, e.gpu_block, e.gpu_max_registers, e.gpu_reductions
+    block = cfg.engine.gpu_block
+    opts = gpu_options(cfg.engine)
     rec = {"variant": a.variant, "block": block, "device": device, "settings": sets}
     t = time.perf_counter()
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, block, threads, regs, reductions)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, **opts)
     rec["compile_s"] = time.perf_counter() - t
 
     def engine(tile):
         whole, L_x, L_y = load_table(a.table, cfg, tile, say=lambda m: None)
         dom = Domain.from_config(None, cfg)
         st = dom.scatter(whole, L_x, L_y)
-        eng = make_engine(st, phys, dom, device, block, threads, regs, reductions)
+        eng = make_engine(st, phys, dom, device, **opts)
         eng.start()
         return eng, st, len(whole["id"])
 
@@ -223,6 +226,16 @@ def measure(a):
         rebuilds.append({"ms": 1e3 * clock.stop(), "through_host": bool(host)})
         eng.advance(1)
     rec["rebuilds"] = rebuilds
+    # a stop-rule sample: the kinetic energies and the force ratio of an evaluation that kept its pairs
+    eng.step(keep_pairs=True)
+    samples = []
+    for _ in range(a.repeats):
+        clock.start()
+        eng.kinetic()
+        eng.force_ratio()
+        samples.append(1e3 * clock.stop())
+    rec["sample_ms"] = statistics.median(samples)
+    eng.complete()
     rec["kernels"] = kernel_resources(eng)
     del eng, st
     if a.tiles != (1, 1) or a.big_steps:
@@ -282,7 +295,7 @@ def verdicts(result):
 def table(result):
     """The summary table (text lines)."""
     head = (f"{'variant':<12} {'block':>5} {'us/step':>9} {'ns/atom-step':>12} {'big ns':>8} {'rebuild ms':>10} "
-            f"{'regs':>5} {'local B':>7} {'coop':>5} {'compile s':>9}  digest")
+            f"{'sample ms':>9} {'regs':>5} {'local B':>7} {'coop':>5} {'compile s':>9}  digest")
     lines = [head, "-" * len(head)]
     for r in result["variants"]:
         if "skipped" in r:
@@ -298,7 +311,7 @@ def table(result):
         def num(v, fmt):
             return format(v, fmt) if v is not None else "-"
         lines.append(f"{r['variant']:<12} {r['block']:>5} {r['step_us_median']:>9.2f} {r['ns_atom_step']:>12.3f} "
-                     f"{num(big, '8.3f'):>8} {statistics.median(gpu_rebuilds):>10.2f} "
+                     f"{num(big, '8.3f'):>8} {statistics.median(gpu_rebuilds):>10.2f} {r['sample_ms']:>9.2f} "
                      f"{num(adv.get('registers'), 'd'):>5} {num(adv.get('local_bytes'), 'd'):>7} "
                      f"{num(adv.get('cooperative_blocks'), 'd'):>5} {r['compile_s']:>9.1f}  "
                      f"{'= CPU' if r['same'] else 'DIFFERS from the CPU ' + str(r.get('digest'))[:16]}")

@@ -35,7 +35,7 @@ from .errors import InputError
 from .io import tables
 from .io import checkpoint
 from .decomp import Domain
-from .engine import make_engine
+from .engine import gpu_options, make_engine
 from .engine.base import Physics
 from .engine.cpu import Engine
 from .parallel import channel
@@ -118,16 +118,14 @@ def rss_peak():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-def warm_up_kernels(phys, L_x, L_y, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0,
-                    gpu_reductions="tree"):
+def warm_up_kernels(phys, L_x, L_y, device="cpu", **gpu):
     """Compile (or load) the step's kernels on a tiny pile, so no timing or baseline includes it.
 
     A 3 x 3 bed with five mobile spheres resting on it, touching each other
     and the bed (overlaps 0.005 d), stepped ``WARMUP_STEPS`` times with the
     bench's physics on this rank alone, then rebuilt and stepped once more,
-    by the engine the timed loop uses (``gpu_block``, ``gpu_threads``,
-    ``gpu_max_registers``, ``gpu_reductions``: the GPU engine's kernels differ by
-    the threads of its forces, their register cap and their reductions).
+    by the engine the timed loop uses (``gpu``: ``make_engine``'s ``gpu_*``
+    keywords, ``engine.gpu_options``: the GPU engine's kernels differ by them).
     """
     g = np.arange(3.0)
     bed = np.array([[1.0 + i, 1.0 + j, 0.0] for j in g for i in g])
@@ -135,7 +133,7 @@ def warm_up_kernels(phys, L_x, L_y, device="cpu", gpu_block=128, gpu_threads="ro
     x = np.concatenate([mob, bed])
     fixed = np.concatenate([np.zeros(len(mob), np.uint8), np.ones(len(bed), np.uint8)])
     eng = make_engine(State(np.arange(len(x)), x, fixed=fixed, L_x=L_x, L_y=L_y), phys, Domain(None), device,
-                      gpu_block, gpu_threads, gpu_max_registers, gpu_reductions)
+                      **gpu)
     eng.start()
     # (in ``run_quiet``'s way: the kernels of steps in one call compiled too)
     eng.advance(WARMUP_STEPS)
@@ -297,9 +295,7 @@ def run_table_bench(args, net):
     say = print if rank == 0 else (lambda msg: None)
     phys = Physics.from_config(cfg)
     device = getattr(args, "device", "cpu")
-    e = cfg.engine
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, e.gpu_block, e.gpu_threads, e.gpu_max_registers,
-                    e.gpu_reductions)
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, **gpu_options(cfg.engine))
     gc.collect()
     baseline = rss_now()
     # every rank reads the same table, so a bad table stops every rank alike
@@ -308,7 +304,7 @@ def run_table_bench(args, net):
     dom = Domain.from_config(net, cfg)
     st = dom.scatter(whole, L_x, L_y)
     del whole
-    eng = make_engine(st, phys, dom, device, e.gpu_block, e.gpu_threads, e.gpu_max_registers, e.gpu_reductions)
+    eng = make_engine(st, phys, dom, device, **gpu_options(cfg.engine))
     eng.start()
     eng.advance(WARMUP_STEPS)
     wall, rebuilds, before, after, steady = timed_loop(eng, dom, args.steps)

@@ -170,6 +170,10 @@ SCHEMA = (
        "the GPU engine's fused steps' block reductions: 'tree' (a tree of barriers a value) or 'fused' (a phase's "
        "values in one tree: fewer than half the barriers); no effect on results", str, ("tree", "fused"), restart=True,
        physics=False),
+    _k("engine", "gpu_samples", "host",
+       "where the GPU engine sums the stop rule's samples (kinetic energy, force ratio): 'host' (the rows and the "
+       "entries' forces copied to the host) or 'device' (the same exact fixed-point sums by integer atomics on the "
+       "GPU, a few kB copied); no effect on results", str, ("host", "device"), restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",

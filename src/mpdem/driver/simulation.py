@@ -28,7 +28,7 @@ from . import summary
 from ..io import rundir
 from ..config import collision_time
 from ..decomp import Domain
-from ..engine import make_engine
+from ..engine import gpu_options, make_engine
 from ..engine import require as require_device
 from ..engine.base import Physics
 from .._version import __version__
@@ -179,8 +179,8 @@ class Run:
         self.snapshots.restore(rec.snapshots)
         self.checks = Checks(cfg, self.pile, self.n_bed, self.log)
         self.thermo = Thermo(out_dir, self.rank)
-        self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device, cfg.engine.gpu_block,
-                                  cfg.engine.gpu_threads, cfg.engine.gpu_max_registers, cfg.engine.gpu_reductions)
+        self.engine = make_engine(self.state, self.physics, self.domain, cfg.engine.device,
+                                  **gpu_options(cfg.engine))
         # laws that change with the step: a stiffening ramp (``stiffen``) or a flow phase (``flowarrest``; the
         # config allows one of them), None without; the engine's law is the step's
         self.schedule = (stiffen.Ramp.from_config(cfg, self.physics.law)

@@ -54,12 +54,19 @@ def require(device):
 
 
 def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0,
-                gpu_reductions="tree"):
-    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; ``gpu_block``,
-    ``gpu_threads``, ``gpu_max_registers`` and ``gpu_reductions``: the GPU engine's threads per block,
-    its threads of the forces, its kernels' register cap and its fused steps' reductions
-    (``engine.gpu_*``; no effect on results)."""
+                gpu_reductions="tree", gpu_samples="host"):
+    """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; the ``gpu_*`` keywords: the
+    GPU engine's threads per block, its threads of the forces, its kernels' register cap, its fused
+    steps' reductions and where the stop rule's samples are summed (``engine.gpu_*``, ``gpu_options``;
+    no effect on results)."""
     if device == "gpu":
         return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads,
-                                    max_registers=gpu_max_registers, reductions=gpu_reductions)
+                                    max_registers=gpu_max_registers, reductions=gpu_reductions, samples=gpu_samples)
     return engine_class(device)(state, physics, domain)
+
+
+def gpu_options(engine):
+    """``make_engine``'s ``gpu_*`` keywords from a config's ``engine`` section (``cfg.engine``)."""
+    return {"gpu_block": engine.gpu_block, "gpu_threads": engine.gpu_threads,
+            "gpu_max_registers": engine.gpu_max_registers, "gpu_reductions": engine.gpu_reductions,
+            "gpu_samples": engine.gpu_samples}

@@ -27,7 +27,7 @@ from ..errors import DeviceError
 from ..kernels import history
 from ..kernels.balance import force_balance
 from ..kernels.bundles import Lists, Near, Slots, make_box
-from ..kernels.exactsum import new_accumulator, to_float
+from ..kernels.exactsum import NLIMBS, new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
 from ..kernels.neighbours import build_neighbours, cell_axis
 from .base import NO_FLAGS, EngineBase, StepInfo
@@ -40,6 +40,14 @@ BATCH = 1000
 THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
 # engine.gpu_reductions
 REDUCTIONS = ("tree", "fused")
+# engine.gpu_samples
+SAMPLES = ("host", "device")
+
+
+def runtime_samples():
+    """``kernels.gpu.samples`` (imported where a GPU engine sums its samples on the GPU)."""
+    from ..kernels.gpu import samples
+    return samples
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -100,6 +108,10 @@ class Engine(EngineBase):
     reductions : {"tree", "fused"}
         The fused steps' block reductions (``engine.gpu_reductions``): a tree a value, or a phase's
         values in one tree (``kernels.gpu.reduce``); no effect on results.
+    samples : {"host", "device"}
+        Where ``kinetic`` and ``force_ratio`` sum (``engine.gpu_samples``): on the host from the rows
+        and the entries' forces copied there, or on the GPU (``kernels.gpu.samples``: the same exact
+        sums, a few kB copied); no effect on results.
 
     Attributes
     ----------
@@ -110,7 +122,7 @@ class Engine(EngineBase):
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
-                 reductions="tree"):
+                 reductions="tree", samples="host"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -121,6 +133,10 @@ class Engine(EngineBase):
             raise ValueError(f"reductions = {reductions!r}: accepted {', '.join(map(repr, REDUCTIONS))}")
         # the fused steps' reductions: one tree a phase ("fused") or one a value ("tree")
         self.fused = reductions == "fused"
+        if samples not in SAMPLES:
+            raise ValueError(f"samples = {samples!r}: accepted {', '.join(map(repr, SAMPLES))}")
+        # the stop rule's sums on the GPU (``kernels.gpu.samples``) or on the host
+        self.ks = runtime_samples() if samples == "device" else None
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -163,6 +179,7 @@ class Engine(EngineBase):
         self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
         self._coop_blocks = None
         self._zr = self.cuda.to_device(np.zeros(2))   # the z range of the GPU's list build
+        self._sample_acc = {}     # the samples' accumulators on the GPU, by rows of limbs
         self.n_rebuilds = 0
         self.info = StepInfo()
         self.n_contacts = 0
@@ -582,12 +599,26 @@ class Engine(EngineBase):
         ``momentum`` also the momentum along x summed over the mobile spheres [m sqrt(g d)]."""
         self.complete()
         s = self.state
-        if self.has_lists:
-            self._download_rows(("v", "omega"), s.n_own)
-        acc = new_accumulator(3 if momentum else 2)
-        kinetic_energy(s.n_own, self._particles(), acc, 1)
+        if self.has_lists and self.ks is not None:
+            acc = self._sums(self.ks.kinetic_sums, 3 if momentum else 2, self._dev["v"], self._dev["omega"],
+                             self._dev["fixed"])
+        else:
+            if self.has_lists:
+                self._download_rows(("v", "omega"), s.n_own)
+            acc = new_accumulator(3 if momentum else 2)
+            kinetic_energy(s.n_own, self._particles(), acc, 1)
         acc = self.domain.sum_int(acc)
         return tuple(to_float(a) for a in acc)
+
+    def _sums(self, kernel, n, *args):
+        """``kernel``'s exact sums over the owned rows (``kernels.gpu.samples``): a zeroed (n, NLIMBS) int64
+        accumulator on the GPU, the launch, the limbs copied back."""
+        acc = self._sample_acc.get(n)
+        if acc is None:
+            acc = self._sample_acc[n] = self.cuda.device_array((n, NLIMBS), np.int64)
+        self._run(self.ks.zero, self._grid(n * NLIMBS), (acc,))
+        self._run(kernel, self._grid(self.state.n_own), (self.state.n_own, *args, acc))
+        return acc.copy_to_host()
 
     def force_ratio(self):
         """(ratio, in flight) of the last evaluation, exact on any number of ranks, as the CPU
@@ -595,6 +626,11 @@ class Engine(EngineBase):
         if self._epoch == 0 or not self._pairs_kept:
             return math.nan, -1
         s = self.state
+        if self.ks is not None:
+            d = self._dev
+            acc = self._sums(self.ks.balance_sums, 4, d["f"], d["fixed"], d["start"], d["stamp"], d["pair"],
+                             np.uint32(self._epoch & 0xFFFFFFFF))
+            return self._ratio(self.domain.sum_int(acc))
         k = self._k
         self._lists()
         self._download_rows(("f",), s.n_own)
