@@ -42,15 +42,15 @@ THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
 REDUCTIONS = ("tree", "fused")
 # engine.gpu_samples
 SAMPLES = ("host", "device")
+# every this many list rebuilds on one rank go through the host, which orders the rows by cell
+# (neighbours near in memory); the others are built on the GPU
+SORT_EVERY = 20
 
 
 def runtime_samples():
     """``kernels.gpu.samples`` (imported where a GPU engine sums its samples on the GPU)."""
     from ..kernels.gpu import samples
     return samples
-# every this many list rebuilds on one rank go through the host, which orders the rows by cell
-# (neighbours near in memory); the others are built on the GPU
-SORT_EVERY = 20
 
 
 def require():
