@@ -119,20 +119,24 @@ def test_bench_reports_every_phase_of_the_loop(tmp_path, capsys):
 
 
 def test_warm_up_compiles_the_engine_the_loop_times(tmp_path, monkeypatch, capsys):
-    """The untimed warm-up builds its engine as the timed loop does (device, ``engine.gpu_block``,
-    ``engine.gpu_threads``): the GPU engine's kernels differ by the threads of its forces, and a
-    variant first compiled inside the timed loop would be timed with its compilation."""
+    """The untimed warm-up builds its engine as the timed loop does (device and every ``engine.gpu_*``
+    key): the GPU engine's kernels differ by them, and a variant first compiled inside the timed loop
+    would be timed with its compilation."""
     made = []
     real = bench.make_engine
 
-    def spy(state, phys, dom, device="cpu", gpu_block=128, gpu_threads="row"):
-        made.append((device, gpu_block, gpu_threads))
+    def spy(state, phys, dom, device="cpu", **gpu):
+        made.append((device, gpu))
         return real(state, phys, dom, "cpu")
 
     monkeypatch.setattr(bench, "make_engine", spy)
     settled_table(tmp_path / "t.txt")
+    sets = ["engine.gpu_block=64", "engine.gpu_threads=chunk16", "engine.gpu_max_registers=80",
+            "engine.gpu_reductions=fused", "engine.gpu_samples=device"]
     args = argparse.Namespace(table=str(tmp_path / "t.txt"), steps=5, tile=(1, 1),
-                              set=["box.L_x=6.0", "box.L_y=6.0", "engine.gpu_block=64", "engine.gpu_threads=entry"])
+                              set=["box.L_x=6.0", "box.L_y=6.0", *sets])
     bench.run_table_bench(args, None)
     capsys.readouterr()
-    assert len(made) == 2 and made[0] == made[1] == ("cpu", 64, "entry")
+    want = {"gpu_block": 64, "gpu_threads": "chunk16", "gpu_max_registers": 80, "gpu_reductions": "fused",
+            "gpu_samples": "device"}
+    assert len(made) == 2 and made[0] == made[1] == ("cpu", want)

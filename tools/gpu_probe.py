@@ -136,6 +136,15 @@ class Clock:
             self.e0.record()
         self.t0 = time.perf_counter()
 
+    def repeat(self, n, work):
+        """Seconds of ``work()`` each of ``n`` times."""
+        out = []
+        for _ in range(n):
+            self.start()
+            work()
+            out.append(self.stop())
+        return out
+
     def stop(self):
         if self.events:
             self.e1.record()
@@ -174,6 +183,7 @@ def measure(a):
     from mpdem.bench import load_table, set_up_process, table_config, warm_up_kernels
     from mpdem.decomp import Domain
     from mpdem.engine import gpu_options, make_engine
+    from mpdem.engine.gpu import SORT_EVERY
     from mpdem.engine.base import Physics
     from mpdem.io import checkpoint
 
@@ -209,18 +219,13 @@ def measure(a):
     rec["device_name"] = eng.device_name
     cuda = None if eng._simulator else eng.cuda
     clock = Clock(cuda)
-    times = []
-    for _ in range(a.repeats):
-        clock.start()
-        eng.run_quiet(a.steps)
-        eng.complete()
-        times.append(clock.stop())
+    times = clock.repeat(a.repeats, lambda: (eng.run_quiet(a.steps), eng.complete()))
     rec["step_us"] = [1e6 * s / a.steps for s in times]
     rec["step_us_median"] = statistics.median(rec["step_us"])
     rec["ns_atom_step"] = 1e3 * rec["step_us_median"] / atoms
     rebuilds = []
     for _ in range(REBUILDS):
-        host = not eng.n_rebuilds % 20 if hasattr(eng, "n_rebuilds") else None
+        host = eng.n_rebuilds % SORT_EVERY == 0
         clock.start()
         eng.rebuild()
         rebuilds.append({"ms": 1e3 * clock.stop(), "through_host": bool(host)})
@@ -228,25 +233,14 @@ def measure(a):
     rec["rebuilds"] = rebuilds
     # a stop-rule sample: the kinetic energies and the force ratio of an evaluation that kept its pairs
     eng.step(keep_pairs=True)
-    samples = []
-    for _ in range(a.repeats):
-        clock.start()
-        eng.kinetic()
-        eng.force_ratio()
-        samples.append(1e3 * clock.stop())
-    rec["sample_ms"] = statistics.median(samples)
+    rec["sample_ms"] = 1e3 * statistics.median(clock.repeat(a.repeats, lambda: (eng.kinetic(), eng.force_ratio())))
     eng.complete()
     rec["kernels"] = kernel_resources(eng)
-    del eng, st
+    eng = st = None     # the 20k pile's GPU arrays freed before the tiles
     if a.tiles != (1, 1) or a.big_steps:
         big, _, n_big = engine(a.tiles)
         big.advance(min(10, a.big_steps))
-        times = []
-        for _ in range(a.repeats):
-            clock.start()
-            big.run_quiet(a.big_steps)
-            big.complete()
-            times.append(clock.stop())
+        times = clock.repeat(a.repeats, lambda: (big.run_quiet(a.big_steps), big.complete()))
         rec["big"] = {"tiles": list(a.tiles), "atoms": n_big, "steps": a.big_steps,
                       "ns_atom_step": 1e9 * statistics.median(times) / (a.big_steps * n_big)}
     return rec

@@ -38,6 +38,17 @@ RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
 NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
 
 
+@device_cuda
+def _reset_drift_slots(red):
+    """The first thread of the grid sets ``red``'s slots of ``kick_drift`` to ``NEUTRAL`` (the forces'
+    kernels do it for the next step's drift)."""
+    if cuda.grid(1) == 0:
+        red[RED_D2] = NEUTRAL[RED_D2]
+        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
+        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
+        red[RED_BAD] = NEUTRAL[RED_BAD]
+
+
 @device
 def _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending):
     """Row i of ``kick_drift``; returns (d^2 since x_ref [d^2], z [d], 1 if x is not finite else 0)."""
@@ -186,6 +197,22 @@ def _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz):
 
 
 @device
+def _entry(i, e, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx, hy, law, increment):
+    """Entry e of row i a thread an entry: its contact's force and torque into pair[e] (zeros out of
+    contact with ``keep``); returns (1 if in contact else 0, its overlap [d], 0 out of contact). A bed
+    row's entries are not computed (0, 0.0)."""
+    if fixed[i]:
+        return 0, 0.0
+    c, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x[i, 0], x[i, 1], x[i, 2], x, v, omega, fixed, nbr, hist,
+                                                      stamp, now, before, L_x, L_y, hx, hy, law, increment)
+    if c:
+        _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
+    elif keep:
+        _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return c, delta
+
+
+@device
 def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                now, before, L_x, L_y, hx, hy, law, increment):
     """Row i (mobile) of ``forces``: its entries computed and summed in order, then the planes;
@@ -313,11 +340,7 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    if cuda.grid(1) == 0:
-        red[RED_D2] = NEUTRAL[RED_D2]
-        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
-        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
-        red[RED_BAD] = NEUTRAL[RED_BAD]
+    _reset_drift_slots(red)
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
                  increment, red, room, False)
@@ -360,11 +383,7 @@ def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
     of ``kick_drift`` to ``NEUTRAL``. Other arguments as ``forces``'s; any grid.
     """
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    if cuda.grid(1) == 0:
-        red[RED_D2] = NEUTRAL[RED_D2]
-        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
-        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
-        red[RED_BAD] = NEUTRAL[RED_BAD]
+    _reset_drift_slots(red)
     _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, np.uint32(epoch & 0xFFFFFFFF),
                  np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law, increment, red, room, False)
 
@@ -377,17 +396,10 @@ def _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
     deepest = 0.0
     contacts = 0
     for e in range(cuda.grid(1), n_entries, cuda.gridsize(1)):
-        i = row[e]
-        if fixed[i]:
-            continue
-        c, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x[i, 0], x[i, 1], x[i, 2], x, v, omega, fixed, nbr,
-                                                          hist, stamp, now, before, L_x, L_y, hx, hy, law, increment)
-        if c:
-            contacts += 1
-            deepest = max(deepest, delta)
-            _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
-        elif keep:
-            _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        c, delta = _entry(row[e], e, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx, hy,
+                          law, increment)
+        contacts += c
+        deepest = max(deepest, delta)
     if fused:
         contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
     else:
@@ -432,11 +444,7 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
     and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
     ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
     room = cuda.shared.array(BLOCK_MAX, np.float64)
-    if cuda.grid(1) == 0:
-        red[RED_D2] = NEUTRAL[RED_D2]
-        red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
-        red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
-        red[RED_BAD] = NEUTRAL[RED_BAD]
+    _reset_drift_slots(red)
     _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
                  kinds, np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
                  increment, red, room, False)
@@ -455,18 +463,10 @@ def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
         r0 = c * rows
         r1 = min(r0 + rows, n_own)
         for e in range(start[r0] + t, start[r1], nt):
-            i = row[e]
-            if fixed[i]:
-                continue
-            k, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, x[i, 0], x[i, 1], x[i, 2], x, v, omega, fixed,
-                                                              nbr, hist, stamp, now, before, L_x, L_y, hx, hy, law,
-                                                              increment)
-            if k:
-                contacts += 1
-                deepest = max(deepest, delta)
-                _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
-            elif keep:
-                _keep(pair, e, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            k, delta = _entry(row[e], e, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx,
+                              hy, law, increment)
+            contacts += k
+            deepest = max(deepest, delta)
         # the chunk's entries in pair and stamp, seen by the threads that sum its rows
         cuda.syncthreads()
         for i in range(r0 + t, r1, nt):
