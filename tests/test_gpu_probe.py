@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import gpu_probe  # noqa: E402
 
-DRY = ("row", "chunk16-r64", "row-samples")
+DRY = ("row", "chunk16-r64")
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def small_table(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dry_run(small_table, tmp_path_factory):
     out = tmp_path_factory.mktemp("probe") / "out"
-    # three variants (a thread a row; chunks under a register cap; the samples on the GPU) carry the probe's
+    # two variants (a thread a row; chunks under a register cap) carry the probe's
     # every path; the variants' own bits are test_gpu_engine.py's
     env = {**os.environ, "PY": sys.executable, "SIZE": "small", "VARIANTS": ",".join(DRY)}
     p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
