@@ -158,7 +158,8 @@ def rung_config(run, k_n, sets=()):
         Neither final.h5 nor packing.npz in ``run``, or ``k_n`` not above the run's by at most ten times
         (naming --k_n).
     ConfigError
-        From the config's own checks (a packing of a frictional pile among them).
+        From the config's own checks. (A frictional pile's packing is refused when the run starts,
+        ``initial.check_file``, before any work.)
     """
     final = rundir.final_path(run)
     if not os.path.exists(final):
