@@ -151,21 +151,20 @@ def of_packing(pk, cf, h, band_width, force_fraction):
 
     Returns
     -------
-    dict: kept, live, counts, weak (as ``backbone``), ref_force (M,) [m g], and plane_supports: the
-    contacts with planes that pass the cut
+    dict: kept, live, counts, weak (as ``backbone``) and ref_force (M,) [m g]
     """
-    from .contacts import band_index, elastic_normal, local_mean, n_bands
+    from .contacts import band_index, band_means, elastic_normal, n_bands
     B = n_bands(h, pk.z_bed, band_width)
     mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
     band = band_index(mid, h, band_width, B)
-    ref = local_mean(cf.F_n, band, B)
+    means = band_means(cf.F_n, band, B)
+    ref = means[band]
     rows, nrm, delta = pk.plane_contacts()
     supports = None
     if len(rows):
-        means = np.bincount(band, weights=cf.F_n, minlength=B) / np.maximum(np.bincount(band, minlength=B), 1)
-        s_ref = means[band_index(pk.x[rows, 2], h, band_width, B)]
+        # a band without pair contacts sets no bar (mean 0) for a plane contact in it
+        s_ref = np.nan_to_num(means[band_index(pk.x[rows, 2], h, band_width, B)], nan=0.0)
         supports = (rows, nrm, elastic_normal(delta, cf.k_n, cf.model), s_ref)
     kept, live, counts, weak = backbone(len(pk.x), pk.pairs, cf.nrm, cf.F_n, ref, pk.mobile, pk.mu, force_fraction,
                                         supports=supports)
-    n_sup = 0 if supports is None else int((supports[2] >= force_fraction * supports[3]).sum())
-    return {"kept": kept, "live": live, "counts": counts, "weak": weak, "ref_force": ref, "plane_supports": n_sup}
+    return {"kept": kept, "live": live, "counts": counts, "weak": weak, "ref_force": ref}

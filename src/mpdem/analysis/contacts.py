@@ -110,10 +110,14 @@ def band_index(z, h, width, n_bands):
     return np.clip(k, 0, n_bands - 1)
 
 
-def local_mean(values, band, n_bands):
-    """(len(values),) the mean of ``values`` over the entries of the same band."""
+def band_means(values, band, n_bands):
+    """(n_bands,) the mean of ``values`` in each band (nan in a band without entries)."""
     s = np.bincount(band, weights=values, minlength=n_bands)
     c = np.bincount(band, minlength=n_bands)
     with np.errstate(invalid="ignore", divide="ignore"):
-        m = s / c
-    return m[band]
+        return s / c
+
+
+def local_mean(values, band, n_bands):
+    """(len(values),) the mean of ``values`` over the entries of the same band."""
+    return band_means(values, band, n_bands)[band]
