@@ -253,3 +253,13 @@ def test_a_ramp_read_back_from_its_config_toml_has_the_same_laws(tmp_path):
     law = make_law(2e6, cfg.contact.k_t, cfg.contact.gamma_n, 0.0, 0.5, cfg.integration.dt)
     a, b = stiffen.Ramp(cfg, law), stiffen.Ramp(again, law)
     assert all(a.law(s) == b.law(s) for s in range(0, a.end + 2, 7))
+
+
+def test_the_api_stiffen_config_is_the_command_lines_rung(soft):
+    """``mpdem.stiffen_config`` (keys by name) is ``mpdem stiffen``'s config (``--set`` texts)."""
+    cfg = mpdem.stiffen_config(soft, 2e5, **{"stiffen.ramp_time": 2.0, "run.max_steps": 300000})
+    assert cfg == stiffen.rung_config(str(soft), 2e5, RAMP)
+    assert cfg.contact.k_n == 2e5 and cfg.stiffen.k_n_from == 2e4 and cfg.stiffen.ramp_time == 2.0
+    assert cfg.run.initial_file == str(soft / "final.h5") and cfg.contact.mu == 0.5 and cfg.pour.N == 120
+    with pytest.raises(InputError, match="--k_n 500000.*up to 200000"):
+        mpdem.stiffen_config(soft, 5e5)

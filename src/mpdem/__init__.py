@@ -10,8 +10,9 @@ ARCHITECTURE.md. The Python API (docs/python.md)::
     a = mpdem.analyze(r.final)
     s = mpdem.read_state(r.final)
 
-``load_config``, ``run``, ``restart``, ``read_state``, ``analyze``, ``collect``
-(``mpdem.api``); errors are ``mpdem.errors.MpdemError`` and its kinds.
+``load_config``, ``run``, ``restart``, ``stiffen_config``, ``read_state``, ``analyze``,
+``collect`` (``mpdem.api``; the reference: docs/reference.md, ``make docs``); errors are
+``mpdem.errors.MpdemError`` and its kinds.
 """
 import hashlib
 import os
@@ -33,7 +34,8 @@ def _numba_cache_dir():
 os.environ.setdefault("NUMBA_CACHE_DIR", _numba_cache_dir())
 
 
-API = ("load_config", "run", "restart", "read_state", "analyze", "collect", "RunRecord", "StateArrays")
+API = ("load_config", "run", "restart", "stiffen_config", "read_state", "analyze", "collect", "RunRecord",
+       "StateArrays")
 __all__ = ["__version__", *API]
 
 

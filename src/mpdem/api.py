@@ -31,13 +31,21 @@ class RunRecord:
 
     Attributes
     ----------
-    status : "converged", "max_steps" (at run.max_steps without converging) or
-        "interrupted" (wall time or a stop signal: a checkpoint was written)
-    steps : time steps taken in all
-    digest : SHA-256 of the final state (sorted by id); None when interrupted
-    final : path of the final state file (RUN/final.h5); None when interrupted
-    out : the run directory
-    summary : the run's summary.json as a dict (on every rank); {} when interrupted
+    status : str
+        "converged" (the stop rule held), "max_steps" (at run.max_steps without converging) or
+        "interrupted" (wall time or a stop signal: a checkpoint was written; ``restart`` goes on).
+    steps : int
+        Time steps taken in all (of ``integration.dt`` [tau] each).
+    digest : str or None
+        SHA-256 of the final state (sorted by id; equal for any rank count, thread count, engine and
+        restarts); None when interrupted.
+    final : str or None
+        Path of the final state file (``out/final.h5``); None when interrupted.
+    out : str
+        The run directory.
+    summary : dict
+        The run's summary.json (on every rank): steps, wall time [s], digest and the bulk's z, phi,
+        P(z); {} when interrupted.
     """
     status: str
     steps: int
@@ -53,9 +61,16 @@ class RunRecord:
 
 
 class StateArrays(dict):
-    """The arrays of a state file by name (``x``, ``v``, ``omega``, ``id``, ``fixed`` (n, ...),
-    sorted by id; ``id_i``, ``id_j``, ``delta``, ``F_n``, ``F_t`` of the contact list where the
-    file has one; ``L_x``, ``L_y``), with the file's attributes in ``.attrs``."""
+    """The arrays of a state file by name, sorted by id, with the file's attributes in ``.attrs``.
+
+    Particles (n of them, bed included): ``x`` (n, 3) positions [d], ``v`` (n, 3) velocities
+    [sqrt(g d)], ``omega`` (n, 3) angular velocities [1/tau], ``f`` (n, 3) forces [m g], ``torque``
+    (n, 3) [m g d], ``id`` (n,), ``fixed`` (n,) (1 for a frozen bed sphere), and the contact slots
+    the engine keeps (``count``, ``partner``, ``ds``). Contacts (m of them, where the file has a
+    contact list): ``id_i``, ``id_j`` (m,) the pair's ids, ``delta`` (m,) overlap [d], ``F_n`` (m,)
+    normal force [m g] (compressive > 0), ``F_t`` (m, 3) tangential force [m g], ``ds_i`` (m, 3)
+    tangential spring [d]. The box: ``L_x``, ``L_y`` [d] (floats).
+    """
 
     def __init__(self, arrays, attrs):
         super().__init__(arrays)
@@ -66,11 +81,26 @@ class StateArrays(dict):
 def load_config(path=None, **sets):
     """A resolved, validated config: the TOML file ``path``, or the built-in example without one.
 
-    ``sets``: keys as in ``--set``, e.g. ``load_config(**{"contact.mu": 0.3})``.
+    Parameters
+    ----------
+    path : str or None
+        A TOML config file (docs/config.md: every key, its default and its unit); None: the built-in
+        example (``src/mpdem/example.toml``: 1500 spheres in a 10 d x 10 d box, mu = 0.5).
+    **sets
+        Keys as ``--set`` takes them, by name, over the file's: ``load_config(**{"contact.mu": 0.3,
+        "pour.N": 200, "run.max_steps": 1_000_000})``. Values in reduced units (lengths [d], times
+        [tau], spring constants [m g / d], energies [m g d]).
+
+    Returns
+    -------
+    Config
+        Every key resolved (derived ones such as ``contact.k_t`` and ``integration.dt`` filled in);
+        read as attributes, ``cfg.contact.mu``.
 
     Raises
     ------
-    ConfigError naming the key, the value and what is accepted.
+    ConfigError
+        Naming the key, the value and what is accepted (an unknown key, a value out of range).
     """
     from . import config
     return config.load_run_config(path, [f"{k}={config.toml_value(v)}" for k, v in sets.items()])
@@ -150,19 +180,45 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
         t_start=None, signals=None):
     """A new run of ``config`` in directory ``out``, in this process (one rank of an mpiexec launch).
 
+    The bed is made (or taken from the bed cache), the spheres poured and stepped until the stop
+    rule holds (``status`` "converged") or ``run.max_steps`` (``status`` "max_steps"); the final
+    state, its summary and the run's log are written into ``out`` (README.md, the run directory).
+
     Parameters
     ----------
-    config : Config (``load_config``)
-    out : run directory (created)
-    threads : numba threads of this process
-    force : reuse an ``out`` that holds a run
-    quiet : progress to RUN/log.txt only (else also to stdout)
-    walltime, walltime_margin : seconds; stop with a checkpoint before the limit
-    net : mpi4py communicator or ``parallel.Channel``; default MPI's COMM_WORLD
+    config : Config
+        From ``load_config`` (or ``stiffen_config``).
+    out : str
+        The run directory; made if missing.
+    threads : int or None
+        Numba threads of this process (None: leave them as they are).
+    force : bool
+        Reuse an ``out`` that holds a run (its files are overwritten).
+    quiet : bool
+        Progress to ``out/log.txt`` only (else also to stdout).
+    walltime : float or None
+        Wall-clock limit [s] counted from the call (or from ``t_start``): a checkpoint is written and
+        the run returns "interrupted" before it.
+    walltime_margin : float or None
+        Seconds kept free before ``walltime`` besides twice the last checkpoint write [s]
+        (default min(60, walltime / 20)).
+    net : mpi4py communicator, ``parallel.Channel`` or None
+        The ranks of the run; None: MPI's COMM_WORLD (one rank when not launched by mpiexec).
+    t_start : float or None
+        ``time.monotonic()`` at which ``walltime`` starts counting (default: now).
+    signals : object or None
+        The command line's signal flags (SIGTERM, SIGUSR1: checkpoint and stop); None: none.
 
     Returns
     -------
     RunRecord
+
+    Raises
+    ------
+    MpdemError
+        A directory that holds a run (without ``force``) or cannot be written, an initial file that
+        cannot be used, ``engine.device = "gpu"`` without a usable GPU (``DeviceError``): before any
+        work, leaving no run directory behind.
     """
     from . import config as config_mod
     from .io import lammps
@@ -215,13 +271,31 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
             signals=None, set_items=(), **sets):
     """Go on with the run in directory (or from state file) ``out``, from its newest valid file.
 
-    ``sets``: restart keys (``run.max_steps``, ``stop.*``, ``output.*``, ...) by name, e.g.
-    ``**{"run.max_steps": 4000000}``; ``set_items``: the same as ``--set`` texts.
-    A run with nothing to do (converged; final at its cap) returns its result unchanged.
+    A restart continues exactly: K steps, restart, K more give the digest of 2K straight, on any
+    rank count and either engine. A run with nothing to do (converged; final at its cap) returns its
+    result unchanged.
+
+    Parameters
+    ----------
+    out : str
+        A run directory (its newest valid checkpoint or final state), or a state file in one.
+    threads, quiet, walltime, walltime_margin, net, t_start, signals
+        As for ``run``.
+    set_items : sequence of str
+        Restart keys as ``--set`` texts, ``["run.max_steps=4000000"]``.
+    **sets
+        Restart keys by name (``run.max_steps``, ``stop.*``, ``output.*``, ``engine.device``, ...:
+        the keys marked "restart" in docs/config.md), e.g. ``**{"run.max_steps": 4_000_000}``.
 
     Returns
     -------
     RunRecord
+
+    Raises
+    ------
+    MpdemError
+        No state file to go on from, a key that a restart may not change, a run directory that
+        another process writes (its ``.lock``).
     """
     from . import config
     from .driver import resume as rs
@@ -265,12 +339,53 @@ def _finished(t, status, net):
     return RunRecord(name, int(s.get("steps", t.attrs["step"])), s.get("digest"), t.path, t.run_dir, s)
 
 
-def read_state(path):
-    """The arrays and attributes of a state file (or a packing file), on one process.
+def stiffen_config(run, k_n, **sets):
+    """The config that stiffens the finished run ``run`` to the stiffer ``k_n`` (``mpdem stiffen``).
+
+    The new run starts from ``run``'s final state; k_n rises geometrically from the run's to ``k_n``
+    over ``stiffen.ramp_time`` (k_t, gamma_n and each tangential spring following), then the stop
+    rule settles the pile again (docs/model.md 6.6). Run it with ``run(cfg, out)``.
+
+    Parameters
+    ----------
+    run : str
+        A finished run's directory (its ``config.toml`` and ``final.h5``; or ``packing.npz``, for a
+        frictionless pile).
+    k_n : float
+        The new ``contact.k_n`` [m g / d], above the run's by at most ten times (a rung; stiffen the
+        result again for more).
+    **sets
+        Keys by name over the run's own, as for ``load_config``: ``run.max_steps``,
+        ``stiffen.ramp_time`` [tau], ``stop.E_stop`` [m g d], ...
 
     Returns
     -------
-    StateArrays: a dict of arrays sorted by id, with ``.attrs``
+    Config
+
+    Raises
+    ------
+    InputError
+        ``run`` without a final state, or ``k_n`` not above the run's by at most ten times.
+    ConfigError
+        From the config's own checks.
+    """
+    from . import config, stiffen
+    items = [f"{k}={config.toml_value(v)}" for k, v in sets.items()]
+    return stiffen.rung_config(os.fspath(run), float(k_n), items)
+
+
+def read_state(path):
+    """The arrays and attributes of a state file (or a packing file), on one process.
+
+    Parameters
+    ----------
+    path : str
+        An mpdem state file (``final.h5``, a checkpoint or snapshot) or a run's ``packing.npz``.
+
+    Returns
+    -------
+    StateArrays
+        A dict of arrays sorted by id (positions [d], velocities [sqrt(g d)], ...), with ``.attrs``.
 
     Raises
     ------
@@ -287,15 +402,30 @@ def analyze(state_or_path, *, write=False, out=None, plots=False, **sets):
 
     Parameters
     ----------
-    state_or_path : a StateArrays (``read_state``), a state or packing file, or a run directory
-    write : also write the summary and tables (and ``plots``) as ``mpdem analyze`` does, into ``out``
-        (default RUN/analysis)
-    sets : ``analysis.*`` keys, e.g. ``**{"analysis.margin_bottom": 5}``
+    state_or_path : StateArrays or str
+        A StateArrays (``read_state``), a state or packing file, or a run directory.
+    write : bool
+        Also write the summary and tables (and ``plots``) as ``mpdem analyze`` does, into ``out``.
+    out : str or None
+        Where ``write`` writes (default RUN/analysis).
+    plots : bool
+        With ``write``: the figures too (PNG by default, ``analysis.figure_format``).
+    **sets
+        ``analysis.*`` keys by name, e.g. ``**{"analysis.margin_bottom": 5}`` (lengths [d]).
 
     Returns
     -------
-    dict: the summary (as RUN/analysis/summary.json) and ``arrays``: ``g_r`` (r, g),
-    ``g_xi`` (xi, g), ``P_z`` (n, P), ``P_zeta`` (zeta, P) where measured, ``bands`` (the depth profile)
+    dict
+        The summary (as RUN/analysis/summary.json: ``z``, the mean contacts per sphere of the bulk;
+        ``phi``, its packing fraction; ``h``, the free surface [d]; ``backbone``, ``alpha``, ...
+        docs/analysis.md) and ``arrays``: ``g_r`` (r [d], g), ``g_xi`` (xi = r/d - 1, g), ``P_z``
+        (n, P), ``P_zeta`` (zeta, P) where measured, ``bands`` (the depth profile: ``depth_lo``,
+        ``depth_hi`` [d], ``z``, ``phi``, ... per band).
+
+    Raises
+    ------
+    AnalysisError
+        A packing too small or too short for what is asked, a file that is not a state.
     """
     from .analysis import report
     from .config import toml_value
@@ -318,13 +448,27 @@ def analyze(state_or_path, *, write=False, out=None, plots=False, **sets):
 def collect(paths, out=None):
     """The tables of ``mpdem collect`` over the runs in ``paths``, as lists of dicts.
 
-    ``out``: also keep the files (CSV, JSON, figures, README.md) there; without it they are made in a
-    temporary directory and removed.
+    Runs of one parameter set (equal physics but the seed) are pooled: mean and standard error of
+    z, phi, ... over the seeds; a run without an analysis is analysed first.
+
+    Parameters
+    ----------
+    paths : str or sequence of str
+        Run directories, or directories holding them (a sweep's ``--out``).
+    out : str or None
+        Also keep the files (CSV, JSON, the paper's figures such as ``fig2_z_vs_mu.png``,
+        README.md) there; None: they are made in a temporary directory and removed.
 
     Returns
     -------
-    dict: ``runs`` and ``sets`` (one dict per row of runs.csv and sets.csv), ``fits`` (fits.json),
-    ``skipped`` (runs left out, with the reason)
+    dict
+        ``runs`` and ``sets`` (one dict per row of runs.csv and sets.csv, values as text: e.g.
+        ``float(row["z_mean"])``), ``fits`` (fits.json), ``skipped`` (runs left out, with the reason).
+
+    Raises
+    ------
+    AnalysisError
+        No usable runs in ``paths``.
     """
     import csv
     import json
