@@ -9,7 +9,7 @@ RANKS  ?= 2
 TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
 XDIST  = -n $(TEST_JOBS) --dist worksteal
 
-.PHONY: setup run test test-fast lint test-serial test-pytest test-mpi test-validation test-slurm test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
+.PHONY: setup run test docs test-fast lint test-serial test-pytest test-mpi test-validation test-slurm test-gpu-compile bench reproduce collect-dev reproduce-paper collect-paper clean
 
 setup:
 	@bash tools/setup.sh
@@ -20,7 +20,7 @@ run: setup
 	$(PY) -m mpdem analyze runs/example
 
 # Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
-test: setup lint test-pytest test-mpi test-gpu-compile test-slurm
+test: setup lint test-pytest test-mpi test-gpu-compile test-slurm docs
 
 test-fast: setup lint test-serial test-mpi
 
@@ -33,6 +33,12 @@ lint:
 test-gpu-compile:
 	@bash tools/setup_cuda.sh
 	.venv-cuda/bin/python tools/gpu_compile.py
+
+# the documentation site, docs/ and the API reference from the docstrings (docs/reference.md), into
+# build/docs/html; warnings are errors (.venv-docs made by tools/setup_docs.sh, idempotent)
+docs:
+	@bash tools/setup_docs.sh
+	.venv-docs/bin/python -m sphinx -W --keep-going -q -b html docs build/docs/html
 
 # the default selection: pyproject.toml's addopts deselect -m validation
 test-serial:
