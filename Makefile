@@ -102,10 +102,12 @@ reproduce-paper: setup
 	$(MAKE) collect-paper
 
 # The tables, fits and figures of analysis/results/paper from its committed files alone (summaries and
-# packings: a run whose analysis is older than its packing is analysed again): the poured piles and the
-# flow-arrest ones (runs/ladder-dev has its own results, ladder-dev/; runs/hstop is a table of verdicts, NOTES).
+# packings: a run whose analysis is older than its packing is analysed again): the poured piles, the
+# flow-arrest ones and the converged rungs of the paper-size stiffening ladders (each rung a set apart from
+# the piles poured at its k_n; runs/ladder-dev has its own results, ladder-dev/; runs/hstop is a table of
+# verdicts, NOTES).
 collect-paper: setup
-	$(PY) -m mpdem collect $(PAPER_RUNS)/dev $(PAPER_RUNS)/size $(PAPER_RUNS)/height $(PAPER_RUNS)/flow --out analysis/results/paper
+	$(PY) -m mpdem collect $(PAPER_RUNS)/dev $(PAPER_RUNS)/size $(PAPER_RUNS)/height $(PAPER_RUNS)/flow $(PAPER_RUNS)/ladder-size --out analysis/results/paper
 
 clean:
 	rm -rf runs .pytest_cache

@@ -43,6 +43,11 @@ def params(**kw):
     return {k: vals[k] for k in config.PARAM_KEYS}
 
 
+def comparison_rows(out):
+    """The per-set comparisons with the paper's numbers (collect.json; the README carries the claim table)."""
+    return json.loads((Path(out) / "collect.json").read_text())["comparisons"]
+
+
 def write_csv(path, head, cols):
     """Columns as ``mpdem analyze`` writes its tables."""
     rundir.write_csv(path, head, zip(*cols))
@@ -225,8 +230,9 @@ def test_tables_and_figures_written(tree):
     copy, orig = str(tree["root"] / "bad/copy"), str(tree["root"] / "mu/mu0.1_s1")
     assert used - {copy, orig} == set(tree["made"]) - {orig} and len(used & {copy, orig}) == 1
     assert json.loads((out / "collect.json").read_text())["n_runs"] == len(tree["made"])
-    readme = (out / "README.md").read_text()
-    assert "6.144" in readme and "within" in readme and "S01" in readme
+    rows = comparison_rows(out)
+    assert any(r["paper"] == 6.144 and r["verdict"] == "within" for r in rows)
+    assert "S01" in (out / "README.md").read_text()
 
 
 def test_eq7_is_weighted_by_the_pooled_scatter_and_fitted_with_the_exponent_fixed_too(tree):
@@ -387,8 +393,8 @@ def test_a_run_analysed_again_keeps_its_analysis_settings(tmp_path):
 
 def test_development_size_verdicts_figures_inline_and_notes(tmp_path):
     """Dev-size piles (N = 2000, 10d box) are judged against docs/model.md 7.1 with the project's
-    acceptance (z +-0.05 at mu = 0, +-0.10 at mu = 0.5, phi +-0.01); the README shows the
-    figures it made inline and carries OUT/NOTES.md."""
+    acceptance (z +-0.05 at mu = 0, +-0.10 at mu = 0.5, phi +-0.01: collect.json's comparisons); the
+    README shows the figures it made inline and links OUT/NOTES.md (the dated log) without copying it."""
     rng = np.random.default_rng(7)
     root = tmp_path / "runs"
     for mu, z, phi in ((0.0, 6.12, 0.640), (0.5, 4.70, 0.612)):
@@ -401,17 +407,17 @@ def test_development_size_verdicts_figures_inline_and_notes(tmp_path):
     (out / "NOTES.md").write_text("### What we found\n\nz at mu = 0.5 is low: a finite-size effect.\n")
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
     readme = (out / "README.md").read_text()
-    rows = [ln for ln in readme.splitlines() if "vs 7.1" in ln]
-    z0 = [r for r in rows if r.startswith("| z |") and "mu = 0," in r]
-    z5 = [r for r in rows if r.startswith("| z |") and "mu = 0.5," in r]
-    phi5 = [r for r in rows if r.startswith("| phi |") and "mu = 0.5," in r]
-    assert z0 and "6.09 … 6.19" in z0[0] and "| within" in z0[0]
-    assert z5 and "4.817 … 5.017" in z5[0] and "| outside" in z5[0]
-    assert phi5 and "| within" in phi5[0]
+    rows = [r for r in comparison_rows(out) if "vs 7.1" in r["conditions"]]
+    z0 = [r for r in rows if r["quantity"] == "z" and "mu = 0," in r["conditions"]]
+    z5 = [r for r in rows if r["quantity"] == "z" and "mu = 0.5," in r["conditions"]]
+    phi5 = [r for r in rows if r["quantity"] == "phi" and "mu = 0.5," in r["conditions"]]
+    assert z0 and z0[0]["accept"] == [6.09, 6.19] and z0[0]["verdict"] == "within"
+    assert z5 and z5[0]["accept"] == [4.817, 5.017] and z5[0]["verdict"] == "outside"
+    assert phi5 and phi5[0]["verdict"] == "within"
     assert "![" in readme and "(fig2_z_vs_mu.png)" in readme and (out / "fig2_z_vs_mu.png").exists()
     made = [ln for ln in readme.splitlines() if ln.startswith("![")]
     assert all((out / ln.split("(")[-1].rstrip(")")).exists() for ln in made)
-    assert "## Findings (from `NOTES.md`)" in readme and "a finite-size effect" in readme
+    assert "(NOTES.md)" in readme and "a finite-size effect" not in readme
 
 
 def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
@@ -443,8 +449,8 @@ def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     out = tmp_path / "out"
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
     text = (out / "README.md").read_text().splitlines()
-    trend = [ln for ln in text if ln.startswith("| z(mu) trend")]
-    assert len(trend) == 1 and "decreasing at every step" in trend[0], trend
+    trend = [r for r in comparison_rows(out) if r["quantity"] == "z(mu) trend"]
+    assert len(trend) == 1 and trend[0]["value"] == "decreasing at every step", trend
     # the README says which set ran under the other rule, below the sets table
     marked = [ln for ln in text if ln.startswith("- S") and "stop.energy = translational" in ln]
     assert len(marked) == 1, marked
@@ -556,14 +562,15 @@ def test_a_set_apart_by_a_parameter_outside_the_columns_says_so(tmp_path):
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
     text = (out / "README.md").read_text().splitlines()
     ratio = f"gamma_t = {25.7 / params(mu=0.5)['contact.gamma_n']:.4g} gamma_n"
-    z_rows = [ln for ln in text if ln.startswith("| z | mu = 0.5")]
+    z_rows = [r["conditions"] for r in comparison_rows(out) if r["quantity"] == "z"
+              and r["conditions"].startswith("mu = 0.5")]
     assert len(z_rows) == 2 and sum(ratio in ln for ln in z_rows) == 1, z_rows
     assert len([ln for ln in text if ln.startswith("- S") and ratio in ln]) == 1
 
 
 def test_flow_arrested_sets_are_compared_with_the_papers_flow_arrest_numbers_alone(tmp_path):
     """A poured set and a flow-arrest set (a flow phase: docs/model.md 5.5) of one mu, eps, k_n and
-    phi_i: the README compares the first with the poured z = 4.90 and the second with 4.69 and
+    phi_i: collect compares the first with the poured z = 4.90 and the second with 4.69 and
     phi = 0.594, never the other way round."""
     rng = np.random.default_rng(6)
     root = tmp_path / "runs"
@@ -576,14 +583,14 @@ def test_flow_arrested_sets_are_compared_with_the_papers_flow_arrest_numbers_alo
                 (run / "analysis" / "summary.json").write_text(json.dumps(rundir.json_safe(s)))
     out = tmp_path / "out"
     co.collect([str(root)], str(out), analyze_missing=False, log=lambda m: None)
-    text = (out / "README.md").read_text().splitlines()
-    rows = [ln for ln in text if ln.startswith("| z | mu = 0.5") or ln.startswith("| phi | mu = 0.5")]
-    flow_rows = [ln for ln in rows if "flow.time" in ln]
-    poured = [ln for ln in rows if "flow.time" not in ln]
-    assert len(flow_rows) == 2 and all("4.69" in ln or "0.594" in ln for ln in flow_rows), flow_rows
-    assert all("4.725" in ln or "0.596" in ln for ln in flow_rows), flow_rows
-    assert not any("4.69" in ln or "0.594" in ln for ln in poured), poured
-    assert any("4.9" in ln and "4.865" in ln for ln in poured), poured
+    rows = [r for r in comparison_rows(out) if r["quantity"] in ("z", "phi")
+            and r["conditions"].startswith("mu = 0.5")]
+    flow_rows = [r for r in rows if "flow.time" in r["conditions"]]
+    poured = [r for r in rows if "flow.time" not in r["conditions"]]
+    assert len(flow_rows) == 2 and sorted(r["paper"] for r in flow_rows) == [0.594, 4.69], flow_rows
+    assert sorted(round(r["value"], 4) for r in flow_rows) == [0.596, 4.725], flow_rows
+    assert not any(r["paper"] in (4.69, 0.594) for r in poured), poured
+    assert any(r["paper"] == 4.9 and round(r["value"], 4) == 4.865 for r in poured), poured
 
 
 def test_a_derived_key_set_away_from_its_derivation_is_named(tmp_path):

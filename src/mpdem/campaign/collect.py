@@ -6,7 +6,8 @@
     OUT/sets.csv      one row per parameter set: mean and standard error over its seeds
     OUT/fits.json     eq. 7 per family of k_n, eq. 9 per family of phi_i (or why not)
     OUT/fig*.png      Figs. 2-9 of the paper, its values drawn as open markers / dashes
-    OUT/README.md     sets, seeds, numbers next to the paper's and docs/model.md 7's acceptance
+    OUT/README.md     the paper's claims judged by one rule (``claims``, ``claimtable``, ``verdict``), the
+                      sets and seeds, a section per figure and equation
     OUT/collect.json  the runs used and skipped, the figures made and not made, and why
 
 This module finds and loads the runs (analysing those that need it), groups
@@ -35,7 +36,7 @@ import numpy as np
 from ..io import rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
-from . import contrasts, depth, paper, pooled, ratio, samples
+from . import claims, claimtable, contrasts, depth, ladder, paper, pooled, ratio, samples
 from .comparison import comparisons, write_readme
 from .figures import make_figures
 from ..analysis.report import PACKING, SUMMARY, AnalysisError
@@ -396,8 +397,9 @@ def _alpha_check(e, members):
 
 
 def make_fits(sets):
-    """{'eq7', 'eq9', 'overlap', 'alpha', 'P_f', 'depth', 'ratio', 'contrasts'}: lists, 'samples': a dict; eq. 7 per
-    family with >= 2 values of k_n, eq. 9 per family with >= 2 values of phi_i, the overlap fit per family
+    """{'eq7', 'eq9', 'overlap', 'alpha', 'P_f', 'depth', 'ratio', 'contrasts', 'ladder'}: lists, 'samples': a dict;
+    eq. 7 per family with >= 2 values of k_n, eq. 9 per family with >= 2 values of phi_i (with a note where the
+    family is not the paper's eq. 9 conditions), the stiffening ladders (``ladder.ladders``), the overlap fit per family
     of k_n (any number of k_n), alpha, P(f) and the depth windows pooled over the seeds of each set, the
     F_t/F_n collapse per family of mu (``ratio.tests``), the sets that differ in one setting from the
     one at its default (``contrasts.contrasts``), whether the runs are independent samples (``samples.tests``)."""
@@ -421,7 +423,11 @@ def make_fits(sets):
             e = _fit_one("eq9", fam, members)
             e["z"] = [s.stat("z")[0] for s in members]
             e["z_sem"] = [v if math.isfinite(v) else None for _, v, _ in (s.stat("z") for s in members)]
+            if (f := e["family"]).get("mu") != paper.EQ9["mu"] or f.get("epsilon") != paper.EQ9["epsilon"]:
+                e["note"] = (f"not the paper's eq. 9 (mu = {paper.EQ9['mu']:g}, eps = {paper.EQ9['epsilon']:g}): "
+                             f"phi_f against phi_i at mu = {f.get('mu'):g}, eps = {f.get('epsilon'):g}")
             out["eq9"].append(e)
+    out["ladder"] = ladder.ladders(sets, lambda fam, members: _fit_one("eq7", fam, members))
     return out
 
 
@@ -461,7 +467,7 @@ def write_json(path, obj):
 
 # ---------------------------------------------------------------- the command
 
-def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
+def collect(runs, out, analyze_missing=True, log=print, figure_format="png", claim_list=None):
     """``mpdem collect RUN_DIR ... --out OUT``: the paper's tables and figures from many runs.
 
     Parameters
@@ -472,6 +478,9 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
         up-to-date analysis/summary.json; False skips them with a warning
     log : one-line messages
     figure_format : formats of the figures (``analysis.figure_format``: png, pdf, svg, joined by commas)
+    claim_list : the paper's claims to judge (``claims.Claim`` list) for README.md's claim table; None
+        takes ``claims.for_out(out)`` (the claims of ``claims.CLAIMS`` for the paper campaign's directory,
+        whose set ids they cite; none elsewhere); an empty list writes no table
 
     Returns
     -------
@@ -524,11 +533,16 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png"):
     rows = comparisons(sets, fit_res)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,
             "n_runs": n_runs, "n_sets": len(sets)}
-    write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows)
+    claim_list = claims.for_out(out) if claim_list is None else claim_list
+    judged = claimtable.rows(claim_list, claimtable.Context(sets, fit_res, windows, out, runs)) if claim_list else None
+    write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows, judged)
     res = {**info, "sets": {s.id: {"params": {SHORT[k]: v for k, v in s.params.items()}, "seeds": s.seeds,
                                    "runs": [r.path for r in s.runs], "signature": s.signature} for s in sets},
            "set_ids": set_ids,
            "skipped": skipped, "comparisons": rows,
+           "claims": [{"id": r["id"], "claim": r["claim"], "paper": r["paper"], "this_work": r["ours"],
+                       "samples": r["count"], "verdict": r["verdict_text"], "kind": r["verdict"].kind,
+                       "reason": r["reason"]} for r in judged or []],
            "figures": {k: v for k, v in figs.items() if not k.startswith("_")}, "figure_notes": figs["_notes"],
            "files": ["runs.csv", "sets.csv", "depth.csv", "fits.json", "README.md", "collect.json"]
            + [p for k, f in figs.items() if not k.startswith("_") and f["made"] for p in f["files"]]}

@@ -10,7 +10,6 @@ and the runs skipped.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
@@ -190,16 +189,24 @@ def _fam_text(f, drop=()):
     return ", ".join(f"{k} = {fmt_kn(f[k]) if k == 'k_n' else f[k]}" for k in keys)
 
 
-def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=()):
-    """OUT/README.md: sets, seeds, numbers with errors next to the paper's, fits, figures, skipped runs."""
+def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=(), claim_rows=None):
+    """OUT/README.md: the claim table first (``claimtable``, the rule stated once), then the parameter sets,
+    one short section per figure and equation with its plot and numbers, the measures under gravity, the
+    one-setting contrasts and the seeds, and the runs skipped. The dated log of findings is OUT/NOTES.md
+    (written by hand; not copied here). ``rows``: the per-set comparisons (collect.json keeps them)."""
+    from . import claimtable
     L = ["# mpdem collect: the paper's tables and figures", "",
          f"Made by `mpdem collect` on {info['date']} from {info['n_runs']} run(s) in {info['n_sets']} parameter "
-         f"set(s); {len(skipped)} skipped (below). Inputs: {', '.join(f'`{t}`' for t in info['inputs'])}.", "",
-         "`±` is the standard error of the mean over the seeds (runs) of a set; a set with one seed has no error "
-         "bar and is marked `(1 seed)`. Paper: " + paper.SOURCE + ". Acceptance ranges: docs/model.md 7, "
-         "\"Suggested acceptance\" (a choice of this project, not the paper's).", "",
-         "## Parameter sets", "",
-         "Every run parameter but the seed is equal within a set (`sets.csv` has them all; runs in `runs.csv`).", ""]
+         f"set(s); {len(skipped)} skipped (the last section). Inputs: "
+         f"{', '.join(f'`{t}`' for t in info['inputs'])}. Paper: " + paper.SOURCE + ".", "",
+         "`±` is the standard error of the mean over the seeds (runs) of a set, unless a row says otherwise; a set "
+         "with one seed has no error bar and says so. The dated log of how each number came about, newest first "
+         f"at its head: [`{NOTES}`]({NOTES}).", ""]
+    if claim_rows is not None:
+        L += claimtable.section(claim_rows)
+    L += ["## Parameter sets", "",
+          "Every run parameter but the seed is equal within a set (`sets.csv` has them all; runs in `runs.csv`). "
+          "A stiffened rung (`stiffen.k_n_from` set) is a set of its own, apart from a pile poured at its k_n.", ""]
     head = ["set", "μ", "ε", "k_n", "φ_i", "N", "box", "seeds", "z", "z (no rattlers)", "φ_f", "α", "rattlers"]
     L += [_table(head, [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), f"{s.p('phi_i'):g}",
                          s.p("N"), f"{s.p('L_x'):g}×{s.p('L_y'):g}", " ".join(map(str, s.seeds)),
@@ -210,66 +217,103 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=()):
     # settings outside the columns (e.g. the stop rule) that a set ran with away from their defaults
     other = [f"- {s.id}: run with {_extras(s)} (not the default; docs/config.md)" for s in sets if _extras(s)]
     L += other + ([""] if other else [])
-    L += ["## Comparison with the paper", ""]
-    if rows:
-        L += [_table(["quantity", "conditions", "set(s)", "this work", "paper", "acceptance", "verdict"],
-                     [[r["quantity"], r["conditions"], r["set"],
-                       fmt_pm(r["value"], r["err"], _BASE.get(r["quantity"], 4), r["n_seeds"]),
-                       _quoted(r["paper"], r["paper_err"]),
-                       "—" if r["accept"] is None else f"{r['accept'][0]!r} … {r['accept'][1]!r}",
-                       r["verdict"] + (f" ({r['note']})" if r["note"] else "")] for r in rows]), "",
-              "Paper values without an error were quoted without one. 7.1 rows: the reference implementation at "
-              "development size (docs/model.md 7.1), not the paper.", ""]
-    else:
-        L += ["No set matches the paper's conditions (k_n = 2e5, φ_i ≈ 0.13, the μ and ε of docs/model.md 7).", ""]
-    L += gravity_sections(sets, fit_res)
-    L += _depth_section(windows)
-    L += ratio.section(fit_res.get("ratio", []), _fam_text)
+    L += _figure_sections(sets, fit_res, figs, windows)
+    L += _gravity_section(sets)
     L += contrasts.section(fit_res.get("contrasts", []), _fam_text)
     L += samples.section(fit_res.get("samples", {}))
-    L += ["## Fits (`fits.json`)", "", "Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n "
-          "(fit weights 1/σ², σ = the family's pooled seed-to-seed scatter / √(seeds of the set); "
-          "the free fit, then with α_n fixed: 1/2 at μ = 0, the paper's 1/4 with friction):", ""]
-    L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]
-    L += ["", "Eq. 9, φ_f = A + B exp(−C φ_i), per family of sets differing in φ_i:", ""]
-    L += [_fit_lines(e, "eq9") for e in fit_res["eq9"]] or ["- no family with ≥ 2 values of φ_i"]
-    L += ["", "## Figures", "", f"Figs. 2-6 and 8 use the sets at {figs['_slice']}.", ""]
-    for name, _, shows in FIGURES:
-        f = figs[name]
-        L.append(f"- `{f['file']}`: {shows}. " + ("Made." if f["made"] else f"**Not made**: {f['reason']}."))
-    for name, notes in figs["_notes"].items():
-        L += [f"  - note ({name}): {n}" for n in notes]
-    for name, _, shows in FIGURES:
-        if figs[name]["made"]:
-            L += ["", f"![{shows}]({figs[name]['file']})"]
-    # the findings a person wrote beside the results (OUT/NOTES.md) belong in the README
-    notes = os.path.join(os.path.dirname(path), NOTES)
-    if os.path.exists(notes):
-        with open(notes) as fh:
-            L += ["", f"## Findings (from `{NOTES}`)", "", fh.read().strip()]
-    L += ["", "## Skipped", ""]
+    L += ["## Skipped", ""]
     L += [_table(["run", "reason"], [[f"`{s['path']}`", s["reason"]] for s in skipped])] if skipped else ["None."]
     rundir.write_atomic(path, "\n".join(L) + "\n")
 
 
+# which claims of the table each figure bears on
+FIGURE_CLAIMS = {"fig2": "7, 8, 9, 10", "fig3": "7b, 10", "fig4": "11, 12, 13", "fig5": "14, 15",
+                 "fig6": "16, 17", "fig7": "19-27", "fig8": "29, 30, 30b",
+                 "fig9": "32 (31, the paper's eq. 9 at μ = 0.5, is fitted in analysis/results/dev)",
+                 "fig10": "16-18", "fig11": "19, 27, 4 (depth)", "fig12": "33 (P(f))"}
+
+
+def _figure_sections(sets, fit_res, figs, windows):
+    """One short section per figure: its plot, the claims it bears on, its notes and its numbers."""
+    L = ["## Figures and equations", "", f"Figs. 2-6 and 8 use the sets at {figs['_slice']}.", ""]
+    numbers = {"fig6": _alpha_section, "fig7": _eq7_section, "fig8": _ratio_section, "fig9": _eq9_section,
+               "fig11": _overlap_depth_section, "fig12": _pf_section}
+    for name, _, shows in FIGURES:
+        f = figs[name]
+        L += [f"### {name.replace('fig', 'Fig. ')}: {shows}", ""]
+        L += [f"Claims {FIGURE_CLAIMS[name]}.", ""] if name in FIGURE_CLAIMS else []
+        L += [f"![{shows}]({f['file']})" if f["made"] else f"**Not made**: {f['reason']}.", ""]
+        L += [f"- note: {n}" for n in figs["_notes"].get(name, [])]
+        if figs["_notes"].get(name):
+            L.append("")
+        if name in numbers:
+            L += numbers[name](sets, fit_res, windows)
+    return L
+
+
+def _ratio_section(sets, fit_res, windows):
+    """The F_t/F_n collapse (``ratio.section``), its heading one level down."""
+    L = ratio.section(fit_res.get("ratio", []), _fam_text)
+    return [L[0].replace("## ", "#### ", 1)] + L[1:]
+
+
+def _eq7_section(sets, fit_res, windows):
+    L = ["Eq. 7, z(k_n) = z∞ + ã k_n^(−α_n), per family of sets differing in k_n (weights 1/σ², σ = the family's "
+         "pooled seed-to-seed scatter / √(seeds of the set); the free fit, then with α_n fixed: 1/2 at μ = 0, the "
+         "paper's 1/4 with friction):", ""]
+    L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]
+    L += ["", "Stiffening ladders (a settled pile stiffened rung by rung, physics.md 6.6; eq. 7 over the base pile "
+          "and the rungs once they give 4 k_n):", ""]
+    L += [_ladder_lines(e) for e in fit_res.get("ladder", [])] or ["- none collected"]
+    return L + [""]
+
+
+def _ladder_lines(e):
+    f = e["family"]
+    rungs = "; ".join(f"{fmt_kn(r['k_n'])} ({r['set']}, {r['n_runs']} run{'s' if r['n_runs'] > 1 else ''}): z "
+                      f"{fmt_pm(r['z'], r['z_sem'] if r['z_sem'] is not None else NAN, 3, r['n_runs'])}, median "
+                      f"overlap {r['overlap_median']:.2g} d" for r in sorted(e["rungs"], key=lambda r: r["k_n"]))
+    head = f"- μ = {f['mu']:g}, ε = {f['epsilon']:g}, N = {f['N']} [base {e['base'] or 'none'}]: {rungs}. "
+    if e.get("status") in ("fitted",) and "z_inf" in e:
+        return head + f"Eq. 7: z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, α_n = " \
+                      f"{fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; χ² = {e['chi2']:.3g} for {e['dof']} dof"
+    return head + f"Eq. 7: **{e.get('status')}** ({e.get('reason', '')})"
+
+
+def _eq9_section(sets, fit_res, windows):
+    L = ["Eq. 9, φ_f = A + B exp(−C φ_i), per family of sets differing in φ_i:", ""]
+    L += [_fit_lines(e, "eq9") for e in fit_res["eq9"]] or ["- no family with ≥ 2 values of φ_i"]
+    return L + [""]
+
+
 def _depth_section(windows):
-    """z and phi on fixed depth windows below the surface (``depth.csv``; docs/model.md 6.10)."""
-    have = [r for r in windows if math.isfinite(r["mean"])]
-    if not have:
+    """z and phi on fixed depth windows below the surface (``depth.csv``, which has the fabric as well;
+    docs/model.md 6.10)."""
+    have = {(r["set"], r["window"], r["quantity"]): r for r in windows if math.isfinite(r["mean"])}
+    keys = list(dict.fromkeys((r["set"], r["window"]) for r in windows if r["quantity"] == "z"
+                              and (r["set"], r["window"], "z") in have))
+    if not keys:
         return []
-    L = ["## z, φ and the contact fabric at fixed depths below the surface (`depth.csv`)", "",
-         "The slab of docs/model.md 6.1 follows each pile's height; these windows are the same depths in every "
-         "pile. Errors: the seed scatter pooled over the sets of one N and μ, over √(seeds of the set); and the "
-         "jackknife over each pile's 4 × 4 lateral columns, combined over its seeds: independent of the seeds, and an "
-         "upper bound (a pile's columns are anticorrelated; docs/model.md 6.10). "
-         "The fabric: the anisotropy of the contact normals' tensor and the angle of its major axis from the bed's "
-         "normal toward +x (downslope; docs/model.md 6.10). "
-         "A run analysed before the windows (or the fabric) existed has none (`mpdem analyze` again).", ""]
-    L += [_table(["set", "μ", "N", "window [d]", "quantity", "mean", "± pooled seeds", "± jackknife", "seeds"],
-                 [[r["set"], f"{r['mu']:g}", r["N"], r["window"], depth.LABEL[r["quantity"]],
-                   f"{r['mean']:.{depth.DIGITS[r['quantity']]}f}",
-                   *(f"{r[k]:.{depth.DIGITS[r['quantity']]}f}" if math.isfinite(r[k]) else "—"
-                     for k in ("pooled_sem", "jackknife")), r["n_seeds"]] for r in have]), ""]
+    L = ["z and φ at fixed depths below the surface (`depth.csv`, with the contact fabric): the slab of "
+         "docs/model.md 6.1 follows each pile's height, these windows are the same depths in every pile. Errors: "
+         "the seed scatter pooled over the sets of one N and μ, over √(seeds of the set); then the jackknife over "
+         "each pile's 4 × 4 lateral columns, combined over its seeds (an upper bound: a pile's columns are "
+         "anticorrelated; docs/model.md 6.10).", ""]
+
+    def cell(k, q):
+        r = have.get((*k, q))
+        if r is None:
+            return "—"
+        d = depth.DIGITS[q]
+        errs = " ± ".join(f"{r[e]:.{d}f}" if math.isfinite(r[e]) else "—" for e in ("pooled_sem", "jackknife"))
+        return f"{r['mean']:.{d}f} ± {errs}"
+
+    rows = []
+    for k in keys:
+        r = have[(*k, "z")]
+        rows.append([k[0], f"{r['mu']:g}", r["N"], k[1], cell(k, "z"), cell(k, "phi"), r["n_seeds"]])
+    L += [_table(["set", "μ", "N", "window [d]", "z ± pooled ± jackknife", "φ ± pooled ± jackknife", "runs"], rows),
+          ""]
     return L
 
 
@@ -311,14 +355,16 @@ def _by_id(entries):
     return {e["set"]: e for e in entries}
 
 
-def gravity_sections(sets, fit_res):
-    """README sections of the measures of a pile under gravity (docs/model.md 6.2, 6.5, 6.6, 6.10)."""
+def _gravity_section(sets):
+    """The README section of the counts of a pile under gravity (docs/model.md 6.2)."""
     L = ["## Counting under gravity", "",
          "z over all bulk spheres (the paper's z); z of the force-bearing backbone (contacts below 1 % of their "
          "depth band's mean normal force dropped, then spheres that cannot balance their weight with the rest; "
          "docs/model.md 6.2) and its rattler fraction; the count rule's rattler fraction (fewer than 4 contacts at "
          "μ = 0, 2 with friction: the rule of packings without gravity); for μ > 0 the generalized isostatic "
-         "count 4 + 2 n_m / 3; the crystal-like fraction (q6 bond order).", ""]
+         "count 4 + n_m / 3 (n_m = 2 N_m / N, the fully mobilised contacts counted once for each of their two "
+         "spheres; docs/model.md 6.2); the "
+         "crystal-like fraction (q6 bond order).", ""]
     rows = []
     for s in sets:
         if not any(r.s.get("backbone") for r in s.runs):
@@ -335,8 +381,13 @@ def gravity_sections(sets, fit_res):
     L += [_table(["set", "μ", "ε", "k_n", "N", "z (all)", "z (backbone)", "rattlers (force)", "rattlers (count rule)",
                   "isostatic count", "crystal-like"], rows), ""] if rows else \
         ["No run has the backbone measures (analysed before they existed: `mpdem analyze` again).", ""]
+    return L
+
+
+def _alpha_section(sets, fit_res, windows=()):
+    """The eq. 6 exponent on fixed windows of xi (docs/model.md 6.5)."""
     al = _by_id(fit_res.get("alpha", []))
-    L += ["## Near-contact exponent α (eq. 6) on fixed windows", "",
+    L = ["Near-contact exponent α (eq. 6) on fixed windows:", "",
           "Maximum likelihood on the gaps ξ = r/d − 1 of every bulk pair in the window (docs/model.md 6.5), the "
           "seeds pooled: first error the statistical (Fisher) one, second a bootstrap over seeds. `soft`: the "
           "window's lower end is below 20 × the median bulk overlap. Paper: 0.52 ± 0.03 on an unnamed window; "
@@ -359,7 +410,12 @@ def gravity_sections(sets, fit_res):
         L += [_table(head, rows), ""]
     else:
         L += ["No run has window statistics.", ""]
-    L += ["## z against the overlap (docs/model.md 6.6)", "",
+    return L
+
+
+def _overlap_depth_section(sets, fit_res, windows):
+    """z against the overlap (docs/model.md 6.6), then z on the fixed depth windows."""
+    L = ["z against the overlap (docs/model.md 6.6):", "",
           "z − z_c = A (δ/d)^(1/2) fitted over the depth bands inside the bulk of every run of a family (all k_n), "
           "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs. At μ = 0 isostaticity "
           "says z_c = 6. The collapse: the F test of the one curve against one of the same slope offset for each "
@@ -370,8 +426,13 @@ def gravity_sections(sets, fit_res):
           f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs, δ/d from "
           f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}; {_collapse_text(e)}"
           for e in ov] or ["- no family with depth profiles of 2 runs or more"]
+    return L + [""] + _depth_section(windows)
+
+
+def _pf_section(sets, fit_res, windows=()):
+    """Normal forces P(f) (docs/model.md 6.10)."""
     pf = _by_id(fit_res.get("P_f", []))
-    L += ["", "## Normal forces P(f) (docs/model.md 6.10)", "",
+    L = ["Normal forces P(f) (docs/model.md 6.10):", "",
           "f = F_n / the mean F_n of its depth band, bulk contacts, seeds pooled: the fraction with f < 0.1 and the "
           "decay rate β of P(f) ~ exp(−β f) beyond f = 1 (maximum likelihood).", ""]
     rows = [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), s.p("N"), pf[s.id]["n"],

@@ -1,0 +1,319 @@
+"""The paper's claims, one entry each: what the paper says, where this work's number comes from, and the
+curated text (why a row that differs differs). ``claimtable`` measures and judges them by the one rule of
+``verdict``; ``mpdem collect`` writes the table into README.md. Adding a claim: one ``Claim`` here.
+
+Sources (``claimtable``): ``S(set, q)`` a set's seed mean, ``Find(q, sel)`` the poured set with those
+parameters, ``Window(set, '10-30', q)`` a fixed depth window, ``Diff(a, b)``, ``Fit(kind, key, set | mu)``
+a fit of ``fits.json`` (``kind`` 'ladder': the paper-size stiffening ladders), ``Rung(mu, q, k_n)``,
+``PerRun(set, fn)``, ``AlphaWindow``, ``OneMinus``, and another collect's tables: ``Ext``, ``ExtFit``,
+``ExtTest``, ``Eq9Deviation`` (``DEV``: the development sweeps, N = 2000; ``LADDER_DEV``: the N = 2000
+stiffening ladders). Set ids are those of this directory's ``collect.json`` (stable across collects).
+
+A paper value without a stated error takes the tolerance of ``TOL_DIGIT`` (half a unit of the last digit
+the paper quotes) unless the claim says otherwise, with the reason in ``tolerance``.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from . import paper
+from .claimtable import (AlphaWindow, Diff, Eq9Deviation, Ext, ExtFit, ExtTest, Find, Fit, OneMinus, PerRun,
+                         Rung, S, Window)
+
+DEV = "../dev"                 # analysis/results/dev: the development sweeps (N = 2000, 10 d x 10 d)
+LADDER_DEV = "ladder-dev"      # the N = 2000 stiffening ladders' collect
+TOL_DIGIT = "the paper quotes it to {q}: half a unit of its last digit"
+NO_NUMBER = "the paper gives no number (\"{w}\"): no tolerance, this work's error alone"
+
+
+@dataclass
+class Claim:
+    """One claim of the paper.
+
+    Parameters
+    ----------
+    id : its number in the table
+    claim : the claim, with its conditions
+    paper : the paper's statement as text
+    kind : 'compare' (ours against ``value`` ± ``paper_err``), 'bound' (beyond ``value``; ``above``),
+        'nonzero' (a difference away from zero), 'range' (``value`` = (lo, hi)), 'sign' (every step of
+        ``ours`` in order has the sign ``value``), 'test' (a p value: one curve not rejected at 2 σ),
+        'qualitative' (a figure's shape, by eye: ``seen``), 'none' (nothing measures it: ``why_none``)
+    value : the paper's number (or a function of the measure: the derived eq. 7 at a rung's k_n)
+    paper_err : its stated error, or the tolerance ``tolerance`` justifies from the paper's text
+    ours : sources; the first with a number is the one judged
+    also : sources shown beside it (other sizes, windows), each with its distance from the paper's value
+    if_differs : ('explained' | 'open', why), shown when the rule says it differs
+    note : conditions or caveats, always shown
+    """
+    id: str
+    claim: str
+    paper: str
+    kind: str
+    value: object = None
+    paper_err: float = None
+    tolerance: str = ""
+    above: bool = True
+    ours: list = field(default_factory=list)
+    also: list = field(default_factory=list)
+    if_differs: tuple = None
+    note: str = ""
+    seen: str = "seen"
+    why_none: str = ""
+    digits: int = None
+    judge_also: bool = True
+
+    def paper_text(self):
+        """The paper's number as the table shows it, with the tolerance and its reason where it has one."""
+        if self.tolerance:
+            return f"{self.paper} (tolerance ±{self.paper_err:g}: {self.tolerance})" if self.paper_err \
+                else f"{self.paper} ({self.tolerance})"
+        return self.paper
+
+
+def _f8(s):
+    """The fraction of bulk spheres with 8 contacts or more (P_z)."""
+    pz = s.get("P_z") or []
+    return float(sum(pz[8:])) if pz else float("nan")
+
+
+def _f2(s):
+    pz = s.get("P_z") or []
+    return float(pz[2]) if len(pz) > 2 else float("nan")
+
+
+def _peak(s):
+    pz = s.get("P_z") or []
+    return float(max(range(len(pz)), key=pz.__getitem__)) if pz else float("nan")
+
+
+def _width(s):
+    pz = s.get("P_z") or []
+    tot = sum(pz)
+    if not tot:
+        return float("nan")
+    m = sum(n * p for n, p in enumerate(pz)) / tot
+    return (sum((n - m) ** 2 * p for n, p in enumerate(pz)) / tot) ** 0.5
+
+
+PAPER20K = {"epsilon": 0.88, "N": 20000, "phi_i": 0.13}
+T2 = 0.005   # half a unit of the last of two decimals
+
+CLAIMS = [
+    Claim("1", "z, μ = 0, ε = 0.88", "6.144 ± 0.002", "compare", 6.144, 0.002, ours=[S("S12")],
+          also=[Window("S12", "10-30"), S("S08", "z", "N 5000"), S("S02", "z", "N 2000"),
+                S("S13", "z", "stop 100 × stricter")],
+          if_differs=("open", "below the paper (and the reference implementation at N = 2000) by some 0.009; a "
+                              "100 times stricter stop raises one pile by 0.002 (S13); the pours that never reach "
+                              "the stop rule (2 of 6 at μ = 0) may bias the rest: not yet counted")),
+    Claim("2", "z, μ = 0, ε = 0.26", "6.144 ± 0.002", "compare", 6.144, 0.002, ours=[S("S11")],
+          also=[S("S01", "z", "N 2000")]),
+    Claim("3", "z at μ = 0 the same for ε = 0.88 and 0.26", "equal (both 6.144 ± 0.002)", "compare", 0.0,
+          0.0028, tolerance="both quoted 6.144 ± 0.002: their difference 0 ± 0.0028",
+          ours=[Diff(S("S11"), S("S12"))], also=[Diff(S("S01"), S("S02"), "N 2000")],
+          if_differs=("explained", "at N = 2000 the difference is the pile's height (row 1's N 5000 and 2000)")),
+    Claim("4", "z, μ = 0.5, ε = 0.88", "4.90", "compare", 4.90, T2, tolerance=TOL_DIGIT.format(q="0.01"),
+          ours=[S("S15")], also=[Window("S15", "10-30"), Window("S15", "5-15"), S("S09", "z", "N 5000"),
+                                 S("S03", "z", "N 2000")],
+          if_differs=("open", "z falls with depth in a tall frictional pile (5–15 d against 10–30 d beside), so "
+                              "the paper's unnamed window could hold the difference; not established")),
+    Claim("5", "φ_f, μ = 0.5, ε = 0.88", "0.61", "compare", 0.61, T2, tolerance=TOL_DIGIT.format(q="0.01"),
+          ours=[S("S15", "phi")], also=[S("S09", "phi", "N 5000"), S("S03", "phi", "N 2000")]),
+    Claim("6", "φ_f, μ = 0, ε = 0.88 (random close packing)", "≈ 0.64", "compare", 0.64, T2,
+          tolerance=TOL_DIGIT.format(q="0.01"), ours=[S("S12", "phi")],
+          also=[S("S08", "phi", "N 5000"), S("S02", "phi", "N 2000")]),
+    Claim("7", "z falls monotonically with μ (ε = 0.88; μ = 0, 0.1, 0.5, 1)", "monotonic", "sign", -1,
+          ours=[S("S12"), S("S14"), S("S15"), S("S16")], note="μ = 0.1 and 1: one seed each, no error"),
+    Claim("7b", "φ_f falls monotonically with μ (ε = 0.88; μ = 0, 0.1, 0.5, 1)", "monotonic", "sign", -1,
+          ours=[S("S12", "phi"), S("S14", "phi"), S("S15", "phi"), S("S16", "phi")],
+          note="μ = 0.1 and 1: one seed each, no error"),
+    Claim("8", "no jump of z to 4 at small μ (μ = 0.1)", "smooth: z > 4", "bound", 4.0,
+          ours=[S("S14")], also=[Ext(DEV, "S16", "z", "N 2000, μ 0.05"), Ext(DEV, "S17", "z", "N 2000, μ 0.1")]),
+    Claim("9", "z levels off for μ ≥ 1: z(μ = 2) − z(μ = 1), ε = 0.88", "saturates", "compare", 0.0, None,
+          tolerance=NO_NUMBER.format(w="saturate"),
+          ours=[Diff(Find("z", {"mu": 2.0, **PAPER20K, "k_n": 2e5}), S("S16")),
+                Diff(Ext(DEV, "S24", label="N 2000"), Ext(DEV, "S23", label="N 2000"))],
+          also=[Diff(Ext(DEV, "S25", label="N 2000"), Ext(DEV, "S24", label="N 2000"), "N 2000, μ 10 − 2"),
+                Diff(Ext(DEV, "S09", label="N 2000"), Ext(DEV, "S08", label="N 2000"), "N 2000, ε 0.26, μ 2 − 1"),
+                Diff(Ext(DEV, "S11", label="N 2000"), Ext(DEV, "S09", label="N 2000"), "N 2000, ε 0.26, μ 10 − 2")],
+          if_differs=("open", "at N = 2000 z still moves between μ = 1 and 2 (up at ε = 0.88, down at 0.26) and "
+                              "is level from 2 to 10; μ ≥ 2 not run at paper size"),
+          note="paper size has μ = 1 only (1 seed)"),
+    Claim("10", "the saturated z is lower at lower ε (μ = 1: ε 0.26 − 0.88)", "lower", "bound", 0.0, above=False,
+          ours=[Diff(Ext(DEV, "S08", label="N 2000"), Ext(DEV, "S23", label="N 2000"))],
+          also=[Diff(Ext(DEV, "S11", label="N 2000"), Ext(DEV, "S25", label="N 2000"), "N 2000, μ 10"),
+                Diff(Ext(DEV, "S08", "phi", "N 2000"), Ext(DEV, "S23", "phi", "N 2000"), "N 2000, φ_f, μ 1")],
+          note="N = 2000 only: ε = 0.26 with friction not run at paper size"),
+    Claim("11", "P(z) shifts down with μ, its shape kept (Fig. 4)", "figure", "qualitative",
+          ours=[PerRun("S12", _peak), PerRun("S15", _peak), PerRun("S12", _width), PerRun("S15", _width)],
+          note="peak n and width (standard deviation of n), μ = 0 then 0.5"),
+    Claim("12", "the fraction with n ≥ 8 falls with μ (μ = 0, 0.1, 0.5, 1)", "falls", "sign", -1,
+          ours=[PerRun("S12", _f8), PerRun("S14", _f8), PerRun("S15", _f8), PerRun("S16", _f8)],
+          note="μ = 0.1 and 1: one seed each, no error"),
+    Claim("13", "spheres with n = 2 appear at μ = 0.5", "appear: P(2) > 0", "bound", 0.0,
+          ours=[PerRun("S15", _f2)], also=[PerRun("S16", _f2), PerRun("S12", _f2)], judge_also=False,
+          if_differs=("open", "one or two spheres a pile: too rare to resolve over 3 seeds")),
+    Claim("14", "g(r) at μ = 0: split second peak (Fig. 5)", "figure", "qualitative",
+          note="fig5_gofr.png: subpeaks at √3 d and 2 d"),
+    Claim("15", "g(r): secondary peaks weaken as μ grows (Fig. 5)", "figure", "qualitative",
+          note="fig5_gofr.png: the √3 d subpeak halves by μ = 0.5"),
+    Claim("16", "α (eq. 6), μ = 0", "0.52 ± 0.03", "compare", paper.ALPHA, paper.ALPHA_ERR,
+          ours=[S("S12", "alpha")], also=[AlphaWindow("S12", 0.01), AlphaWindow("S12", 0.001),
+                                          S("S02", "alpha", "N 2000")],
+          if_differs=("explained", "g(ξ) is no single power law at μ = 0: the outer decade of ξ (beside) comes "
+                                   "near the paper's value, the whole window gives the later literature's "
+                                   "0.38–0.40; the paper names no window")),
+    Claim("17", "α (eq. 6) with friction, μ = 0.5", "0.52 ± 0.03", "compare", paper.ALPHA, paper.ALPHA_ERR,
+          ours=[S("S15", "alpha")], also=[AlphaWindow("S15", 0.01), AlphaWindow("S15", 0.001),
+                                          S("S09", "alpha", "N 5000"), S("S03", "alpha", "N 2000")],
+          if_differs=("open", "one power law at N = 2000, curved in tall piles")),
+    Claim("18", "α does not depend on k_n: α(2e6) − α(2e5), μ = 0", "0.52 ± 0.03 at every k_n", "compare", 0.0,
+          0.042, tolerance="α quoted 0.52 ± 0.03 at each k_n: a difference 0 ± 0.042",
+          ours=[Diff(S("S17", "alpha"), S("S12", "alpha"))],
+          also=[Diff(Rung(0.0, "alpha", "top"), S("S12", "alpha"), "ladder top rung − 2e5"),
+                Diff(Ext(DEV, "S31", "alpha", "N 2000"), Ext(DEV, "S15", "alpha", "N 2000"), "N 2000, 2e8 − 2e5"),
+                Diff(S("S07", "alpha"), S("S03", "alpha"), "N 2000, μ 0.5, 2e7 − 2e5")],
+          note="paper size: two k_n at μ = 0; with friction N = 2000 only"),
+    Claim("19", "eq. 7, μ = 0: z_∞", "6.01 ± 0.02", "compare", 6.01, 0.02,
+          ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S12")],
+          also=[ExtFit(DEV, "eq7", "z_inf", "S15", label="N 2000 eq. 7 free"), Fit("overlap", "z_c", "S02")],
+          note="until the paper-size ladder has 4 k_n: z_c of z − z_c = A (δ/d)^(1/2) over the depth bands "
+               "(exponent assumed), bootstrap over runs"),
+    Claim("20", "eq. 7, μ = 0: α_n", "0.498 ± 0.002", "compare", 0.498, 0.002,
+          ours=[Fit("ladder", "alpha_n", mu=0.0), Fit("eq7", "alpha_n", "S12")],
+          also=[ExtFit(DEV, "eq7", "alpha_n", "S15", label="N 2000 eq. 7 free")],
+          note="eq. 7 with α_n free at paper size: the poured piles have 2 k_n, the ladder's rungs join as they "
+               "converge"),
+    Claim("21", "eq. 8: α_n = 1 − α, μ = 0 (α_n − (1 − α))", "0.498 against 0.48 ± 0.03", "compare", 0.0, 0.03,
+          tolerance="the paper's own α_n and 1 − α differ by 0.018, within its α error 0.03",
+          ours=[Diff(Fit("ladder", "alpha_n", mu=0.0), OneMinus(S("S12", "alpha")))],
+          also=[Diff(ExtFit(DEV, "eq7", "alpha_n", "S15", label="N 2000"), OneMinus(Ext(DEV, "S15", "alpha")),
+                     "N 2000")],
+          if_differs=("explained", "α depends on its window (16)")),
+    Claim("22", "z at k_n = 2e6 from eq. 7 (derived), μ = 0", "6.053 ± 0.02 (derived)", "compare",
+          paper.EQ7_MU0_POINTS[2e6], 0.02, ours=[S("S17")],
+          also=[Rung(0.0, "z", 2e6), Ext(DEV, "S26", "z", "N 2000")]),
+    Claim("22b", "z at k_n = 2e7 from eq. 7 (derived), μ = 0", "6.024 ± 0.02 (derived)", "compare",
+          paper.EQ7_MU0_POINTS[2e7], 0.02, ours=[Rung(0.0, "z", 2e7)], also=[Ext(DEV, "S29", "z", "N 2000")],
+          if_differs=("open", "N = 2000 only: the development pile's height lowers z (row 1)")),
+    Claim("22c", "z at k_n = 2e8 from eq. 7 (derived), μ = 0", "6.014 ± 0.02 (derived)", "compare",
+          paper.EQ7_MU0_POINTS[2e8], 0.02, ours=[Rung(0.0, "z", 2e8)], also=[Ext(DEV, "S31", "z", "N 2000")],
+          if_differs=("open", "N = 2000 only: the development pile's height lowers z (row 1)")),
+    Claim("23", "with friction z approaches z_∞ as k_n^(−1/4) (α_n, μ = 0.5, ε = 0.88)", "1/4", "compare",
+          paper.EQ7_FRICTIONAL_ALPHA_N, 0.005, tolerance="quoted as 1/4 = 0.25: half a unit of 0.01",
+          ours=[Fit("ladder", "alpha_n", mu=0.5)],
+          also=[ExtFit(DEV, "eq7", "alpha_n", "S20", label="N 2000 [0.5, 0.88] eq. 7 free"),
+                ExtFit(DEV, "eq7", "alpha_n", "S38", label="N 2000 [0.5, 0.5]"),
+                ExtFit(DEV, "eq7", "alpha_n", "S06", label="N 2000 [0.5, 0.26]")],
+          if_differs=("open", "four rungs of 2 seeds at N = 2000 cannot fix the exponent")),
+    Claim("24", "frictional z_∞ > 4 ([0.5, 0.88], α_n = 1/4 fixed)", "> 4", "bound", 4.0,
+          ours=[Fit("ladder", "z_inf", mu=0.5, fixed=True), ExtFit(DEV, "eq7", "z_inf", "S20", True, "N 2000")],
+          also=[ExtFit(DEV, "eq7", "z_inf", "S38", True, "N 2000 [0.5, 0.5]"),
+                ExtFit(DEV, "eq7", "z_inf", "S06", True, "N 2000 [0.5, 0.26]"),
+                ExtFit(DEV, "eq7", "z_inf", "S11", True, "N 2000 [10, 0.26]")]),
+    Claim("24b", "frictional z_∞ depends on ε: [0.5, 0.88] − [0.5, 0.5] (α_n = 1/4 fixed)", "depends",
+          "nonzero", ours=[Diff(ExtFit(DEV, "eq7", "z_inf", "S20", True, "N 2000 [0.5, 0.88]"),
+                                ExtFit(DEV, "eq7", "z_inf", "S38", True, "[0.5, 0.5]"))],
+          also=[Diff(ExtFit(DEV, "eq7", "z_inf", "S38", True, "N 2000 [0.5, 0.5]"),
+                     ExtFit(DEV, "eq7", "z_inf", "S06", True, "[0.5, 0.26]"))],
+          note="N = 2000 only; [10, 0.26] has two rungs (not fitted)"),
+    Claim("25", "Fig. 7b's families follow k_n^(−1/4): [0.5, 0.5] (fixed-exponent fit's p)", "figure", "test",
+          ours=[ExtFit(DEV, "eq7", "p_value", "S38", True, "N 2000 [0.5, 0.5]")],
+          also=[ExtFit(DEV, "eq7", "p_value", "S06", True, "N 2000 [0.5, 0.26]"),
+                ExtFit(DEV, "eq7", "p_value", "S20", True, "N 2000 [0.5, 0.88]")],
+          note="the paper gives the families as a figure, no numbers; N = 2000 only"),
+    Claim("26", "with friction the limits k_n → ∞ and μ → 0 do not commute: z stiffened − z poured at 2e6, "
+                "μ = 0.5", "differ (Sec. III E)", "nonzero",
+          ours=[Diff(Rung(0.5, "z", 2e6), Find("z", {"mu": 0.5, **PAPER20K, "k_n": 2e6},
+                                                       label="poured 2e6"))],
+          also=[Diff(Ext(LADDER_DEV, "S07", label="N 2000 stiffened"), Ext(LADDER_DEV, "S06", label="poured")),
+                Diff(Ext(LADDER_DEV, "S11", label="N 2000 stiffened 2e7"), Ext(LADDER_DEV, "S10", label="poured"))],
+          note="N = 2000: one ladder (seed 4) against one or two poured seeds; the paper-size ladder at μ = 0.5 "
+               "and piles poured at 2e6 are to settle it"),
+    Claim("26b", "at μ = 0 they commute: z stiffened − z poured at 2e6", "equal", "compare", 0.0, None,
+          tolerance=NO_NUMBER.format(w="commute"),
+          ours=[Diff(Rung(0.0, "z", 2e6), S("S17"))],
+          also=[Diff(Ext(LADDER_DEV, "S05", label="N 2000 stiffened"), Ext(LADDER_DEV, "S04", label="poured")),
+                Diff(Ext(LADDER_DEV, "S12", label="N 2000 stiffened 2e8"), Ext(DEV, "S31", label="poured"))]),
+    Claim("27", "frictionless packings are isostatic: z → 6", "z_∞ = 6.01 ± 0.02", "compare", 6.0, 0.02,
+          tolerance="", ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S12")],
+          also=[Fit("overlap", "z_c", "S02")], note="against 6, with the paper's z_∞ error",
+          if_differs=("open", "an excess above 6 at N = 2000 only")),
+    Claim("28", "frictional packings lie above the generalized isostatic count (z − (4 + n_m/3), μ = 0.5)",
+          "z > 4 + n_m/3", "bound", 0.0, ours=[Diff(S("S15"), S("S15", "z_iso"), "S15: z − count")],
+          also=[Diff(S("S16"), S("S16", "z_iso"), "μ 1"), Diff(S("S03"), S("S03", "z_iso"), "N 2000")]),
+    Claim("29", "almost all frictional contacts have ζ = F_t/(μ F_n) < 1 (fully mobilised fraction, μ = 0.5)",
+          "almost all (Fig. 8)", "qualitative", ours=[S("S15", "mobilised_fraction")],
+          also=[S("S14", "mobilised_fraction"), S("S16", "mobilised_fraction")],
+          note="\"almost all\" has no number to test"),
+    Claim("30", "P(ζ) for μ ≥ 1 collapse against F_t/F_n (μ = 1, 2, 10; ε = 0.88)", "collapse (Fig. 8)", "test",
+          ours=[ExtTest(DEV, "ratio", "S23", "ratio_mean", "N 2000 ε 0.88, mean F_t/F_n")],
+          note="N = 2000 only; one-way analysis of variance of the mean F_t/F_n against the pooled seed "
+               "scatter"),
+    Claim("30b", "P(ζ) for μ ≥ 1 collapse against F_t/F_n (μ = 1, 2, 10; ε = 0.26)", "collapse (Fig. 8)", "test",
+          ours=[ExtTest(DEV, "ratio", "S08", "ratio_mean", "N 2000 ε 0.26, mean F_t/F_n")],
+          if_differs=("open", "the mean F_t/F_n rises with μ at ε = 0.26 (the F_t/F_n section of "
+                              "analysis/results/dev)"), note="N = 2000 only"),
+    Claim("31", "eq. 9: φ_f(φ_i) = 0.5778 + 0.0567 exp(−4.3 φ_i), μ = 0.5: A", "0.5778", "compare",
+          paper.EQ9["A"], 0.00005, tolerance=TOL_DIGIT.format(q="1e-4"),
+          ours=[ExtFit(DEV, "eq9", "A", "S12", label="N 2000 eq. 9")],
+          also=[Eq9Deviation(DEV, "S12")], judge_also=False,
+          if_differs=("explained", "three parameters of a flat curve trade off; the curve itself stays close to "
+                                   "the paper's (beside)"),
+          note="N = 2000 only; the paper-size campaign has no φ_i sweep"),
+    Claim("32", "z at μ = 0 does not depend on the construction: z(φ_i = 0.02) − z(0.13)", "isostatic regardless",
+          "compare", 0.0, None, tolerance=NO_NUMBER.format(w="isostatic regardless"),
+          ours=[Diff(S("S19"), S("S02"))], also=[Diff(S("S20"), S("S02"), "N 2000, φ_i 0.30 − 0.13")],
+          note="N = 2000, μ = 0 and k_n = 2e5 only (z there, not its k_n → ∞ limit); φ_f does move with φ_i"),
+    Claim("33", "the initial kinetic energy changes nothing: z(K0 = 50) − z(K0 = 0), μ = 0.5", "identical (Sec. II)",
+          "compare", 0.0, None, tolerance=NO_NUMBER.format(w="identical"),
+          ours=[Diff(S("S26"), S("S15"))],
+          also=[Diff(Window("S26", "10-30"), Window("S15", "10-30"), "10–30 d"),
+                Diff(Window("S26", "5-15"), Window("S15", "5-15"), "5–15 d"),
+                Diff(S("S21"), S("S03"), "N 2000, K0 50"), Diff(S("S24"), S("S03"), "N 2000, K0 20"),
+                Diff(S("S25"), S("S03"), "N 2000, K0 100")],
+          if_differs=("open", "a discrepancy of protocol: this project pours with K0 = 0 (its default), the "
+                              "paper's runs with K0 = 20–100 or 0; the paper-size contrast has one seed at K0 = 50")),
+    Claim("34", "Hertzian contacts give the same picture: z(Hertz) − z(Hooke) at equal k_n, μ = 0", "the same "
+          "(Sec. II)", "compare", 0.0, None, tolerance=NO_NUMBER.format(w="the same"),
+          ours=[Diff(S("S23"), S("S02"))], note="N = 2000",
+          if_differs=("open", "at equal nominal k_n a Hertzian contact is softer (overlaps some 30 times "
+                              "larger): the same hard-sphere limit needs stiffer Hertzian rows")),
+    Claim("35", "strains at k_n = 2e9 below 1e-8 (median overlap δ/d, μ = 0)", "δ/d ≤ 1e-8", "bound", 1e-8,
+          above=False, ours=[Rung(0.0, "overlap_median", 2e9)],
+          also=[Rung(0.0, "overlap_median", "top"), S("S17", "overlap_median", "poured 2e6"),
+                S("S12", "overlap_median", "2e5")], judge_also=False,
+          note="the overlap goes as 1/k_n over the measured decades"),
+    Claim("36", "run length at small k_n (steps to the stop, μ = 0, 2e5)", "(3–8) × 1e6", "range", (3e6, 8e6),
+          ours=[S("S12", "step")], also=[S("S15", "step", "μ 0.5")],
+          if_differs=("explained", "the run length is set by the stop rule (docs/model.md 5.4), this project's "
+                                   "threshold, not the paper's")),
+    Claim("37", "run length at k_n = 2e9", "(4–8) × 1e7", "range", (4e7, 8e7), ours=[Rung(0.0, "step", 2e9)],
+          also=[Rung(0.0, "step", "top")], judge_also=False),
+    Claim("38", "flow-arrest packing: z, μ = 0.5 (another protocol)", "4.69", "compare", 4.69, T2,
+          tolerance=TOL_DIGIT.format(q="0.01"), ours=[S("S22")], also=[S("S10", "z", "400 τ of flow")],
+          note="N = 8000 on 20 d × 10 d, 800 τ of steady flow at 24°, then levelled",
+          if_differs=("open", "the packing was levelled to 0° where the paper's keeps its surface near the angle "
+                              "of repose; the flow's duration is not it (S10 beside)")),
+    Claim("38b", "flow-arrest packing: φ, μ = 0.5", "0.594", "compare", 0.594, 0.0005,
+          tolerance=TOL_DIGIT.format(q="0.001"), ours=[S("S22", "phi")], also=[S("S10", "phi", "400 τ of flow")],
+          if_differs=("open", "as 38")),
+    Claim("38c", "poured minus arrested z (15–25 d)", "4.90 − 4.69 = 0.21", "compare", 0.21, 0.0071,
+          tolerance="both quoted to 0.01: ±0.005 each", ours=[Diff(Window("S15", "15-25"), Window("S22", "15-25"))],
+          note="the 36 d flow layer has no 10–30 d window"),
+    Claim("38d", "poured minus arrested φ (15–25 d)", "0.61 − 0.594 = 0.016", "compare", 0.016, 0.005,
+          tolerance="quoted to 0.01 and 0.001", ours=[Diff(Window("S15", "15-25", "phi"),
+                                                           Window("S22", "15-25", "phi"))]),
+]
+
+
+# the directory whose collect.json gives the set ids the claims cite
+OUT = os.path.join("analysis", "results", "paper")
+
+
+def for_out(out):
+    """The claims to judge for a collect into ``out``: ``CLAIMS`` for the paper campaign's directory (its
+    set ids are the ones cited), none for any other."""
+    norm = os.path.normpath(os.path.abspath(out or "."))
+    return CLAIMS if norm.endswith(os.sep + OUT) else []

@@ -1,0 +1,237 @@
+"""The verdict rule of the claim table (``campaign.verdict``) and the table ``collect`` writes from it
+(``campaign.claimtable``, ``campaign.claims``)."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from mpdem.campaign import claims, claimtable as ct, ladder, verdict as V
+from mpdem.campaign.runs import AnalysedRun, Set
+
+ROOT = Path(__file__).resolve().parents[1]
+NAN = float("nan")
+
+
+# ---------------------------------------------------------------- the rule
+
+def test_two_combined_errors_is_reproduced_and_a_tenth_more_differs():
+    """sigma = sqrt(0.375^2 + 0.5^2) = 0.625 exactly: 1.25 away is 2.0 sigma, 1.3125 is 2.1."""
+    at = V.compare(1.25, 0.375, 0.0, 0.5)
+    assert at.kind == "reproduced" and at.n_sigma == 2.0 and at.sigma == 0.625
+    past = V.compare(1.3125, 0.375, 0.0, 0.5)
+    assert past.kind == "differs" and math.isclose(past.n_sigma, 2.1)
+    assert past.text() == "differs by +1.31 (2.1 σ)"   # the difference to two digits of sigma
+    below = V.compare(-1.3125, 0.375, 0.0, 0.5)
+    assert below.kind == "differs" and below.diff == -1.3125
+
+
+def test_the_papers_error_is_combined_with_ours_not_replaced_by_an_acceptance():
+    """Row 1's numbers: 6.1354 +- 0.0015 against 6.144 +- 0.002 is 3.4 combined errors: it differs (a
+    +-0.02 acceptance would have called it reproduced)."""
+    v = V.compare(6.1354, 0.0015, 6.144, 0.002)
+    assert v.kind == "differs"
+    assert math.isclose(v.n_sigma, 0.0086 / math.hypot(0.0015, 0.002), rel_tol=1e-9)
+    assert 3.4 <= v.n_sigma < 3.5
+
+
+def test_a_paper_value_without_an_error_takes_the_tolerance_of_its_claim():
+    """4.90 quoted without an error: the claim's tolerance (half its last digit, 0.005) is the paper's
+    sigma; with no tolerance at all only our error counts."""
+    c = next(c for c in claims.CLAIMS if c.id == "4")
+    assert c.paper_err == 0.005 and "last digit" in c.tolerance
+    m = ct.Measure(4.8447, 0.0040, 3, "3 runs", "S15")
+    v = ct.judge(c, m)
+    assert v.kind == "differs" and math.isclose(v.sigma, math.hypot(0.004, 0.005))
+    wide = ct.judge(c, ct.Measure(4.893, 0.0040, 3, "3 runs", "x"))
+    assert wide.kind == "reproduced"
+    alone = V.compare(4.893, 0.004, 4.90, None)
+    assert alone.kind == "reproduced" and math.isclose(alone.sigma, 0.004)
+
+
+def test_one_seed_against_a_claim_without_tolerance_is_not_determined():
+    v = V.compare(0.03, NAN, 0.0, None)
+    assert v.kind == "not determined" and "no error" in v.why
+    # against a stated paper error the single value is judged on the paper's error alone, and says so
+    w = V.compare(6.141, NAN, 6.144, 0.002)
+    assert w.kind == "reproduced" and w.sigma == 0.002 and "1 seed" in w.why
+
+
+def test_bounds_ranges_and_signs():
+    assert V.bound(4.87, 0.02, 4.0).kind == "reproduced"
+    assert V.bound(4.87, 0.02, 4.0).text() == "reproduced (beyond by 43.5 σ)"
+    assert V.bound(4.03, 0.02, 4.0).kind == "differs"            # above, but not by 2 sigma
+    assert V.bound(4.03, 0.02, 4.0).text() == "differs: +0.030 beyond the bound (1.5 σ, not 2)"
+    assert V.bound(7.7e-6, NAN, 1e-8, above=False).kind == "differs"
+    assert V.in_range(5e6, 1e5, 3e6, 8e6).kind == "reproduced"
+    r = V.in_range(2.0e6, 0.4e6, 3e6, 8e6)
+    assert r.kind == "differs" and r.diff == -1.0e6 and math.isclose(r.n_sigma, 2.5)
+    assert V.in_range(2.4e6, 0.4e6, 3e6, 8e6).kind == "reproduced"
+    assert V.sign([(-0.6, 0.01), (-0.5, 0.02)]).kind == "reproduced"
+    assert V.sign([(-0.6, 0.01), (0.5, 0.02)]).kind == "differs"
+    assert V.sign([(-0.6, 0.01), (-0.01, 0.02)]).kind == "differs"   # a fall within 2 sigma is not resolved
+    one = V.sign([(-0.6, NAN)])
+    assert one.kind == "reproduced" and "judged by sign" in one.why
+
+
+# ---------------------------------------------------------------- rows from sources
+
+def _run(i, z, phi=0.6, **p):
+    params = {"contact.mu": 0.5, "contact.epsilon": 0.88, "contact.k_n": 2e5, "pour.N": 20000, "run.seed": i,
+              **p}
+    return AnalysedRun(f"r{i}", {"params": params, "z": z, "phi": phi})
+
+
+def _set(sid, zs, **p):
+    s = Set(sid, {"contact.mu": 0.5, "contact.k_n": 2e5, **p}, [_run(i + 1, z, **p) for i, z in enumerate(zs)])
+    return s
+
+
+def _claim(**kw):
+    base = dict(id="x", claim="z", paper="4.90", kind="compare", value=4.90, paper_err=0.005, tolerance="t")
+    return claims.Claim(**{**base, **kw})
+
+
+def test_a_row_whose_set_is_absent_reads_not_measured():
+    ctx = ct.Context([_set("S01", [4.85, 4.86])], {}, [])
+    r = ct.row(_claim(ours=[ct.S("S99")]), ctx)
+    assert r["verdict"].kind == "not measured" and r["ours"] == "—" and r["reason"] == ""
+
+
+def test_a_row_reads_the_set_mean_error_and_count():
+    ctx = ct.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
+    r = ct.row(_claim(ours=[ct.S("S01")]), ctx)
+    assert r["count"] == "3 runs" and r["ours"].startswith("4.8600 ± 0.0058")
+    assert r["verdict"].kind == "differs" and r["reason"] == "open: no cause found"
+    r2 = ct.row(_claim(ours=[ct.S("S01")], if_differs=("explained", "the window")), ctx)
+    assert r2["reason"] == "explained: the window"
+
+
+def test_a_fit_that_cannot_tell_its_parameters_apart_is_not_determined():
+    fit_res = {"eq7": [{"sets": ["S01", "S02"], "status": "not fitted", "reason": "2 distinct k_n"},
+                       {"sets": ["S03"], "status": "fitted", "determined": False, "alpha_n": 0.3,
+                        "reason": "correlation 1"},
+                       {"sets": ["S04"], "status": "fitted", "determined": True, "alpha_n": 0.49,
+                        "alpha_n_err": 0.01}]}
+    ctx = ct.Context([], fit_res, [])
+    c = _claim(value=0.498, paper_err=0.002, tolerance="")
+    for sid in ("S01", "S03"):
+        r = ct.row(c.__class__(**{**c.__dict__, "ours": [ct.Fit("eq7", "alpha_n", sid)]}), ctx)
+        assert r["verdict"].kind == "not determined", r
+    r = ct.row(c.__class__(**{**c.__dict__, "ours": [ct.Fit("eq7", "alpha_n", "S04")]}), ctx)
+    assert r["verdict"].kind == "reproduced"
+
+
+def test_a_difference_of_a_one_setting_contrast_takes_its_pooled_error():
+    a, b = _set("S26", [4.872]), _set("S15", [4.84, 4.845, 4.85])
+    fit_res = {"contrasts": [{"reference": "S15", "rows": [{"set": "S26", "z": {"diff": 0.027, "err": 0.008}}]}]}
+    m = ct.Diff(ct.S("S26"), ct.S("S15")).resolve(ct.Context([a, b], fit_res, []))
+    assert m.ok and m.err == 0.008 and math.isclose(m.value, 4.872 - 4.845)
+
+
+def test_a_one_run_side_of_a_difference_takes_the_other_sides_seed_scatter():
+    a, b = _set("S27", [6.048]), _set("S17", [6.043, 6.053])
+    m = ct.Diff(ct.S("S27"), ct.S("S17")).resolve(ct.Context([a, b], {}, []))
+    sd = 0.005 * math.sqrt(2)                     # S17's standard deviation: its sem times sqrt(2)
+    assert math.isclose(m.err, math.hypot(sd, 0.005), rel_tol=1e-9)
+
+
+def test_a_ladder_rung_reads_running_while_its_directory_has_no_converged_run(tmp_path):
+    lad = tmp_path / "ladder-size" / "mu0_s1"
+    (lad / "kn2e6").mkdir(parents=True)
+    (lad / "kn2e7").mkdir()
+    ctx = ct.Context([], {"ladder": []}, [], str(tmp_path), [str(tmp_path / "ladder-size")])
+    assert ct.Rung(0.0, "z", 2e7).resolve(ctx).status == "running"
+    far = ct.Rung(0.0, "z", 2e9).resolve(ctx)
+    assert far.status == "not measured" and "mu0_s1/kn2e7" in far.why
+    assert ct.Rung(0.5, "z", 2e6).resolve(ctx).status == "not measured"
+    fit_res = {"ladder": [{"family": {"mu": 0.0}, "rungs": [{"set": "S27", "k_n": 2e6, "n_runs": 1, "z": 6.048,
+                                                             "z_sem": None}]}]}
+    m = ct.Rung(0.0, "z", "top").resolve(ct.Context([], fit_res, [], str(tmp_path), []))
+    assert m.ok and m.value == 6.048 and m.k_n == 2e6 and "no error" in m.count
+
+
+def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
+    from mpdem import config
+
+    def p(k_n, seed):
+        vals = config.resolve({"run.max_steps": 1, "contact.mu": 0.0, "contact.k_n": k_n, "pour.N": 20000,
+                               "run.seed": seed}).values
+        return {k: vals[k] for k in config.PARAM_KEYS}
+
+    def st(sid, k_n, zs, k_from=None):
+        runs = [AnalysedRun(f"{sid}{i}", {"params": p(k_n, i + 1), "z": z, "phi": 0.64}) for i, z in enumerate(zs)]
+        return Set(sid, p(k_n, 1), runs, {"stiffen.k_n_from": k_from} if k_from else {})
+
+    base, poured2e6 = st("S12", 2e5, [6.13, 6.14, 6.135]), st("S17", 2e6, [6.043, 6.053])
+    r6 = st("S27", 2e6, [6.048], 2e5)
+    calls = []
+    got = ladder.ladders([base, poured2e6, r6], lambda fam, m: calls.append(m) or {"status": "fitted"})
+    assert len(got) == 1 and got[0]["base"] == "S12" and got[0]["sets"] == ["S12", "S27"]
+    assert got[0]["status"] == "not fitted" and "needs 4" in got[0]["reason"] and not calls
+    rungs = [r6, st("S28", 2e7, [6.03], 2e6), st("S29", 2e8, [6.02], 2e7)]
+    got = ladder.ladders([base, poured2e6, *rungs], lambda fam, m: calls.append(m) or {"status": "fitted"})
+    assert got[0]["status"] == "fitted" and [s.id for s in calls[0]] == ["S12", "S27", "S28", "S29"]
+
+
+# ---------------------------------------------------------------- the claims themselves
+
+def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
+    ids = [c.id for c in claims.CLAIMS]
+    assert len(ids) == len(set(ids))
+    kinds = {"compare", "bound", "nonzero", "range", "sign", "test", "qualitative", "none"}
+    cited = set()
+
+    def walk(src):
+        if isinstance(src, (ct.S, ct.Window, ct.PerRun)):
+            cited.add(src.set)
+        for v in vars(src).values():
+            if hasattr(v, "resolve"):
+                walk(v)
+    for c in claims.CLAIMS:
+        assert c.kind in kinds, c.id
+        if c.kind == "compare":
+            assert c.value is not None, c.id
+            # a tolerance in place of a paper error is always given with its reason, from the paper's text
+            assert c.paper_err is None or c.tolerance or c.paper in ("6.144 ± 0.002", "0.52 ± 0.03") \
+                or "±" in c.paper, c.id
+        for src in c.ours + c.also:
+            walk(src)
+    have = set(json.loads((ROOT / "analysis/results/paper/collect.json").read_text())["sets"])
+    assert cited and cited <= have, cited - have
+
+
+def test_claims_are_written_for_the_paper_campaign_alone(tmp_path):
+    assert claims.for_out(str(ROOT / "analysis/results/paper")) is claims.CLAIMS
+    assert claims.for_out(str(tmp_path / "out")) == []
+    assert claims.for_out(str(ROOT / "analysis/results/dev")) == []
+
+
+def test_the_table_states_the_rule_once_and_counts_what_it_judged():
+    ctx = ct.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
+    judged = ct.rows([_claim(id="1", ours=[ct.S("S01")]), _claim(id="2", ours=[ct.S("S02")]),
+                      _claim(id="3", ours=[ct.S("S01")], value=4.86)], ctx)
+    text = "\n".join(ct.section(judged))
+    assert text.count("within two combined standard errors") == 1
+    assert "1 reproduced, 1 differs" in text and "1 not measured" in text
+    assert ct.counts(judged) == {"differs": 1, "not measured": 1, "reproduced": 1}
+
+
+def test_every_verdict_of_the_committed_readme_agrees_with_its_number_of_errors():
+    """The table collect wrote: no row is 'reproduced' beyond 2 combined errors, none 'differs' within them,
+    and every row that differs says whether it is explained or open."""
+    import re
+    text = (ROOT / "analysis/results/paper/README.md").read_text()
+    rows = [ln for ln in text.split("## The paper, claim by claim")[1].split("\n## ")[0].splitlines()
+            if re.match(r"\| [0-9]+[a-z]? \|", ln)]
+    assert len(rows) == len(claims.CLAIMS)
+    for ln in rows:
+        verdict = ln.split(" | ")[5]
+        m = re.search(r"\*\*reproduced \(([0-9.]+) σ\)", verdict)
+        if m:
+            assert float(m.group(1)) <= 2.0, ln
+        m = re.search(r"\*\*differs by [-+0-9.e]+ \(([0-9.]+) σ\)[^*]*\*\*; (explained|open)", verdict)
+        if "**differs by" in verdict:
+            assert m and float(m.group(1)) > 2.0, ln
+        elif "**differs" in verdict:        # a test or a bound: its reason all the same
+            assert re.search(r"\*\*; (explained|open)", verdict), ln
