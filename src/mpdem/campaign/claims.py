@@ -39,7 +39,8 @@ class Claim:
     kind : 'compare' (ours against ``value`` ± ``paper_err``), 'bound' (beyond ``value``; ``above``),
         'nonzero' (a difference away from zero), 'range' (``value`` = (lo, hi)), 'sign' (every step of
         ``ours`` in order has the sign ``value``), 'test' (a p value: one curve not rejected at 2 σ),
-        'qualitative' (a figure's shape, by eye: ``seen``), 'none' (nothing measures it: ``why_none``)
+        'qualitative' (a figure's shape, by eye: ``seen``, ``by_eye`` says why no number decides it), 'none'
+        (nothing measures it: ``why_none``)
     value : the paper's number (or a function of the measure: the derived eq. 7 at a rung's k_n)
     paper_err : its stated error, or the tolerance ``tolerance`` justifies from the paper's text
     ours : sources; the first with a number is the one judged
@@ -60,6 +61,7 @@ class Claim:
     if_differs: tuple = None
     note: str = ""
     seen: str = "seen"
+    by_eye: str = "by eye: a figure's shape"
     why_none: str = ""
     digits: int = None
     judge_also: bool = True
@@ -246,7 +248,7 @@ CLAIMS = [
     Claim("29", "almost all frictional contacts have ζ = F_t/(μ F_n) < 1 (fully mobilised fraction, μ = 0.5)",
           "almost all (Fig. 8)", "qualitative", ours=[S("S15", "mobilised_fraction")],
           also=[S("S14", "mobilised_fraction"), S("S16", "mobilised_fraction")],
-          note="\"almost all\" has no number to test"),
+          by_eye="by eye: \"almost all\" has no number to test"),
     Claim("30", "P(ζ) for μ ≥ 1 collapse against F_t/F_n (μ = 1, 2, 10; ε = 0.88)", "collapse (Fig. 8)", "test",
           ours=[ExtTest(DEV, "ratio", "S23", "ratio_mean", "N 2000 ε 0.88, mean F_t/F_n")],
           note="N = 2000 only; one-way analysis of variance of the mean F_t/F_n against the pooled seed "

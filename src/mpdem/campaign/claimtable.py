@@ -484,7 +484,7 @@ def row(claim, ctx):
     if claim.kind == "qualitative":
         ms = [src.resolve(ctx) for src in claim.ours]
         v = V.Verdict(claim.seen if ms and all(m.ok for m in ms) or not claim.ours else "not measured",
-                      why="by eye: a figure's shape")
+                      why=claim.by_eye)
         ours = "; ".join(_mtext(m, claim.digits) for m in ms) or "figure"
         count = "; ".join(m.count for m in ms if m.ok)
     elif claim.kind == "sign":
@@ -555,7 +555,7 @@ def _pm(v, e):
     if _finite(e) and e > 0:
         d = min(max(0, 1 - math.floor(math.log10(e))), 8)
         return f"{v:.{d}f} ± {e:.{d}f}"
-    return f"{v:.4g}"
+    return f"{v:.4g}" + (" ± 0" if _finite(e) and e == 0 else "")
 
 
 def rows(claims_, ctx):
