@@ -180,11 +180,13 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
     ids = [c.id for c in claims.CLAIMS]
     assert len(ids) == len(set(ids))
     kinds = {"compare", "bound", "nonzero", "range", "sign", "test", "qualitative", "none"}
-    cited = set()
+    cited, ext = set(), {}
 
     def walk(src):
         if isinstance(src, (ct.S, ct.Window, ct.PerRun)):
             cited.add(src.set)
+        if isinstance(src, (ct.Ext, ct.ExtFit, ct.ExtTest, ct.Eq9Deviation)):
+            ext.setdefault(src.results, set()).add(src.set)
         for v in vars(src).values():
             if hasattr(v, "resolve"):
                 walk(v)
@@ -197,8 +199,14 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
                 or "±" in c.paper, c.id
         for src in c.ours + c.also:
             walk(src)
-    have = set(json.loads((ROOT / "analysis/results/paper/collect.json").read_text())["sets"])
+    paper = ROOT / "analysis/results/paper"
+    have = set(json.loads((paper / "collect.json").read_text())["sets"])
     assert cited and cited <= have, cited - have
+    # the other collects' tables the claims read (the development sweeps, the N = 2000 ladders)
+    assert set(ext) == {claims.DEV, claims.LADDER_DEV}
+    for results, ids in ext.items():
+        other = set(json.loads((paper / results / "collect.json").read_text())["sets"])
+        assert ids <= other, (results, ids - other)
 
 
 def test_claims_are_written_for_the_paper_campaign_alone(tmp_path):
