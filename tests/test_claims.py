@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from mpdem.campaign import claims, claimtable as ct, ladder, verdict as V
+from mpdem.campaign import claims, claimtable as ct, ladder, sources as src, verdict as V
 from mpdem.campaign.runs import AnalysedRun, Set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,10 +40,10 @@ def test_a_paper_value_without_an_error_takes_the_tolerance_of_its_claim():
     sigma; with no tolerance at all only our error counts."""
     c = next(c for c in claims.CLAIMS if c.id == "4")
     assert c.paper_err == 0.005 and "last digit" in c.tolerance
-    m = ct.Measure(4.8447, 0.0040, 3, "3 runs", "S15")
+    m = src.Measure(4.8447, 0.0040, 3, "3 runs", "S15")
     v = ct.judge(c, m)
     assert v.kind == "differs" and math.isclose(v.sigma, math.hypot(0.004, 0.005))
-    wide = ct.judge(c, ct.Measure(4.893, 0.0040, 3, "3 runs", "x"))
+    wide = ct.judge(c, src.Measure(4.893, 0.0040, 3, "3 runs", "x"))
     assert wide.kind == "reproduced"
     alone = V.compare(4.893, 0.004, 4.90, None)
     assert alone.kind == "reproduced" and math.isclose(alone.sigma, 0.004)
@@ -93,17 +93,17 @@ def _claim(**kw):
 
 
 def test_a_row_whose_set_is_absent_reads_not_measured():
-    ctx = ct.Context([_set("S01", [4.85, 4.86])], {}, [])
-    r = ct.row(_claim(ours=[ct.S("S99")]), ctx)
+    ctx = src.Context([_set("S01", [4.85, 4.86])], {}, [])
+    r = ct.row(_claim(ours=[src.S("S99")]), ctx)
     assert r["verdict"].kind == "not measured" and r["ours"] == "—" and r["reason"] == ""
 
 
 def test_a_row_reads_the_set_mean_error_and_count():
-    ctx = ct.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
-    r = ct.row(_claim(ours=[ct.S("S01")]), ctx)
+    ctx = src.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
+    r = ct.row(_claim(ours=[src.S("S01")]), ctx)
     assert r["count"] == "3 runs" and r["ours"].startswith("4.8600 ± 0.0058")
     assert r["verdict"].kind == "differs" and r["reason"] == "open: no cause found"
-    r2 = ct.row(_claim(ours=[ct.S("S01")], if_differs=("explained", "the window")), ctx)
+    r2 = ct.row(_claim(ours=[src.S("S01")], if_differs=("explained", "the window")), ctx)
     assert r2["reason"] == "explained: the window"
 
 
@@ -113,25 +113,25 @@ def test_a_fit_that_cannot_tell_its_parameters_apart_is_not_determined():
                         "reason": "correlation 1"},
                        {"sets": ["S04"], "status": "fitted", "determined": True, "alpha_n": 0.49,
                         "alpha_n_err": 0.01}]}
-    ctx = ct.Context([], fit_res, [])
+    ctx = src.Context([], fit_res, [])
     c = _claim(value=0.498, paper_err=0.002, tolerance="")
     for sid in ("S01", "S03"):
-        r = ct.row(c.__class__(**{**c.__dict__, "ours": [ct.Fit("eq7", "alpha_n", sid)]}), ctx)
+        r = ct.row(c.__class__(**{**c.__dict__, "ours": [src.Fit("eq7", "alpha_n", sid)]}), ctx)
         assert r["verdict"].kind == "not determined", r
-    r = ct.row(c.__class__(**{**c.__dict__, "ours": [ct.Fit("eq7", "alpha_n", "S04")]}), ctx)
+    r = ct.row(c.__class__(**{**c.__dict__, "ours": [src.Fit("eq7", "alpha_n", "S04")]}), ctx)
     assert r["verdict"].kind == "reproduced"
 
 
 def test_a_difference_of_a_one_setting_contrast_takes_its_pooled_error():
     a, b = _set("S26", [4.872]), _set("S15", [4.84, 4.845, 4.85])
     fit_res = {"contrasts": [{"reference": "S15", "rows": [{"set": "S26", "z": {"diff": 0.027, "err": 0.008}}]}]}
-    m = ct.Diff(ct.S("S26"), ct.S("S15")).resolve(ct.Context([a, b], fit_res, []))
+    m = src.Diff(src.S("S26"), src.S("S15")).resolve(src.Context([a, b], fit_res, []))
     assert m.ok and m.err == 0.008 and math.isclose(m.value, 4.872 - 4.845)
 
 
 def test_a_one_run_side_of_a_difference_takes_the_other_sides_seed_scatter():
     a, b = _set("S27", [6.048]), _set("S17", [6.043, 6.053])
-    m = ct.Diff(ct.S("S27"), ct.S("S17")).resolve(ct.Context([a, b], {}, []))
+    m = src.Diff(src.S("S27"), src.S("S17")).resolve(src.Context([a, b], {}, []))
     sd = 0.005 * math.sqrt(2)                     # S17's standard deviation: its sem times sqrt(2)
     assert math.isclose(m.err, math.hypot(sd, 0.005), rel_tol=1e-9)
 
@@ -140,14 +140,14 @@ def test_a_ladder_rung_reads_running_while_its_directory_has_no_converged_run(tm
     lad = tmp_path / "ladder-size" / "mu0_s1"
     (lad / "kn2e6").mkdir(parents=True)
     (lad / "kn2e7").mkdir()
-    ctx = ct.Context([], {"ladder": []}, [], str(tmp_path), [str(tmp_path / "ladder-size")])
-    assert ct.Rung(0.0, "z", 2e7).resolve(ctx).status == "running"
-    far = ct.Rung(0.0, "z", 2e9).resolve(ctx)
+    ctx = src.Context([], {"ladder": []}, [], str(tmp_path), [str(tmp_path / "ladder-size")])
+    assert src.Rung(0.0, "z", 2e7).resolve(ctx).status == "running"
+    far = src.Rung(0.0, "z", 2e9).resolve(ctx)
     assert far.status == "not measured" and "mu0_s1/kn2e7" in far.why
-    assert ct.Rung(0.5, "z", 2e6).resolve(ctx).status == "not measured"
+    assert src.Rung(0.5, "z", 2e6).resolve(ctx).status == "not measured"
     fit_res = {"ladder": [{"family": {"mu": 0.0}, "rungs": [{"set": "S27", "k_n": 2e6, "n_runs": 1, "z": 6.048,
                                                              "z_sem": None}]}]}
-    m = ct.Rung(0.0, "z", "top").resolve(ct.Context([], fit_res, [], str(tmp_path), []))
+    m = src.Rung(0.0, "z", "top").resolve(src.Context([], fit_res, [], str(tmp_path), []))
     assert m.ok and m.value == 6.048 and m.k_n == 2e6 and "no error" in m.count
 
 
@@ -182,12 +182,12 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
     kinds = {"compare", "bound", "nonzero", "range", "sign", "test", "qualitative", "none"}
     cited, ext = set(), {}
 
-    def walk(src):
-        if isinstance(src, (ct.S, ct.Window, ct.PerRun)):
-            cited.add(src.set)
-        if isinstance(src, (ct.Ext, ct.ExtFit, ct.ExtTest, ct.Eq9Deviation)):
-            ext.setdefault(src.results, set()).add(src.set)
-        for v in vars(src).values():
+    def walk(x):
+        if isinstance(x, (src.S, src.Window, src.PerRun)):
+            cited.add(x.set)
+        if isinstance(x, (src.Ext, src.ExtFit, src.ExtTest, src.Eq9Deviation)):
+            ext.setdefault(x.results, set()).add(x.set)
+        for v in vars(x).values():
             if hasattr(v, "resolve"):
                 walk(v)
     for c in claims.CLAIMS:
@@ -197,8 +197,8 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
             # a tolerance in place of a paper error is always given with its reason, from the paper's text
             assert c.paper_err is None or c.tolerance or c.paper in ("6.144 ± 0.002", "0.52 ± 0.03") \
                 or "±" in c.paper, c.id
-        for src in c.ours + c.also:
-            walk(src)
+        for x in c.ours + c.also:
+            walk(x)
     paper = ROOT / "analysis/results/paper"
     have = set(json.loads((paper / "collect.json").read_text())["sets"])
     assert cited and cited <= have, cited - have
@@ -216,9 +216,9 @@ def test_claims_are_written_for_the_paper_campaign_alone(tmp_path):
 
 
 def test_the_table_states_the_rule_once_and_counts_what_it_judged():
-    ctx = ct.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
-    judged = ct.rows([_claim(id="1", ours=[ct.S("S01")]), _claim(id="2", ours=[ct.S("S02")]),
-                      _claim(id="3", ours=[ct.S("S01")], value=4.86)], ctx)
+    ctx = src.Context([_set("S01", [4.85, 4.86, 4.87])], {}, [])
+    judged = ct.rows([_claim(id="1", ours=[src.S("S01")]), _claim(id="2", ours=[src.S("S02")]),
+                      _claim(id="3", ours=[src.S("S01")], value=4.86)], ctx)
     text = "\n".join(ct.section(judged))
     assert text.count("within two combined standard errors") == 1
     assert "1 reproduced, 1 differs" in text and "1 not measured" in text

@@ -1,8 +1,8 @@
 """The paper's claims, one entry each: what the paper says, where this work's number comes from, and the
-curated text (why a row that differs differs). ``claimtable`` measures and judges them by the one rule of
-``verdict``; ``mpdem collect`` writes the table into README.md. Adding a claim: one ``Claim`` here.
+curated text (why a row that differs differs). ``sources`` measures and ``claimtable`` judges them by the one rule
+of ``verdict``; ``mpdem collect`` writes the table into README.md. Adding a claim: one ``Claim`` here.
 
-Sources (``claimtable``): ``S(set, q)`` a set's seed mean, ``Find(q, sel)`` the poured set with those
+Sources (``sources``): ``S(set, q)`` a set's seed mean, ``Find(q, sel)`` the poured set with those
 parameters, ``Window(set, '10-30', q)`` a fixed depth window, ``Diff(a, b)``, ``Fit(kind, key, set | mu)``
 a fit of ``fits.json`` (``kind`` 'ladder': the paper-size stiffening ladders), ``Rung(mu, q, k_n)``,
 ``PerRun(set, fn)``, ``AlphaWindow``, ``OneMinus``, and another collect's tables: ``Ext``, ``ExtFit``,
@@ -18,7 +18,7 @@ import os
 from dataclasses import dataclass, field
 
 from . import paper
-from .claimtable import (AlphaWindow, Diff, Eq9Deviation, Ext, ExtFit, ExtTest, Find, Fit, OneMinus, PerRun,
+from .sources import (AlphaWindow, Diff, Eq9Deviation, Ext, ExtFit, ExtTest, Find, Fit, OneMinus, PerRun,
                          Rung, S, Window)
 
 DEV = "../dev"                 # analysis/results/dev: the development sweeps (N = 2000, 10 d x 10 d)

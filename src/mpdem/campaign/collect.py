@@ -6,8 +6,8 @@
     OUT/sets.csv      one row per parameter set: mean and standard error over its seeds
     OUT/fits.json     eq. 7 per family of k_n, eq. 9 per family of phi_i (or why not)
     OUT/fig*.png      Figs. 2-9 of the paper, its values drawn as open markers / dashes
-    OUT/README.md     the paper's claims judged by one rule (``claims``, ``claimtable``, ``verdict``), the
-                      sets and seeds, a section per figure and equation
+    OUT/README.md     the paper's claims judged by one rule (``claims``, ``sources``, ``claimtable``,
+                      ``verdict``), the sets and seeds, a section per figure and equation
     OUT/collect.json  the runs used and skipped, the figures made and not made, and why
 
 This module finds and loads the runs (analysing those that need it), groups
@@ -36,7 +36,7 @@ import numpy as np
 from ..io import rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
-from . import claims, claimtable, contrasts, depth, ladder, paper, pooled, ratio, samples
+from . import claims, claimtable, contrasts, depth, ladder, paper, pooled, ratio, samples, sources
 from .comparison import comparisons, write_readme
 from .figures import make_figures
 from ..analysis.report import PACKING, SUMMARY, AnalysisError
@@ -534,7 +534,7 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png", cla
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,
             "n_runs": n_runs, "n_sets": len(sets)}
     claim_list = claims.for_out(out) if claim_list is None else claim_list
-    judged = claimtable.rows(claim_list, claimtable.Context(sets, fit_res, windows, out, runs)) if claim_list else None
+    judged = claimtable.rows(claim_list, sources.Context(sets, fit_res, windows, out, runs)) if claim_list else None
     write_readme(os.path.join(out, "README.md"), info, sets, fit_res, rows, figs, skipped, windows, judged)
     res = {**info, "sets": {s.id: {"params": {SHORT[k]: v for k, v in s.params.items()}, "seeds": s.seeds,
                                    "runs": [r.path for r in s.runs], "signature": s.signature} for s in sets},

@@ -1,0 +1,446 @@
+"""Where the claim table's numbers come from: sources that read this collect's sets, fits and depth
+windows, or another collect's tables, and turn into a ``Measure``.
+
+A claim (``claims.Claim``) names its number by a source: a set's mean over its seeds (``S``, or ``Find``
+by parameters, so that a set joining later is picked up), a fixed depth window (``Window``), a difference
+of two sources (``Diff``; a one-setting contrast takes its pooled error), a fit of ``fits.json`` (``Fit``),
+a rung of a paper-size stiffening ladder (``Rung``), a run-level quantity of the summaries (``PerRun``),
+an eq. 6 window (``AlphaWindow``), 1 minus a source (``OneMinus``), or another collect's tables (``Ext``,
+``ExtFit``, ``ExtTest``, ``Eq9Deviation``: the development sweeps of ``analysis/results/dev``, the N = 2000
+ladders). ``Context`` is what they read. Numbers are never written by hand here: a source with nothing to
+read gives a ``Measure`` that says "not measured" (or "running", "not determined") and why.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from dataclasses import dataclass, field
+
+from . import verdict as V
+from .runs import NAN, fmt_kn, mean_sem
+
+# the paper-size stiffening ladders (physics.md 6.6): runs/ladder-size/<mu>_s<seed>/kn<K>/
+LADDER_DIR = "ladder-size"
+PAPER_N = 20000
+
+
+# ---------------------------------------------------------------- a measured number
+
+@dataclass
+class Measure:
+    """A number of this work: ``value`` ± ``err`` from ``n`` samples (runs; ``count`` says of what),
+    ``where`` it comes from (sets, window); ``status`` 'ok', 'not measured', 'not determined' or
+    'running', ``why`` the reason for a status other than 'ok'. ``k_n``: the stiffness of a rung."""
+    value: float = NAN
+    err: float = NAN
+    n: int = 0
+    count: str = ""
+    where: str = ""
+    status: str = "ok"
+    why: str = ""
+    k_n: float = NAN
+
+    @property
+    def ok(self):
+        return self.status == "ok" and isinstance(self.value, (int, float)) and math.isfinite(self.value)
+
+
+def missing(where, why="", status="not measured"):
+    """A ``Measure`` without a number: ``status`` and why."""
+    return Measure(where=where, status=status, why=why)
+
+
+def _runs(n):
+    return f"{n} run{'s' if n != 1 else ''}"
+
+
+def finite(x):
+    """Whether ``x`` is a finite number (not a bool, None or a string)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+# ---------------------------------------------------------------- sources
+
+@dataclass
+class S:
+    """A set's mean ± standard error over its runs (seeds), by set id; ``label`` names it in the table."""
+    set: str
+    q: str = "z"
+    label: str = ""
+
+    def resolve(self, ctx):
+        s = ctx.sets.get(self.set)
+        where = self.label or self.set
+        if s is None:
+            return missing(where, f"set {self.set} not collected")
+        m, e, n = s.stat(self.q)
+        if not n:
+            return missing(where, f"no {self.q} in set {self.set}")
+        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), f"{where}" if self.label else self.set,
+                       k_n=s.p("k_n"))
+
+
+@dataclass
+class Find:
+    """The poured set (no setting away from its default but those named in ``extra``) with the parameters
+    ``sel`` (short names: mu, epsilon, k_n, N, phi_i, K0, ...); picks up a set that joins later."""
+    q: str
+    sel: dict
+    extra: dict = field(default_factory=dict)
+    label: str = ""
+
+    def resolve(self, ctx):
+        for s in ctx.set_list:
+            if ctx.matches(s, self.sel, self.extra):
+                return S(s.id, self.q, self.label and f"{self.label} ({s.id})").resolve(ctx)
+        return missing(self.label or _sel_text(self.sel), "no such set collected")
+
+
+def _sel_text(sel):
+    return ", ".join(f"{k} = {fmt_kn(v) if k == 'k_n' else v}" for k, v in sel.items())
+
+
+@dataclass
+class Window:
+    """A set's value on a fixed depth window below the surface (``depth.csv``), its error the seed scatter
+    pooled over the sets of one N and mu (the jackknife over lateral columns where that is absent)."""
+    set: str
+    window: str
+    q: str = "z"
+
+    def resolve(self, ctx):
+        where = f"{self.set}, {self.window} d"
+        r = ctx.windows.get((self.set, self.window, self.q))
+        if r is None or not finite(r["mean"]):
+            return missing(where, "no depth window")
+        err = r["pooled_sem"] if finite(r["pooled_sem"]) else r["jackknife"]
+        return Measure(r["mean"], err, r["n_seeds"], _runs(r["n_seeds"]), where)
+
+
+@dataclass
+class Diff:
+    """``a`` minus ``b`` (two sources), errors in quadrature; two sets of a one-setting contrast
+    (``fits.json`` contrasts) take its pooled seed error instead, so one seed has an error too."""
+    a: object
+    b: object
+    label: str = ""
+
+    def resolve(self, ctx):
+        ma, mb = self.a.resolve(ctx), self.b.resolve(ctx)
+        where = self.label or f"{ma.where} − {mb.where}"
+        if not (ma.ok and mb.ok):
+            bad = ma if not ma.ok else mb
+            return missing(where, bad.why, bad.status)
+        ea, eb = ma.err, mb.err
+        # a side of one run has no error of its own: it takes the other side's seed scatter (one run's
+        # standard deviation), as the pooled contrasts do
+        if not finite(ea) and ma.n == 1 and finite(eb) and mb.n >= 2:
+            ea = eb * math.sqrt(mb.n)
+        if not finite(eb) and mb.n == 1 and finite(ea) and ma.n >= 2:
+            eb = ea * math.sqrt(ma.n)
+        err = V.combined(ea, eb) if finite(ea) and finite(eb) else NAN
+        if isinstance(self.a, S) and isinstance(self.b, S):
+            c = ctx.contrast(self.a.set, self.b.set, self.a.q)
+            if c is not None and finite(c["err"]):
+                err = c["err"]
+        return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs", where, k_n=ma.k_n)
+
+
+@dataclass
+class Fit:
+    """A parameter of a ``fits.json`` fit: the first entry of ``kind`` ('eq7', 'overlap', 'eq9', 'ladder')
+    whose sets include ``set`` (or, for 'ladder', of friction ``mu``); ``fixed`` reads its fixed-exponent
+    fit. A fit not made, or one that cannot tell its parameters apart, is 'not determined'."""
+    kind: str
+    key: str
+    set: str = ""
+    mu: float = None
+    fixed: bool = False
+
+    def resolve(self, ctx):
+        e = ctx.fit(self.kind, self.set, self.mu)
+        if e is None and self.kind == "ladder" and self.mu is not None and ctx.ladder_pending(self.mu):
+            return missing(f"ladder mu = {self.mu:g}", "no rung converged yet", "running")
+        return fit_measure(e, self.key, self.fixed, ctx.n_runs_of, self.kind)
+
+
+def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit"):
+    """A ``Measure`` of parameter ``key`` of fit entry ``e`` (None: not measured)."""
+    if e is None:
+        return missing(kind, "no such fit")
+    sets = e.get("sets") or []
+    where = f"{kind} [{' '.join(sets)}]"
+    n = e.get("n_runs") or (sum(n_runs_of(s) for s in sets) if n_runs_of else 0)
+    if kind == "ladder" and e.get("status") == "running":
+        return missing(where, e.get("reason", ""), "running")
+    f = (e.get("fixed") or {}) if fixed else e
+    if fixed and "z_inf" not in f:
+        return missing(where, f.get("reason") or e.get("reason") or "not fitted", "not determined")
+    if f.get("status", "fitted") != "fitted" or (not fixed and e.get("determined") is False):
+        return missing(where, e.get("reason", e.get("status", "")), "not determined")
+    v, err = f.get(key), f.get(f"{key}_err")
+    if not finite(v):
+        return missing(where, f"no {key}", "not determined")
+    return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}", where)
+
+
+@dataclass
+class Rung:
+    """A rung of the paper-size stiffening ladders of friction ``mu`` (``fits.json`` 'ladder'): the one
+    at ``k_n``, or the stiffest converged ('top'). 'running' while its directory exists without a
+    converged run, 'not measured' when there is none."""
+    mu: float
+    q: str = "z"
+    k_n: object = "top"
+
+    def resolve(self, ctx):
+        e = ctx.fit("ladder", "", self.mu)
+        want = "top rung" if self.k_n == "top" else f"rung {fmt_kn(self.k_n)}"
+        where = f"ladder mu = {self.mu:g}, {want}"
+        rungs = (e or {}).get("rungs") or []
+        if self.k_n != "top":
+            rungs = [r for r in rungs if r["k_n"] == self.k_n]
+        if not rungs:
+            if self.k_n == "top":
+                pending = ctx.ladder_pending(self.mu)
+            else:
+                pending = ctx.ladder_pending(self.mu, self.k_n)
+            have = ", ".join(ctx.ladder_dirs(self.mu)) or "none"
+            return missing(where, f"no converged rung; ladder directories: {have}", "running" if pending else
+                            "not measured")
+        r = max(rungs, key=lambda r: r["k_n"])
+        v, err, n = r.get(self.q, NAN), r.get(f"{self.q}_sem", NAN), r["n_runs"]
+        if not finite(v):
+            return missing(where, f"no {self.q} on the rung")
+        return Measure(v, err if finite(err) else NAN, n, _runs(n) + ("" if n > 1 else ", no error"),
+                       f"{where} ({fmt_kn(r['k_n'])}, {r['set']})", k_n=r["k_n"])
+
+
+@dataclass
+class PerRun:
+    """A quantity computed from each run's summary by ``fn`` (summary -> number), mean ± standard error
+    over the runs of a set."""
+    set: str
+    fn: object
+    label: str = ""
+
+    def resolve(self, ctx):
+        s = ctx.sets.get(self.set)
+        if s is None:
+            return missing(self.set, f"set {self.set} not collected")
+        m, e, n = mean_sem([self.fn(r.s) for r in s.runs])
+        if not n:
+            return missing(self.set, "not in its summaries")
+        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), self.set, k_n=s.p("k_n"))
+
+
+@dataclass
+class Ext:
+    """A set of another collect's ``sets.csv`` (``results``: its directory, relative to this collect's
+    output), e.g. the development sweeps at N = 2000."""
+    results: str
+    set: str
+    q: str = "z"
+    label: str = ""
+
+    def resolve(self, ctx):
+        row = ctx.ext_sets(self.results).get(self.set)
+        where = f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.set}"
+        if row is None:
+            return missing(where, f"{self.results}: no set {self.set}")
+        m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), int(_f(row.get("n_seeds")) or 0)
+        if not finite(m):
+            return missing(where, f"no {self.q}")
+        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), where, k_n=_f(row.get("k_n")))
+
+
+@dataclass
+class ExtFit:
+    """A parameter of a fit in another collect's ``fits.json`` (as ``Fit``)."""
+    results: str
+    kind: str
+    key: str
+    set: str
+    fixed: bool = False
+    label: str = ""
+
+    def resolve(self, ctx):
+        fits_ = ctx.ext_fits(self.results)
+        e = next((x for x in fits_.get(self.kind, []) if self.set in (x.get("sets") or [])), None)
+        sets = ctx.ext_sets(self.results)
+        m = fit_measure(e, self.key, self.fixed, lambda s: int(_f((sets.get(s) or {}).get("n_seeds")) or 0),
+                        f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}")
+        return m
+
+
+@dataclass
+class ExtTest:
+    """The p value of a test in another collect's ``fits.json`` (the F_t/F_n collapse, 'ratio'): the
+    entry whose sets include ``set``, quantity ``q``."""
+    results: str
+    kind: str
+    set: str
+    q: str
+    label: str = ""
+
+    def resolve(self, ctx):
+        e = next((x for x in ctx.ext_fits(self.results).get(self.kind, []) if self.set in (x.get("sets") or [])),
+                 None)
+        where = f"{self.label} [{' '.join((e or {}).get('sets') or [])}]"
+        t = ((e or {}).get("quantities") or {}).get(self.q) or {}
+        if not finite(t.get("p")):
+            return missing(where, "no test")
+        n = sum((e or {}).get("n_seeds") or [])
+        return Measure(t["p"], NAN, n, _runs(n), where)
+
+
+@dataclass
+class OneMinus:
+    """1 minus a source (eq. 8: 1 - alpha), its error kept."""
+    src: object
+
+    def resolve(self, ctx):
+        m = self.src.resolve(ctx)
+        if m.ok:
+            m.value, m.where = 1.0 - m.value, f"1 − {m.where}"
+        return m
+
+
+@dataclass
+class AlphaWindow:
+    """A set's eq. 6 exponent on one fixed window of xi (``fits.json`` 'alpha', seeds pooled): the one
+    starting at ``lo``; its error the bootstrap over seeds where there is one, else the Fisher error."""
+    set: str
+    lo: float
+
+    def resolve(self, ctx):
+        e = next((x for x in ctx.fits.get("alpha", []) if x.get("set") == self.set), None)
+        w = next((w for w in (e or {}).get("windows", []) if w.get("xi_lo") == self.lo), None)
+        where = f"{self.set}, ξ from {self.lo:g}" + (f" to {w['xi_hi']:g}" if w else "")
+        if w is None or not finite(w.get("alpha")):
+            return missing(where, "no such window")
+        err = w["boot_err"] if finite(w.get("boot_err")) else w.get("alpha_err", NAN)
+        n = e["n_runs"]
+        return Measure(w["alpha"], err, n, _runs(n), where)
+
+
+@dataclass
+class Eq9Deviation:
+    """The largest |phi_f| difference between the eq. 9 fit of another collect (the family holding ``set``)
+    and the paper's eq. 9, over the fitted phi_i (no error: a fit's curve, not a sample)."""
+    results: str
+    set: str
+
+    def resolve(self, ctx):
+        import numpy as np
+        from ..analysis import fits as F
+        from . import paper
+        e = next((x for x in ctx.ext_fits(self.results).get("eq9", []) if self.set in (x.get("sets") or [])), None)
+        if e is None or e.get("status") != "fitted":
+            return missing("eq. 9 curve", "no fit", "not determined" if e else "not measured")
+        x = np.array(e["phi_i"], float)
+        d = F.eq9(x, e["A"], e["B"], e["C"]) - paper.eq9_paper(x)
+        i = int(np.argmax(np.abs(d)))
+        n = sum(e.get("n_seeds") or [])
+        return Measure(float(d[i]), NAN, n, f"{len(x)} sets, {_runs(n)}",
+                       f"eq. 9 fit − paper, largest at φ_i = {x[i]:g} (φ_i {x.min():g}–{x.max():g})")
+
+
+def _f(v):
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return NAN
+
+
+# ---------------------------------------------------------------- what the sources read
+
+class Context:
+    """What the sources read: this collect's sets (by id and in order), its fits and depth windows, the
+    output directory (another collect's tables lie relative to it) and the ladder directories."""
+
+    def __init__(self, sets, fit_res, windows=(), out=".", inputs=()):
+        self.set_list = list(sets)
+        self.sets = {s.id: s for s in sets}
+        self.fits = fit_res or {}
+        self.windows = {(r["set"], r["window"], r["quantity"]): r for r in windows}
+        self.out = out
+        self.inputs = list(inputs)
+        self._ext = {}
+
+    def n_runs_of(self, sid):
+        s = self.sets.get(sid)
+        return len(s.runs) if s else 0
+
+    def matches(self, s, sel, extra):
+        from .comparison import _off_columns
+        if s.extra != dict(extra):
+            return False
+        off = _off_columns(s)
+        for k, v in sel.items():
+            if k in ("K0", "gamma_t", "model"):
+                continue
+            if s.p(k) != v:
+                return False
+        want_off = {k: v for k, v in sel.items() if k in ("K0", "model")}
+        if {k: off.get(k) for k in ("K0", "model")} != {k: (f"{want_off[k]:g}" if k == "K0" else want_off[k])
+                                                         if k in want_off else None for k in ("K0", "model")}:
+            return False
+        return ("gamma_t" in off) == bool(sel.get("gamma_t"))
+
+    def fit(self, kind, sid="", mu=None):
+        for e in self.fits.get(kind, []) or []:
+            if sid and sid in (e.get("sets") or []):
+                return e
+            if mu is not None and (e.get("family") or {}).get("mu") == mu:
+                return e
+        return None
+
+    def contrast(self, sid, ref, q):
+        for c in self.fits.get("contrasts", []) or []:
+            if c.get("reference") != ref:
+                continue
+            for r in c.get("rows", []):
+                if r.get("set") == sid and q in r:
+                    return r[q]
+        return None
+
+    def ladder_dirs(self, mu):
+        """The rung directories (``<ladder>/kn<K>``) of the paper-size ladders of friction ``mu``."""
+        out = []
+        for base in self.inputs:
+            d = base if os.path.basename(os.path.normpath(base)) == LADDER_DIR else os.path.join(base, LADDER_DIR)
+            if not os.path.isdir(d):
+                continue
+            for lad in sorted(x for x in os.listdir(d) if x.startswith(f"mu{mu:g}_s")):
+                out += [f"{lad}/{r}" for r in sorted(os.listdir(os.path.join(d, lad))) if r.startswith("kn")]
+        return out
+
+    def ladder_pending(self, mu, k_n=None):
+        """Whether a paper-size ladder of friction ``mu`` has a rung directory (at ``k_n``, or any) under an
+        input's ladder-size/ (converged or not: a converged one is a collected set)."""
+        want = None if k_n is None else f"kn{fmt_kn(k_n)}"
+        return any(want is None or d.endswith("/" + want) for d in self.ladder_dirs(mu))
+
+    def ext_sets(self, results):
+        key = ("sets", results)
+        if key not in self._ext:
+            path = os.path.join(self.out, results, "sets.csv")
+            try:
+                with open(path, newline="") as fh:
+                    self._ext[key] = {r["set"]: r for r in csv.DictReader(fh)}
+            except OSError:
+                self._ext[key] = {}
+        return self._ext[key]
+
+    def ext_fits(self, results):
+        key = ("fits", results)
+        if key not in self._ext:
+            try:
+                with open(os.path.join(self.out, results, "fits.json")) as fh:
+                    self._ext[key] = json.load(fh)
+            except (OSError, ValueError):
+                self._ext[key] = {}
+        return self._ext[key]
