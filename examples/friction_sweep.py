@@ -19,7 +19,8 @@ Cost
     Full size (default): mu = 0, 0.1, 0.2, 0.5, 1 with seeds 1-3 at the development size (2000
     spheres, 10 d x 10 d, k_n = 2e5): 15 rows of 3-8 minutes each on one core (the measured rows of
     analysis/results/dev), some 1.5 core-hours: 40-50 minutes on two cores.
-    ``--tiny``: mu = 0, 0.3, 1, one seed, 150 spheres at k_n = 2e4 with E_stop = 1e-5: some 30-40 s.
+    ``--tiny``: mu = 0, 0.3, 1, one seed, 150 spheres at k_n = 2e4 with E_stop = 1e-5: 30-60 s
+    (mostly the start of six processes: each row's run and its analysis).
 
 Run
     python examples/friction_sweep.py [--tiny] [--jobs J] [--out runs/examples/sweep]
@@ -85,8 +86,8 @@ def main():
 
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(9, 3.5))
     ax.errorbar(mu, z, yerr=z_err, fmt="o-", capsize=3)
-    ax.set(xscale="symlog", xlabel="mu", ylabel="z", title="coordination number (Fig. 2)")
-    ax.set_xscale("symlog", linthresh=0.1)
+    ax.set_xscale("symlog", linthresh=0.1)          # linear near mu = 0, logarithmic from 0.1
+    ax.set(xlabel="mu", ylabel="z", title="coordination number (Fig. 2)")
     bx.plot(mu, phi, "s-")
     bx.set_xscale("symlog", linthresh=0.1)
     bx.set(xlabel="mu", ylabel="phi", title="packing fraction (Fig. 3)")

@@ -18,7 +18,7 @@ Cost
     Default: ``tests/data/lammps_sphere.data`` (369 spheres written by LAMMPS: the bottom of
     ``make run``'s pile, 106 of them bed), run until the stop rule holds, at most 2 million steps
     (some 40 us a step: at most 1.5 minutes on one core).
-    ``--tiny``: the same file, 2000 steps: about 10 s.
+    ``--tiny``: the same file, 2000 steps: 10-20 s (five exports, a process each).
 
 Run
     python examples/lammps_to_ovito.py [--tiny] [--data FILE --fixed-types 2] [--out runs/examples/lammps]

@@ -24,7 +24,7 @@ What it prints
 Cost
     Full size: a paper-size pour (20 000 spheres in 20 d x 20 d, mu = 0.5) to rest: some 2.4
     core-hours (README.md), submitted as 30-minute jobs on 8 tasks: a few jobs.
-    ``--tiny``: 150 spheres, 100 000 steps in segments of 1 s, then straight: some 15 s.
+    ``--tiny``: 150 spheres, 100 000 steps in segments of 1 s, then straight: 15-25 s.
 
 Run
     python examples/slurm_chain.py --tiny [--out runs/examples/chain]

@@ -20,7 +20,7 @@
 #
 # It is a jupytext "percent" script: `python examples/tutorial.py` runs it as it is (figures go to
 # files), and `jupytext --to notebook examples/tutorial.py` makes the notebook (figures inline).
-# `make test` runs it whole (tests/test_examples.py). About a minute on one core.
+# `make test` runs it whole (tests/test_examples.py): half a minute to a minute on one core.
 #
 # Units are reduced: sphere diameter d = 1, mass m = 1, gravity g = 1, time τ = sqrt(d/g).
 

@@ -155,3 +155,10 @@ def test_the_readme_stays_short_and_links_the_examples():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 150
     assert "examples/README.md" in text
+
+
+def test_the_examples_pass_lint():
+    """``make lint`` covers src, tests, mpi_tests and tools; the examples and the docs' conf.py here."""
+    ruff = Path(sys.executable).parent / "ruff"
+    p = subprocess.run([str(ruff), "check", "examples", "docs/conf.py"], cwd=ROOT, capture_output=True, text=True)
+    assert p.returncode == 0, p.stdout + p.stderr
