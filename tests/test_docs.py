@@ -5,6 +5,7 @@ import inspect
 import re
 
 import mpdem
+from mpdem import api
 from helpers import ROOT
 
 
@@ -13,7 +14,7 @@ def test_the_reference_documents_every_public_name():
     function's docstring a Parameters section naming each of its parameters."""
     text = (ROOT / "docs" / "reference.md").read_text()
     documented = set(re.findall(r"^\.\. auto(?:function|class):: mpdem\.(\w+)$", text, re.M))
-    assert documented == set(mpdem.__all__) - {"__version__"}
+    assert documented == set(mpdem.__all__) - {"__version__"} == set(api.__all__)
     for name in documented:
         obj = getattr(mpdem, name)
         if inspect.isfunction(obj):

@@ -21,6 +21,10 @@ from dataclasses import dataclass, field
 
 from .errors import EXIT_NOT_CONVERGED, EXIT_OK, EXIT_RESTART, AgreedError, MpdemError
 
+# the public API (``mpdem.API``; docs/reference.md documents each); ``lock``, ``check_out`` are the CLI's
+__all__ = ["load_config", "run", "restart", "stiffen_config", "read_state", "analyze", "collect", "RunRecord",
+           "StateArrays"]
+
 # a run's status -> the exit status of ``python -m mpdem``
 EXIT_OF = {"converged": EXIT_OK, "max_steps": EXIT_NOT_CONVERGED, "interrupted": EXIT_RESTART}
 
