@@ -18,9 +18,10 @@ What it prints
 
 Cost
     Full size (default): the built-in example (1500 spheres in 10 d x 10 d, mu = 0.5) to rest, some
-    435 000 steps: about 2.5 minutes on one CPU core; on an H100 the kernels' compilation (a minute
-    or so, once per machine: numba caches them) and some 45 us a step (docs/performance.md), under
-    half a minute.
+    435 000 steps: about 2.5 minutes on one CPU core (README.md: 73 s on two ranks); on an H100 the
+    kernels' compilation (10-30 s in each process, docs/gpu.md) and some 45 us a step
+    (docs/performance.md): under a minute (an estimate from those figures: the example itself has not
+    been timed on a GPU yet).
     ``--tiny --simulator``: 30 spheres, 40 steps: about 15 s. ``--tiny`` on a GPU: seconds after the
     compilation.
 
