@@ -32,3 +32,18 @@ def test_every_page_of_docs_is_in_the_site():
     listed = set(re.findall(r"^([a-z][\w-]*)$", index, re.M))
     pages = {p.stem for p in (ROOT / "docs").glob("*.md")} - {"index"}
     assert pages <= listed, pages - listed
+
+
+def test_links_between_the_markdown_files_resolve():
+    """Every relative link of the README, ARCHITECTURE, jobs/, examples/ and docs/ pages names a file
+    that exists (the site's build does not check links out of docs/: docs/reference.md)."""
+    pages = [ROOT / "README.md", ROOT / "ARCHITECTURE.md", ROOT / "jobs" / "README.md",
+             ROOT / "examples" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    broken = []
+    for page in pages:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)      # code blocks hold no links
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            path = target.split("#")[0]
+            if path and not re.match(r"[a-z]+:", target) and not (page.parent / path).exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target}")
+    assert not broken, broken
