@@ -20,7 +20,8 @@ Cost
 
 Run
     python examples/pour_and_analyze.py [--tiny] [--mu 0.5] [--out runs/examples/pour]
-    mpiexec -n 2 python examples/pour_and_analyze.py     # the same pile (same digest) on two ranks
+    mpiexec -n 2 python examples/pour_and_analyze.py     # the same pile (same digest) on two ranks;
+                                                         # rank 0 alone analyses and plots it
 """
 import argparse
 import os
@@ -45,13 +46,20 @@ def main():
     ap.add_argument("--out", default="runs/examples/pour", help="output directory")
     args = ap.parse_args()
 
+    # under mpiexec every rank runs this script: the run is collective, the analysis rank 0's
+    from mpi4py import MPI
+    rank = MPI.COMM_WORLD.rank
+
     # 1. the config: the built-in example's physics with this size's keys over it
     cfg = mpdem.load_config(**(TINY if args.tiny else FULL), **{"contact.mu": args.mu})
-    print(f"pouring {cfg.pour.N} spheres in {cfg.box.L_x:g} d x {cfg.box.L_y:g} d, mu = {cfg.contact.mu:g}, "
-          f"k_n = {cfg.contact.k_n:g}")
+    if rank == 0:
+        print(f"pouring {cfg.pour.N} spheres in {cfg.box.L_x:g} d x {cfg.box.L_y:g} d, mu = {cfg.contact.mu:g}, "
+              f"k_n = {cfg.contact.k_n:g}")
 
     # 2. the run: bed, pour, settle; everything it writes goes into OUT/pile
     r = mpdem.run(cfg, out=os.path.join(args.out, "pile"), force=True)
+    if rank != 0:
+        return
     print(f"run: {r.status} after {r.steps} steps, digest {r.digest[:16]}")
     if r.status != "converged":
         print("  (not at rest yet: `mpdem.restart(r.out, **{'run.max_steps': ...})` goes on)")
