@@ -13,7 +13,7 @@ What it prints
     phi = 0.594 arrested against 4.90, 0.61 poured (mu = 0.5, k_n = 2e5).
 
 Cost
-    Full size (default): 8000 spheres in 20 d x 20 d (a layer some 20 d thick), 24 degrees for
+    Full size (default): 8000 spheres in 20 d x 10 d (a layer some 35 d thick), 24 degrees for
     400 tau, mu = 0.5, k_n = 2e5: the campaign's row analysis/results/paper/runs/flow, 6.2 million
     steps, 4.4 hours on one core (z 4.62, phi 0.592); and the pour to compare, some 40 minutes.
     ``--tiny``: 150 spheres in 4 d x 4 d at k_n = 2e4, 26 degrees for 20 tau (a thin layer needs a
@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt           # noqa: E402
 
 import mpdem                              # noqa: E402
 
-FULL = dict(pile={"pour.N": 8000, "box.L_x": 20.0, "box.L_y": 20.0, "contact.mu": 0.5,
+FULL = dict(pile={"pour.N": 8000, "box.L_x": 20.0, "box.L_y": 10.0, "contact.mu": 0.5,
                   "run.max_steps": 20_000_000},
             flow={"flow.incline": 24.0, "flow.time": 400.0})
 TINY = dict(pile={"pour.N": 150, "box.L_x": 4.0, "box.L_y": 4.0, "pour.phi_i": 0.3, "contact.k_n": 2e4,
