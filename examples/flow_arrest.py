@@ -15,7 +15,8 @@ What it prints
 Cost
     Full size (default): 8000 spheres in 20 d x 10 d (a layer some 35 d thick), 24 degrees for
     400 tau, mu = 0.5, k_n = 2e5: the campaign's row analysis/results/paper/runs/flow, 6.2 million
-    steps, 4.4 hours on one core (z 4.62, phi 0.592); and the pour to compare, some 40 minutes.
+    steps, 4.4 hours on one core (z 4.62, phi 0.592); and the pour to compare, an hour or two more
+    (analysis/results/paper/runs/height poured 5000 spheres in 10 d x 10 d in 44 to 115 minutes).
     ``--tiny``: 150 spheres in 4 d x 4 d at k_n = 2e4, 26 degrees for 20 tau (a thin layer needs a
     steeper slope to flow), E_stop = 1e-5: about 20 s.
 
