@@ -24,16 +24,19 @@ from mpdem.state import State
 
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
-# second takes a thread an entry for the forces, the third chunks of rows a block (``engine.gpu_threads``)
-# with its kernels compiled under a register cap (``engine.gpu_max_registers``); the last three reduce a
-# fused step's values in one tree a phase (``engine.gpu_reductions``); the second and the fourth sum the
-# stop rule's samples on the GPU (``engine.gpu_samples``).
-GRIDS = ([dict(block=2, blocks=2), dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device"),
-          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused"),
-          dict(block=2, blocks=3, reductions="fused", samples="device")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry", reductions="fused", samples="device"),
-               dict(block=64, threads="chunk16", max_registers=64, reductions="fused"),
-               dict(block=256, reductions="fused", samples="device")])
+# first is today's default path; the second takes a thread an entry for the forces, the third chunks of rows
+# a block (``engine.gpu_threads``) with its kernels compiled under a register cap (``engine.gpu_max_registers``);
+# the last three reduce a fused step's values in one tree a phase (``engine.gpu_reductions``); the second and
+# the fourth sum the stop rule's samples on the GPU (``engine.gpu_samples``); the second and the third launch
+# steps compiled for the run's options (``engine.gpu_pinned``), the third and the fourth drift the next step
+# in the forces' phase, the rows in two buffers (``engine.gpu_drift``).
+GRIDS = ([dict(block=2, blocks=2),
+          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True),
+          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True),
+          dict(block=2, blocks=3, reductions="fused", samples="device", drift="fused")] if runtime.SIMULATOR
+         else [dict(block=128), dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True),
+               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True),
+               dict(block=256, reductions="fused", samples="device", drift="fused")])
 
 
 def physics(mu=0.5, model="hooke", **kw):

@@ -21,6 +21,7 @@ Run with a Python that has numba-cuda and the CUDA compiler wheels (``make test-
 makes one, ``.venv-cuda``):  python tools/gpu_compile.py
 """
 import math
+import multiprocessing
 import os
 import re
 import subprocess
@@ -49,7 +50,7 @@ class _Device:
 dispatcher.get_current_device = lambda: _Device()
 
 from mpdem.kernels.gpu import lists, samples, step  # noqa: E402
-from mpdem.kernels.law import MODEL_HERTZ, Law  # noqa: E402
+from mpdem.kernels.law import MODEL_HERTZ, MODEL_HOOKE, Law  # noqa: E402
 
 
 @cuda.jit
@@ -72,13 +73,23 @@ def cases():
     box = (10.0, 10.0, 5.0, 5.0)
     planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
+    advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,
+               rec, True, 4, nbr, 16, True, x, x, x, True)
     return {
         "step.kick_drift": (step.kick_drift, (n, x, x, x, x, x, fixed, x, 1e-4, *box, True, red)),
         "step.kick": (step.kick, (n, x, x, x, x, fixed, 1e-4)),
         "step.forces": (step.forces, (n, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair, True, x, planes, kinds,
                                       5, *box, law, True, red)),
-        "step.advance": (step.advance, (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds,
-                                        5, *box, law, True, 0.1, 4, rec, True, 4, nbr, 16, True)),
+        "step.advance": (step.advance, advance),
+        "step.advance_one": (step.advance_one, advance),
+        # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
+        # then chunks of 16 rows, the fused reductions and the fused drift (engine.gpu_drift)
+        "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, False,
+                                                                         False, False), advance),
+        "step.advance pinned (row, Hooke, mu > 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, True,
+                                                                         False, False), advance),
+        "step.advance pinned (chunk16, fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(False, 16, True, True, MODEL_HOOKE, True, False, False), advance),
         "step.chunk_forces": (step.chunk_forces, (n, 16, nbr, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair,
                                                   True, x, planes, kinds, 5, *box, law, True, red)),
         "step.entry_forces": (step.entry_forces, (4, nbr, x, x, x, fixed, nbr, hist, stamp, pair, True, 5, *box, law,
@@ -240,29 +251,43 @@ def main():
         print(f"gpu_compile: the SASS control (mul.f64 then add.f64) shows {plain} DFMA, its explicit twin {twin}: "
               f"the SASS check cannot see a contraction")
         return 1
-    bad = 0
     table = cases()
-    for name, (kernel, args) in table.items():
-        t = time.perf_counter()
-        try:
-            ok, line, _ = check(name, kernel, args, tools)
-        except Exception as e:   # the compiler's own message names the line and the types
-            print(f"gpu_compile: {name}: does not compile: {type(e).__name__}: {e}")
-            bad += 1
-            continue
-        print(f"gpu_compile: {name}: {line}, {time.perf_counter() - t:.1f} s")
+    # the kernels in parallel processes (forked after the imports; compiling needs no GPU), the largest
+    # first so that the processes end together; the report in the table's order
+    names = sorted(table, key=lambda n: not n.startswith("step.advance"))
+    jobs = min(len(names), os.cpu_count() or 1)
+    with multiprocessing.get_context("fork").Pool(jobs) as pool:
+        done = dict(zip(names, pool.map(_report, [(n, tools) for n in names], chunksize=1)))
+    bad = 0
+    for name in table:
+        ok, lines = done[name]
+        print("\n".join(lines))
         bad += not ok
-    kernel, args = table["step.advance"]
-    ptx = ptx_of(kernel, args)
-    for cap in CAPS:
-        res = sass(ptx, tools, cap)[1]
-        print(f"gpu_compile: step.advance under engine.gpu_max_registers = {cap}: {res['registers']} registers, "
-              f"{res['spill_stores']} B spill stores, {res['spill_loads']} B spill loads, {res['stack']} B stack, "
-              f"at most {resident_blocks(res)} blocks of 128 a multiprocessor")
     print(f"gpu_compile: numba-cuda {cuda_version()}, sm_{CC[0]}{CC[1]}: {len(table) - bad} of {len(table)} "
           f"kernels compile with every float64 operation rounded on its own, in the PTX and in ptxas's SASS "
           f"(the controls fuse {ptx_fmas} in the PTX and {plain} in the SASS, their twins {twin})")
     return 1 if bad else 0
+
+
+def _report(job):
+    """(ok, the report's lines) of one kernel of ``cases()`` (``job``: its name and ``toolkit()``); for the
+    fused step also its registers and spills under each of CAPS."""
+    name, tools = job
+    kernel, args = cases()[name]
+    t = time.perf_counter()
+    try:
+        ok, line, _ = check(name, kernel, args, tools)
+    except Exception as e:   # the compiler's own message names the line and the types
+        return False, [f"gpu_compile: {name}: does not compile: {type(e).__name__}: {e}"]
+    lines = [f"gpu_compile: {name}: {line}, {time.perf_counter() - t:.1f} s"]
+    if name == "step.advance":
+        ptx = ptx_of(kernel, args)
+        for cap in CAPS:
+            res = sass(ptx, tools, cap)[1]
+            lines.append(f"gpu_compile: step.advance under engine.gpu_max_registers = {cap}: {res['registers']} "
+                         f"registers, {res['spill_stores']} B spill stores, {res['spill_loads']} B spill loads, "
+                         f"{res['stack']} B stack, at most {resident_blocks(res)} blocks of 128 a multiprocessor")
+    return ok, lines
 
 
 def cuda_version():

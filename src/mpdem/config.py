@@ -174,6 +174,16 @@ SCHEMA = (
        "where the GPU engine sums the stop rule's samples (kinetic energy, force ratio): 'host' (the rows and the "
        "entries' forces copied to the host) or 'device' (the same exact fixed-point sums by integer atomics on the "
        "GPU, a few kB copied); no effect on results", str, ("host", "device"), restart=True, physics=False),
+    _k("engine", "gpu_drift", "apart",
+       "where the GPU engine's launches of many steps do the next step's half-kicks and drift: 'apart' (a phase of "
+       "its own: two grid barriers a step) or 'fused' (by the thread that has just summed the particle's forces, the "
+       "rows in two buffers: one grid barrier a step fewer); no effect on results", str, ("apart", "fused"),
+       restart=True, physics=False),
+    _k("engine", "gpu_pinned", False,
+       "compile the GPU engine's launches of many steps for the run's own options (the contact model, friction or "
+       "none, limit_damping, rescale_history, the other engine.gpu_* choices) as constants, so that the compiler "
+       "drops the code the run never takes; false = one kernel for every option; no effect on results", bool,
+       restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",

@@ -42,6 +42,8 @@ THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
 REDUCTIONS = ("tree", "fused")
 # engine.gpu_samples
 SAMPLES = ("host", "device")
+# engine.gpu_drift
+DRIFTS = ("apart", "fused")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -112,6 +114,14 @@ class Engine(EngineBase):
         Where ``kinetic`` and ``force_ratio`` sum (``engine.gpu_samples``): on the host from the rows
         and the entries' forces copied there, or on the GPU (``kernels.gpu.samples``: the same exact
         sums, a few kB copied); no effect on results.
+    drift : {"apart", "fused"}
+        Where ``run_quiet``'s launches do the next step's half-kicks and drift (``engine.gpu_drift``): a
+        phase of their own, or by the thread that has just summed the row's forces, the rows in two
+        buffers (one grid barrier a step fewer; ``kernels.gpu.step.advance``); no effect on results.
+    pinned : bool
+        ``run_quiet``'s launches compiled for this engine's options and its law's model, friction,
+        ``limit_damping`` and ``rescale_history`` as constants (``engine.gpu_pinned``,
+        ``kernels.gpu.step.pinned_advance``); no effect on results.
 
     Attributes
     ----------
@@ -122,7 +132,7 @@ class Engine(EngineBase):
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
-                 reductions="tree", samples="host"):
+                 reductions="tree", samples="host", drift="apart", pinned=False):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -137,6 +147,12 @@ class Engine(EngineBase):
             raise ValueError(f"samples = {samples!r}: accepted {', '.join(map(repr, SAMPLES))}")
         # the stop rule's sums on the GPU (``kernels.gpu.samples``) or on the host
         self.ks = runtime_samples() if samples == "device" else None
+        if drift not in DRIFTS:
+            raise ValueError(f"drift = {drift!r}: accepted {', '.join(map(repr, DRIFTS))}")
+        # the next step's drift by the thread that summed the row's forces, the rows in two buffers
+        self.one_barrier = drift == "fused"
+        # ``advance`` compiled for the run's options (``kernels.gpu.step.pinned_advance``)
+        self.pinned = bool(pinned)
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -200,16 +216,46 @@ class Engine(EngineBase):
         The first launch specializes the kernel for its argument types (which the engine keeps
         the same: arrays are reallocated with their dtype and layout), so later launches skip
         numba's typing of some twenty arguments (``Dispatcher.specialize``)."""
+        self._run(self._launcher(name, args), grid or self._grid(args[0]), args)
+
+    def _launcher(self, name, args):
+        """Kernel ``name`` (``_kernel``) under the register cap, specialized for ``args``'s types."""
         kernel = self._launchers.get(name)
         if kernel is None:
-            kernel = getattr(self.k, name)
+            kernel = self._kernel(name)
             if self.max_registers:
                 kernel = self._capped(kernel, self.max_registers)
             specialize = getattr(kernel, "specialize", None)   # not in numba's simulator
             if specialize is not None:
                 kernel = specialize(*args)
             self._launchers[name] = kernel
-        self._run(kernel, grid or self._grid(args[0]), args)
+        return kernel
+
+    def _kernel(self, name):
+        """The kernel ``name`` of ``kernels.gpu.step``; ``("advance", key)``: ``pinned_advance(*key)``."""
+        if isinstance(name, tuple):
+            return self.k.pinned_advance(*name[1])
+        return getattr(self.k, name)
+
+    def _advance_name(self):
+        """The launcher name of ``run_quiet``'s kernel: "advance", or with ``pinned`` the key of the one
+        compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
+        if not self.pinned:
+            return "advance_one" if self.one_barrier else "advance"
+        law = self.law
+        return ("advance", (self.by_entry, self.chunk_rows, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
+                            bool(law.limit_damping), bool(law.rescale_history)))
+
+    def _second_rows(self):
+        """x, v and omega's second buffer on the GPU (``drift = "fused"``; shaped as x), else x, v, omega
+        themselves (not written)."""
+        d = self._dev
+        if not self.one_barrier:
+            return d["x"], d["v"], d["omega"]
+        if d.get("xb") is None or d["xb"].shape != d["x"].shape:
+            for name in ("xb", "vb", "wb"):
+                d[name] = self.cuda.device_array(d["x"].shape)
+        return d["xb"], d["vb"], d["wb"]
 
     def _rows_of(self):
         """The row fields the GPU steps (names of ``State`` attributes)."""
@@ -533,8 +579,10 @@ class Engine(EngineBase):
             args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
-                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused)
-            self._launch("advance", *args, grid=self._cooperative_grid(args))
+                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
+                    self.one_barrier)
+            name = self._advance_name()
+            self._launch(name, *args, grid=self._cooperative_grid(name, args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
             s.slots_current = False
@@ -561,7 +609,7 @@ class Engine(EngineBase):
                 infos.append(self._finish_step(rec[whole], self.last_overlap, flags))
         return infos
 
-    def _cooperative_grid(self, args):
+    def _cooperative_grid(self, name, args):
         """The grid of ``advance``: one row (or entry, ``by_entry``) a thread if every block fits on the
         GPU at once (a cooperative launch needs that), else as many blocks as fit, each thread taking
         several."""
@@ -569,8 +617,7 @@ class Engine(EngineBase):
             if self._simulator:     # numba's simulator runs a cooperative grid of one block only
                 self._coop_blocks = 1
             else:
-                kernel = self._capped(self.k.advance, self.max_registers) if self.max_registers else self.k.advance
-                spec = self._launchers.setdefault("advance", kernel.specialize(*args))
+                spec = self._launcher(name, args)
                 try:
                     overload = next(iter(spec.overloads.values()))
                     self._coop_blocks = max(int(overload.max_cooperative_grid_blocks(self.block)), 1)

@@ -29,7 +29,7 @@ from .reduce import BLOCK_MAX, ROOM, contact_into, drift_into, max_into, min_int
 from .runtime import cuda, device, device_cuda
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
-from ..law import PLANE_FLOOR, PLANE_ROUGH
+from ..law import PLANE_FLOOR, PLANE_ROUGH, Law
 
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
@@ -50,8 +50,10 @@ def _reset_drift_slots(red):
 
 
 @device
-def _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending):
-    """Row i of ``kick_drift``; returns (d^2 since x_ref [d^2], z [d], 1 if x is not finite else 0)."""
+def _kick_drift_row(i, x, v, omega, xo, vo, wo, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending):
+    """Row i of ``kick_drift`` from x, v, omega into xo, vo, wo (the same arrays in place, or the other
+    buffer of ``advance``'s fused drift); returns (d^2 since x_ref [d^2], z [d], 1 if x is not finite
+    else 0)."""
     h = 0.5 * dt
     for a in range(3):
         fa, ta = kicks(f[i, a], torque[i, a], h)
@@ -62,28 +64,53 @@ def _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pend
             wa = add(wa, ta)
         va = add(va, fa)
         wa = add(wa, ta)
-        v[i, a] = va
-        omega[i, a] = wa
-        x[i, a] = drift(x[i, a], va, dt)
+        vo[i, a] = va
+        wo[i, a] = wa
+        xo[i, a] = drift(x[i, a], va, dt)
     # one correction suffices: nothing moves a box length in one step
-    if x[i, 0] >= L_x:
-        x[i, 0] -= L_x
-    elif x[i, 0] < 0.0:
-        x[i, 0] += L_x
-        if x[i, 0] >= L_x:  # -tiny + L rounds to L
-            x[i, 0] = 0.0
-    if x[i, 1] >= L_y:
-        x[i, 1] -= L_y
-    elif x[i, 1] < 0.0:
-        x[i, 1] += L_y
-        if x[i, 1] >= L_y:
-            x[i, 1] = 0.0
-    z = x[i, 2]
-    if not (math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(z)):
+    if xo[i, 0] >= L_x:
+        xo[i, 0] -= L_x
+    elif xo[i, 0] < 0.0:
+        xo[i, 0] += L_x
+        if xo[i, 0] >= L_x:  # -tiny + L rounds to L
+            xo[i, 0] = 0.0
+    if xo[i, 1] >= L_y:
+        xo[i, 1] -= L_y
+    elif xo[i, 1] < 0.0:
+        xo[i, 1] += L_y
+        if xo[i, 1] >= L_y:
+            xo[i, 1] = 0.0
+    z = xo[i, 2]
+    if not (math.isfinite(xo[i, 0]) and math.isfinite(xo[i, 1]) and math.isfinite(z)):
         return 0.0, z, 1
-    dx = min_image(x[i, 0] - x_ref[i, 0], L_x, hx)
-    dy = min_image(x[i, 1] - x_ref[i, 1], L_y, hy)
+    dx = min_image(xo[i, 0] - x_ref[i, 0], L_x, hx)
+    dy = min_image(xo[i, 1] - x_ref[i, 1], L_y, hy)
     return norm2(dx, dy, z - x_ref[i, 2]), z, 0
+
+
+@device
+def _drift_row(i, x, v, omega, nxt, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending, d2, z_lo, z_hi, bad):
+    """Row i (mobile) kicked and drifted from x, v, omega into ``nxt`` (xo, vo, wo), its values added to
+    this thread's extremes so far; returns the new (d2 [d^2], z_lo, z_hi [d], bad)."""
+    di, z, b = _kick_drift_row(i, x, v, omega, nxt[0], nxt[1], nxt[2], f, torque, x_ref, dt, L_x, L_y, hx, hy,
+                               pending)
+    if b:
+        return d2, z_lo, z_hi, bad + 1
+    return max(d2, di), min(z_lo, z), max(z_hi, z), bad
+
+
+@device_cuda
+def _drift_reduce(red, d2, z_lo, z_hi, bad, room, fused):
+    """This thread's drift extremes and bad rows into ``red``'s slots RED_D2, RED_ZMAX, RED_ZMIN and
+    RED_BAD (every thread of the block calls it); ``fused``: one tree (``reduce.drift_into``)."""
+    if fused:
+        drift_into(red, RED_D2, d2, RED_ZMAX, z_hi, RED_ZMIN, z_lo, room)
+    else:
+        max_into(red, RED_D2, d2, room)
+        max_into(red, RED_ZMAX, z_hi, room)
+        min_into(red, RED_ZMIN, z_lo, room)
+    if bad:
+        cuda.atomic.add(red, RED_BAD, np.float64(bad))
 
 
 @cuda.jit
@@ -105,31 +132,18 @@ def kick_drift(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy
 
 @device_cuda
 def _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, dt, L_x, L_y, hx, hy, pending, red, room, fused):
-    """This thread's rows of ``kick_drift`` (i, i + threads, ...), their reductions into ``red``'s
-    slots RED_D2, RED_ZMIN, RED_ZMAX and RED_BAD (every thread of the block calls it); ``fused``: the
-    three extremes in one tree (``reduce.drift_into``)."""
+    """This thread's rows of ``kick_drift`` (i, i + threads, ...) in place, their reductions into
+    ``red``'s slots RED_D2, RED_ZMIN, RED_ZMAX and RED_BAD (every thread of the block calls it);
+    ``fused``: the three extremes in one tree (``reduce.drift_into``)."""
     d2 = 0.0
     z_lo = math.inf
     z_hi = -math.inf
     bad = 0
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
-        if fixed[i]:
-            continue
-        di, z, b = _kick_drift_row(i, x, v, omega, f, torque, x_ref, dt, L_x, L_y, hx, hy, pending)
-        if b:
-            bad += 1
-        else:
-            d2 = max(d2, di)
-            z_lo = min(z_lo, z)
-            z_hi = max(z_hi, z)
-    if fused:
-        drift_into(red, RED_D2, d2, RED_ZMAX, z_hi, RED_ZMIN, z_lo, room)
-    else:
-        max_into(red, RED_D2, d2, room)
-        max_into(red, RED_ZMAX, z_hi, room)
-        min_into(red, RED_ZMIN, z_lo, room)
-    if bad:
-        cuda.atomic.add(red, RED_BAD, np.float64(bad))
+        if not fixed[i]:
+            d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, (x, v, omega), f, torque, x_ref, dt, L_x, L_y, hx, hy,
+                                             pending, d2, z_lo, z_hi, bad)
+    _drift_reduce(red, d2, z_lo, z_hi, bad, room, fused)
 
 
 @cuda.jit
@@ -343,17 +357,22 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
     _reset_drift_slots(red)
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
                  np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, red, room, False)
+                 increment, red, room, False, False, (x, v, omega), x, red)
 
 
 @device_cuda
 def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
-                 now, before, L_x, L_y, hx, hy, law, increment, red, room, fused):
+                 now, before, L_x, L_y, hx, hy, law, increment, red, room, fused, then, nxt, x_ref, drec):
     """This thread's rows of ``forces`` (i, i + threads, ...) with the stamps ``now`` and ``before``,
     their reductions into ``red``'s slots RED_OVERLAP and RED_CONTACTS (every thread of the block
-    calls it)."""
+    calls it). With ``then`` each row is then kicked and drifted into ``nxt`` (the next step's drift,
+    ``advance``'s fused drift: x_ref the lists' positions, the reductions into ``drec``)."""
     deepest = 0.0
     contacts = 0
+    d2 = 0.0
+    z_lo = math.inf
+    z_hi = -math.inf
+    bad = 0
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
         if fixed[i]:
             for a in range(3):
@@ -364,6 +383,18 @@ def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, 
                           kinds, now, before, L_x, L_y, hx, hy, law, increment)
         deepest = max(deepest, d)
         contacts += c
+        if then:
+            d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, nxt, f, torque, x_ref, law.dt, L_x, L_y, hx, hy, True,
+                                             d2, z_lo, z_hi, bad)
+    _contact_reduce(red, deepest, contacts, room, fused)
+    if then:
+        _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
+
+
+@device_cuda
+def _contact_reduce(red, deepest, contacts, room, fused):
+    """This thread's largest overlap and contact count into ``red``'s slots RED_OVERLAP and RED_CONTACTS
+    (every thread of the block calls it); ``fused``: one tree (``reduce.contact_into``)."""
     if fused:
         contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
     else:
@@ -400,11 +431,7 @@ def _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
                           law, increment)
         contacts += c
         deepest = max(deepest, delta)
-    if fused:
-        contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
-    else:
-        max_into(red, RED_OVERLAP, deepest, room)
-        sum_into(red, RED_CONTACTS, contacts, room)
+    _contact_reduce(red, deepest, contacts, room, fused)
 
 
 @cuda.jit
@@ -415,15 +442,21 @@ def row_sums(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, 
     ``red[RED_OVERLAP]``. Any grid."""
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds,
-               np.uint32(epoch & 0xFFFFFFFF), law, increment, red, room)
+               np.uint32(epoch & 0xFFFFFFFF), law, increment, red, room, False, (x, v, omega), x, 0.0, 0.0, 0.0, 0.0,
+               red, False)
 
 
 @device_cuda
 def _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, increment,
-               red, room):
+               red, room, then, nxt, x_ref, L_x, L_y, hx, hy, drec, fused):
     """This thread's rows of ``row_sums`` (i, i + threads, ...) and their reduction (every thread of
-    the block calls it)."""
+    the block calls it); ``then`` ... ``fused`` as ``_force_phase``'s (the box L_x .. hy [d] for the
+    drift)."""
     deepest = 0.0
+    d2 = 0.0
+    z_lo = math.inf
+    z_hi = -math.inf
+    bad = 0
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
         if fixed[i]:
             for a in range(3):
@@ -432,7 +465,12 @@ def _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds
             continue
         deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds, now,
                                         law, increment))
+        if then:
+            d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, nxt, f, torque, x_ref, law.dt, L_x, L_y, hx, hy, True,
+                                             d2, z_lo, z_hi, bad)
     max_into(red, RED_OVERLAP, deepest, room)
+    if then:
+        _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
 
 
 @cuda.jit
@@ -447,18 +485,23 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
     _reset_drift_slots(red)
     _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
                  kinds, np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, red, room, False)
+                 increment, red, room, False, False, (x, v, omega), x, red)
 
 
 @device_cuda
 def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, fused):
+                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, fused, then, nxt, x_ref, drec):
     """This block's chunks of ``chunk_forces`` and their reductions into ``red`` (every thread of the block
-    calls it: the chunks' loop is the same for the whole block, so is its barrier)."""
+    calls it: the chunks' loop is the same for the whole block, so is its barrier); ``then`` .. ``drec``
+    as ``_force_phase``'s."""
     t = cuda.threadIdx.x
     nt = cuda.blockDim.x
     deepest = 0.0
     contacts = 0
+    d2 = 0.0
+    z_lo = math.inf
+    z_hi = -math.inf
+    bad = 0
     for c in range(cuda.blockIdx.x, (n_own + rows - 1) // rows, cuda.gridDim.x):
         r0 = c * rows
         r1 = min(r0 + rows, n_own)
@@ -477,11 +520,12 @@ def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
                 continue
             deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds,
                                             now, law, increment))
-    if fused:
-        contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
-    else:
-        max_into(red, RED_OVERLAP, deepest, room)
-        sum_into(red, RED_CONTACTS, contacts, room)
+            if then:
+                d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, nxt, f, torque, x_ref, law.dt, L_x, L_y, hx, hy, True,
+                                                 d2, z_lo, z_hi, bad)
+    _contact_reduce(red, deepest, contacts, room, fused)
+    if then:
+        _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
 
 
 @device_cuda
@@ -503,7 +547,7 @@ def _go_on(red, half_skin, room):
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
             epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
-            fused):
+            fused, xb, vb, wb, one):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -518,38 +562,127 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     entries, ``row`` their rows), a grid barrier between; with ``chunk_rows`` > 0 they are
     ``chunk_forces``'s chunks of that many rows (``row`` and ``pair`` as with ``by_entry``), no grid
     barrier between. With ``fused`` each phase's reductions take one tree (``reduce.drift_into``,
-    ``reduce.contact_into``) instead of one a value: the same results. The same arithmetic as the
-    step's kernels, so the same bits.
+    ``reduce.contact_into``) instead of one a value. With ``one`` (``advance_one``, ``pinned_advance``;
+    ``advance`` itself ignores it and compiles without its code) the next step's half-kicks and drift
+    are done by the thread that has just summed a row's forces (one grid barrier a step fewer): the
+    rows then alternate between x, v, omega and xb, vb, wb (arrays shaped as x), the step's forces
+    reading one while the drift writes the other, and end in x, v, omega. The same results, so
+    the same bits.
     """
-    grid = cuda.cg.this_grid()
-    # the block's reductions (the fused trees need ROOM slots; the sums share the maxima's slots)
     room = cuda.shared.array(ROOM, np.float64)
-    first = cuda.grid(1)
-    if first == 0:
+    # ``one`` as a constant: the fused drift's code is not in this kernel (``advance_one`` has it)
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
+           fused, False, room)
+
+
+@cuda.jit
+def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
+                fused, xb, vb, wb, one):
+    """``advance`` with ``one`` true whatever the argument says (the next step's drift fused into the forces'
+    phase; engine.gpu_drift = "fused")."""
+    room = cuda.shared.array(ROOM, np.float64)
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
+           fused, True, room)
+
+
+# the kernels ``pinned_advance`` made, by their constants
+_PINNED = {}
+
+
+def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history):
+    """``advance`` compiled for one run's options (item 5 of docs/gpu.md's levers): the forces' layout
+    (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
+    model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
+    code, so that the compiler drops the branches the run never takes (and their registers). Its
+    arguments are ``advance``'s; those it was made for are read from the constants, the law's
+    numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine``
+    checks); the same arithmetic, so the same bits. One kernel a set of constants."""
+    key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
+           bool(rescale_history))
+    if key not in _PINNED:
+        BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE = key
+
+        def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                   epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
+                   fused, xb, vb, wb, one):
+            room = cuda.shared.array(ROOM, np.float64)
+            constant = Law(law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu if FRICTION else 0.0, law.g_x, law.g_y,
+                           law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
+            _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                   epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
+                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room)
+        pinned.__name__ = pinned.__qualname__ = "advance_pinned"
+        _PINNED[key] = cuda.jit(pinned)
+    return _PINNED[key]
+
+
+@device_cuda
+def _neutral(rec, s, n_steps):
+    """rec[s] = NEUTRAL if s < n_steps, by the grid's first thread."""
+    if cuda.grid(1) == 0 and s < n_steps:
         for a in range(6):
-            rec[0, a] = NEUTRAL[a]
+            rec[s, a] = NEUTRAL[a]
+
+
+@device_cuda
+def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, nxt, by_entry, chunk_rows, fused,
+           one, room):
+    """``advance``'s steps (every thread of the grid calls it; ``room`` the block's (ROOM,) float64 shared
+    room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s."""
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    here = (x, v, omega)
+    if one:
+        # the rows no drift writes (the bed's) in the other buffer as well
+        for i in range(first, x.shape[0], cuda.gridsize(1)):
+            for a in range(3):
+                nxt[0][i, a] = x[i, a]
+                nxt[1][i, a] = v[i, a]
+                nxt[2][i, a] = omega[i, a]
+    _neutral(rec, 0, n_steps)
     grid.sync()
+    odd = False
     for s in range(n_steps):
-        _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, law.dt, L_x, L_y, hx, hy, pending or s > 0, rec[s],
-                     room, fused)
-        if first == 0 and s + 1 < n_steps:
-            for a in range(6):
-                rec[s + 1, a] = NEUTRAL[a]
-        grid.sync()
+        if s == 0 or not one:
+            _drift_phase(n_own, x, v, omega, f, torque, fixed, x_ref, law.dt, L_x, L_y, hx, hy, pending or s > 0,
+                         rec[s], room, fused)
+            _neutral(rec, s + 1, n_steps)
+            grid.sync()
         if not _go_on(rec[s], half_skin, room):
             break
         now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
         before = np.uint32((epoch + s) & 0xFFFFFFFF)
+        # with ``one``: the forces from one buffer, the next step's drift into the other
+        then = one and s + 1 < n_steps
+        if then:
+            _neutral(rec, s + 2, n_steps)
+        xs, vs, ws = nxt if odd else here
+        there = here if odd else nxt
+        drec = rec[s + 1] if then else rec[s]
         if chunk_rows > 0:
-            _chunk_phase(n_own, chunk_rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False,
-                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused)
+            _chunk_phase(n_own, chunk_rows, row, xs, vs, ws, f, torque, fixed, start, nbr, hist, stamp, pair, False,
+                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused, then,
+                         there, x_ref, drec)
         elif by_entry:
-            _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
+            _entry_phase(n_entries, row, xs, vs, ws, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
                          hx, hy, law, True, rec[s], room, fused)
             grid.sync()
-            _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, True,
-                       rec[s], room)
+            _sum_phase(n_own, xs, vs, ws, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, True,
+                       rec[s], room, then, there, x_ref, L_x, L_y, hx, hy, drec, fused)
         else:
-            _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes,
-                         kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused)
+            _force_phase(n_own, xs, vs, ws, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes,
+                         kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused, then, there, x_ref, drec)
         grid.sync()
+        if then:
+            odd = not odd
+    if odd:
+        # the last drift wrote ``nxt`` (the barrier after it passed): the rows back where the host reads them
+        for i in range(first, n_own, cuda.gridsize(1)):
+            for a in range(3):
+                x[i, a] = nxt[0][i, a]
+                v[i, a] = nxt[1][i, a]
+                omega[i, a] = nxt[2][i, a]
