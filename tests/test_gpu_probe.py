@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import gpu_probe  # noqa: E402
 
-DRY = ("row", "chunk16-r64")
+DRY = ("row", "chunk16-all")
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def small_table(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dry_run(small_table, tmp_path_factory):
     out = tmp_path_factory.mktemp("probe") / "out"
-    # two variants (a thread a row; chunks under a register cap) carry the probe's
+    # two variants (a thread a row; chunks with every switch of the fixed cost) carry the probe's
     # every path; the variants' own bits are test_gpu_engine.py's
     env = {**os.environ, "PY": sys.executable, "SIZE": "small", "VARIANTS": ",".join(DRY)}
     p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
@@ -92,9 +92,41 @@ def test_a_digest_apart_from_the_cpus_or_between_shapes_is_reported_and_fails():
     assert result["all_same"] and any("skipped: the budget" in ln for ln in gpu_probe.table(result))
 
 
+def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp_path):
+    """``drive``: a child that dies at a variant (a GPU fault loses the process's context) leaves that one
+    recorded as failed with its output and why; the next child starts after it; one stopped past the budget
+    says so. Every key gets one record, in order."""
+    path = str(tmp_path / "v.jsonl")
+    keys = [("row", 128), ("row", 256), ("entry", 128), ("entry", 256), ("chunk16", 128), ("chunk16", 256)]
+    calls = []
+
+    def child(variants, shapes, deadline, longest, timeout):
+        calls.append((variants, shapes))
+        done = {(r["variant"], r["block"]) for r in gpu_probe.read_records(path)}
+        for v in variants:
+            for b in shapes:
+                if (v, b) in done:
+                    continue
+                if (v, b) == ("entry", 128):
+                    return 1, "Traceback\nCudaAPIError: an illegal memory access"
+                if (v, b) == ("chunk16", 128):
+                    return None, "still at it"
+                gpu_probe.append_record(path, {"variant": v, "block": b, "wall_s": 1.0})
+        return 0, ""
+
+    recs = gpu_probe.drive(keys, path, child, deadline=1e18, grace=1.0)
+    assert [(r["variant"], r["block"]) for r in recs] == keys
+    assert recs[2]["failed"] == "its process ended with status 1\nTraceback\nCudaAPIError: an illegal memory access"
+    assert recs[4]["failed"] == "ran past the budget and was stopped\nstill at it"
+    assert all("failed" not in r for i, r in enumerate(recs) if i not in (2, 4))
+    # the second child starts at the variant after the one that died, the third after the one stopped
+    assert calls == [(["row", "entry", "chunk16"], [128, 256]), (["entry", "chunk16"], [128, 256]),
+                     (["chunk16"], [256])]
+
+
 @pytest.mark.parametrize("args, what", [
     (["--tiles", "7"], "--tiles 7: accepted AxB"),
-    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of row, entry, chunk16"),
+    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of row, row-all"),
     (["--shapes", "100"], "--shapes 100: accepted comma-separated powers of two"),
     (["--steps", "0"], "--steps 0: accepted a whole number >= 1"),
 ])

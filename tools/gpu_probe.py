@@ -2,13 +2,18 @@
 
     python tools/gpu_probe.py all TABLE OUT [--variants a,b] [--steps 1000] [--repeats 3] [--tiles 7x7]
                                              [--big-steps 100] [--check-steps 200] [--set KEY=VALUE ...]
-    python tools/gpu_probe.py measure TABLE JSON --variant NAME ...      (one variant, in a process of its own)
+    python tools/gpu_probe.py measure TABLE JSONL --variants a,b --shapes 128,256 --deadline T ...
+                                             (variants one after another in one process, a record a line)
 
 A variant is a set of ``engine.gpu_*`` switches (``VARIANTS``; a new one is a line there) run at two block
-shapes (``--shapes``). Each runs in a fresh process, one after another on the GPU (a timing shares the GPU
-with nothing):
+shapes (``--shapes``). The CPU's digest is taken in a process of its own; then the variants run one after
+another in one process (the kernels they share compiled once: a GPU's loan is minutes), each at each
+shape, each record appended to OUT/variants.jsonl as it is made. A process that dies (a fault of the GPU
+loses its context) or hangs past the budget leaves its variant and shape recorded as failed, and a new
+process goes on from the next (a timing shares the GPU with nothing):
 
-- its kernels compiled and warmed on a tiny pile (``bench.warm_up_kernels``; the seconds it took);
+- its kernels compiled and warmed on a tiny pile (``bench.warm_up_kernels``; the seconds it took: the
+  first variant's include the kernels every variant shares);
 - from TABLE's pile, ``--check-steps`` steps as a run takes them, then the state's digest (x, v, omega, the
   contact history): every variant and shape must give the CPU engine's digest (``cpu``, run first), and a
   difference between two shapes of one variant is a race;
@@ -17,7 +22,8 @@ with nothing):
 - five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th);
 - a stop-rule sample (``kinetic`` and ``force_ratio`` after an evaluation that kept its pairs), timed;
 - each launched kernel's registers, local (spill) memory, shared memory and the cooperative grid's blocks;
-- TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats`` times.
+- at its first shape, TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats``
+  times.
 
 Then ``tools/gpu_anatomy.py`` on the same machine (the baseline: machines of one kind differ by 15 %), and
 OUT/probe.json, OUT/probe.txt (the table), the table printed last. Exit 0 when every digest is the CPU's, 1
@@ -28,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -40,16 +47,26 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
+    # every switch that cuts the fixed cost of a step at once, a thread a row and by chunks: launches compiled
+    # for the run's options, the next step's drift in the forces' phase, a phase's reductions in one tree
+    "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                "engine.gpu_reductions": "fused"},
+    "chunk16-all": {"engine.gpu_threads": "chunk16", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                    "engine.gpu_reductions": "fused"},
     "entry": {"engine.gpu_threads": "entry"},
     "chunk16": {"engine.gpu_threads": "chunk16"},
+    # each of the three alone
+    "row-pinned": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true"},
+    "row-drift": {"engine.gpu_threads": "row", "engine.gpu_drift": "fused"},
+    "row-fused": {"engine.gpu_threads": "row", "engine.gpu_reductions": "fused"},
     "chunk32": {"engine.gpu_threads": "chunk32"},
     # a register cap lets more blocks of the cooperative grid be resident, at the price of spills
     # (make test-gpu-compile prints the fused step's spills under 64, 80 and 96)
     "chunk16-r80": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 80},
     "chunk16-r64": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 64},
-    # a phase's reductions in one tree of barriers
-    "row-fused": {"engine.gpu_threads": "row", "engine.gpu_reductions": "fused"},
     "chunk16-fused": {"engine.gpu_threads": "chunk16", "engine.gpu_reductions": "fused"},
+    "entry-all": {"engine.gpu_threads": "entry", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                  "engine.gpu_reductions": "fused"},
     # the stop rule's sums on the GPU (its cost is the table's "sample ms", not the steps')
     "row-samples": {"engine.gpu_threads": "row", "engine.gpu_samples": "device"},
 }
@@ -75,6 +92,11 @@ def parse_variants(text):
         raise argparse.ArgumentTypeError(f"--variants {text}: accepted a comma-separated choice of "
                                          f"{', '.join(VARIANTS)}")
     return names
+
+
+def parse_measured(text):
+    """``measure``'s --variants: ``parse_variants``'s, or "cpu" alone (the CPU engine's digest)."""
+    return ["cpu"] if text == "cpu" else parse_variants(text)
 
 
 def parse_shapes(text):
@@ -111,8 +133,12 @@ def arguments(argv):
                            help="seconds of the call: a variant that would start past them (by the longest "
                                 "one so far) is skipped and says so (default 420)")
         else:
-            p.add_argument("--variant", required=True, choices=["cpu", *VARIANTS])
-            p.add_argument("--block", type=int, default=SHAPES[0])
+            p.add_argument("--variants", type=parse_measured, required=True)
+            p.add_argument("--shapes", type=parse_shapes, default=list(SHAPES))
+            p.add_argument("--deadline", type=float, default=math.inf,
+                           help="time.time() past which no variant starts (it is recorded as skipped)")
+            p.add_argument("--longest", type=float, default=0.0,
+                           help="seconds the longest variant took so far (a variant starts only if that fits)")
     a = ap.parse_args(argv)
     for key in ("steps", "repeats", "big_steps", "check_steps"):
         if getattr(a, key) < 1:
@@ -171,15 +197,18 @@ def kernel_resources(eng):
                 return int(v() if callable(v) else v) if v is not None else None
             except Exception:     # a property this numba-cuda does not have
                 return None
-        out[name] = {"registers": get("regs_per_thread"), "local_bytes": get("local_mem_per_thread"),
-                     "shared_bytes": get("shared_mem_per_block")}
+        # run_quiet's kernel, whichever of its forms (``Engine._advance_name``), is "advance"
+        key = "advance" if isinstance(name, tuple) or name.startswith("advance") else name
+        out[key] = {"registers": get("regs_per_thread"), "local_bytes": get("local_mem_per_thread"),
+                    "shared_bytes": get("shared_mem_per_block")}
     if out.get("advance") is not None and getattr(eng, "_coop_blocks", None):
         out["advance"]["cooperative_blocks"] = int(eng._coop_blocks)
     return out
 
 
-def measure(a):
-    """One variant at one block shape (or the CPU engine's digest): a dict for the JSON."""
+def measure(a, variant, block, big=True):
+    """One variant at one block shape (or the CPU engine's digest): a dict for the JSON; ``big``: the
+    tiles timed too."""
     from mpdem.bench import load_table, set_up_process, table_config, warm_up_kernels
     from mpdem.decomp import Domain
     from mpdem.engine import gpu_options, make_engine
@@ -188,15 +217,15 @@ def measure(a):
     from mpdem.io import checkpoint
 
     set_up_process()
-    device = "cpu" if a.variant == "cpu" else "gpu"
-    sets = [*a.set, f"engine.gpu_block={a.block}"]
+    device = "cpu" if variant == "cpu" else "gpu"
+    sets = [*a.set, f"engine.gpu_block={block}"]
     if device == "gpu":
-        sets += [f"{k}={v}" for k, v in VARIANTS[a.variant].items()]
+        sets += [f"{k}={v}" for k, v in VARIANTS[variant].items()]
     cfg = table_config(sets)
     phys = Physics.from_config(cfg)
     block = cfg.engine.gpu_block
     opts = gpu_options(cfg.engine)
-    rec = {"variant": a.variant, "block": block, "device": device, "settings": sets}
+    rec = {"variant": variant, "block": block, "device": device, "settings": sets}
     t = time.perf_counter()
     warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, device, **opts)
     rec["compile_s"] = time.perf_counter() - t
@@ -237,7 +266,7 @@ def measure(a):
     eng.complete()
     rec["kernels"] = kernel_resources(eng)
     eng = st = None     # the 20k pile's GPU arrays freed before the tiles
-    if a.tiles != (1, 1) or a.big_steps:
+    if big and (a.tiles != (1, 1) or a.big_steps):
         big, _, n_big = engine(a.tiles)
         big.advance(min(10, a.big_steps))
         times = clock.repeat(a.repeats, lambda: (big.run_quiet(a.big_steps), big.complete()))
@@ -246,21 +275,89 @@ def measure(a):
     return rec
 
 
-def run_one(a, variant, block, path):
-    """``measure`` in a process of its own; its record, or one that says why it failed."""
-    cmd = [sys.executable, os.path.abspath(__file__), "measure", a.table, path, "--variant", variant,
-           "--block", str(block), "--steps", str(a.steps), "--repeats", str(a.repeats),
-           "--tiles", "x".join(map(str, a.tiles)), "--big-steps", str(a.big_steps),
-           "--check-steps", str(a.check_steps)] + [f"--set={s}" for s in a.set]
-    t = time.perf_counter()
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode or not os.path.exists(path):
-        return {"variant": variant, "block": block, "failed": (p.stderr or p.stdout).strip()[-2000:],
-                "wall_s": time.perf_counter() - t}
+def read_records(path):
+    """The records of a JSONL file (none if it does not exist; a last line cut off by a dying process is
+    left out)."""
+    if not os.path.exists(path):
+        return []
+    out = []
     with open(path) as fh:
-        rec = json.load(fh)
-    rec["wall_s"] = time.perf_counter() - t
-    return rec
+        for line in fh:
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                pass
+    return out
+
+
+def append_record(path, rec):
+    """One record as a line of ``path``, on disk before the next starts (a process may die after it)."""
+    with open(path, "a") as fh:
+        fh.write(json.dumps(rec) + "\n")
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def measure_all(a):
+    """``measure``: each of ``a.variants`` at each of ``a.shapes`` not yet in the JSONL file ``a.out``, one
+    after another in this process, each record appended as it is made; one that would start past
+    ``a.deadline`` (by the longest so far) is recorded as skipped."""
+    done = {(r["variant"], r["block"]) for r in read_records(a.out)}
+    longest = a.longest
+    for variant in a.variants:
+        for i, block in enumerate(a.shapes):
+            if (variant, block) in done:
+                continue
+            if time.time() + longest > a.deadline:
+                append_record(a.out, {"variant": variant, "block": block,
+                                      "skipped": "the budget: no time left for it in the call"})
+                continue
+            t = time.perf_counter()
+            # the parent names the variant a dying process was at: the one after the last record
+            rec = measure(a, variant, block, big=i == 0)
+            rec["wall_s"] = time.perf_counter() - t
+            longest = max(longest, rec["wall_s"])
+            append_record(a.out, rec)
+    return 0
+
+
+def run_child(a, variants, shapes, path, deadline, longest, timeout):
+    """``measure`` over ``variants`` x ``shapes`` in a new process; (exit status or None if it ran past
+    ``timeout`` s and was killed, the tail of its output)."""
+    cmd = [sys.executable, os.path.abspath(__file__), "measure", a.table, path, "--variants", ",".join(variants),
+           "--shapes", ",".join(map(str, shapes)), "--deadline", repr(deadline), "--longest", repr(longest),
+           "--steps", str(a.steps), "--repeats", str(a.repeats), "--tiles", "x".join(map(str, a.tiles)),
+           "--big-steps", str(a.big_steps), "--check-steps", str(a.check_steps)] + [f"--set={s}" for s in a.set]
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired as e:
+        out = e.stderr or e.stdout or ""
+        return None, (out.decode() if isinstance(out, bytes) else out).strip()[-2000:]
+    return p.returncode, (p.stderr or p.stdout).strip()[-2000:]
+
+
+def drive(keys, path, child, deadline, grace):
+    """Every (variant, block) of ``keys`` recorded in the JSONL file ``path``: ``child(variants, shapes,
+    deadline, longest, timeout)`` (``run_child``'s) is run until each has a record; the key a child died or
+    hung at (the first without one) is recorded as failed with the child's last output, and a new child
+    goes on from the next. Returns the records in ``keys``'s order."""
+    while True:
+        recs = {(r["variant"], r["block"]): r for r in read_records(path)}
+        left = [k for k in keys if k not in recs]
+        if not left:
+            return [recs[k] for k in keys]
+        variants = list(dict.fromkeys(v for v, _ in left))
+        shapes = sorted({b for _, b in left}, key=[b for _, b in keys].index)
+        longest = max([r.get("wall_s", 0.0) for r in recs.values()], default=0.0)
+        rc, tail = child(variants, shapes, deadline, longest, max(deadline - time.time(), 0.0) + grace)
+        recs = {(r["variant"], r["block"]) for r in read_records(path)}
+        stuck = next((k for k in keys if k not in recs), None)
+        if stuck is not None and rc != 0:
+            why = "ran past the budget and was stopped" if rc is None else f"its process ended with status {rc}"
+            append_record(path, {"variant": stuck[0], "block": stuck[1], "failed": f"{why}\n{tail}"})
+        elif stuck is not None:
+            # a child that ended well leaves nothing undone: guard against a loop all the same
+            append_record(path, {"variant": stuck[0], "block": stuck[1], "failed": f"not measured\n{tail}"})
 
 
 def anatomy(a):
@@ -328,23 +425,22 @@ def commit():
 def run_all(a):
     os.makedirs(a.out, exist_ok=True)
     t = time.perf_counter()
+    deadline = time.time() + a.budget
     result = {"commit": commit(), "steps": a.steps, "repeats": a.repeats, "tiles": "x".join(map(str, a.tiles)),
               "big_steps": a.big_steps, "check_steps": a.check_steps, "sets": a.set}
     print(f"gpu_probe: the CPU engine's digest ({a.check_steps} steps)", flush=True)
-    result["cpu"] = run_one(a, "cpu", SHAPES[0], os.path.join(a.out, "cpu.json"))
-    result["variants"] = []
-    longest = result["cpu"].get("wall_s", 0.0)
-    for v in a.variants:
-        for block in a.shapes:
-            spent = time.perf_counter() - t
-            if spent + longest > a.budget:
-                result["variants"].append({"variant": v, "block": block,
-                                           "skipped": f"the budget: {spent:.0f} s spent of {a.budget:.0f}"})
-                continue
-            print(f"gpu_probe: {v}, block {block}", flush=True)
-            rec = run_one(a, v, block, os.path.join(a.out, f"{v}-{block}.json"))
-            longest = max(longest, rec.get("wall_s", 0.0))
-            result["variants"].append(rec)
+    cpu_path = os.path.join(a.out, "cpu.jsonl")
+    for stale in (cpu_path, os.path.join(a.out, "variants.jsonl")):
+        if os.path.exists(stale):
+            os.remove(stale)
+    result["cpu"] = drive([("cpu", SHAPES[0])], cpu_path, lambda v, s, d, lo, to: run_child(
+        a, v, s, cpu_path, math.inf, 0.0, None), math.inf, 0.0)[0]
+    print(f"gpu_probe: {len(a.variants)} variants at blocks {', '.join(map(str, a.shapes))}", flush=True)
+    path = os.path.join(a.out, "variants.jsonl")
+    # a child past the deadline is stopped after this much more (the variant it is at, and its tiles)
+    grace = 120.0
+    result["variants"] = drive([(v, b) for v in a.variants for b in a.shapes], path, lambda v, s, d, lo, to: run_child(
+        a, v, s, path, d, lo, to), deadline, grace)
     if not a.no_anatomy:
         print("gpu_probe: tools/gpu_anatomy.py (the baseline)", flush=True)
         result["anatomy"] = anatomy(a)
@@ -364,12 +460,7 @@ def run_all(a):
 def main(argv=None):
     a = arguments(argv)
     if a.cmd == "measure":
-        rec = measure(a)
-        tmp = a.out + ".tmp"
-        with open(tmp, "w") as fh:
-            json.dump(rec, fh, indent=1)
-        os.replace(tmp, a.out)
-        return 0
+        return measure_all(a)
     return run_all(a)
 
 

@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Every GPU engine variant measured in one call (tools/gpu_probe.py; docs/performance.md, "GPU variants"):
-# the CPU's digest, then each variant at two block shapes (its compile, its digest against the CPU's, the
-# 20k pile timed, its list rebuilds, its kernels' registers and spills, the 994k tiles timed), then
+# the CPU's digest, then each variant at two block shapes, one after another in one process (its compile, its
+# digest against the CPU's, the 20k pile timed, its list rebuilds, its kernels' registers and spills, the 994k
+# tiles timed at the first shape; a process that dies leaves that variant failed and a new one goes on), then
 # tools/gpu_anatomy.py as the baseline; OUT/probe.json and OUT/probe.txt, the table printed last.
-# Some 3-5 minutes on an H100; for a bare machine with a GPU and no network (python3 with numpy, numba,
-# numba-cuda, scipy, h5py). Exit 0 when every digest is the CPU's.
+# BUDGET seconds for the variants, some 1-2 more minutes around them; for a bare machine with a GPU and no
+# network (python3 with numpy, numba, numba-cuda, scipy, h5py). Exit 0 when every digest is the CPU's.
 #   bash tools/gpu_probe.sh TABLE [OUT]      TABLE: the bench's landed20k.txt.gz; OUT default ./gpu_probe_out
-#   VARIANTS=row,entry,chunk16,chunk32  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
+#   VARIANTS=row,row-all,chunk16-all,...  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
 #   CHECK_STEPS=200  BUDGET=420 (seconds: a variant that would start past them is skipped, and says so)
 #   (the defaults)
 #   SIZE=small  a dry run on a small table (under NUMBA_ENABLE_CUDASIM=1 without a GPU: `make test` runs it)
