@@ -8,6 +8,7 @@ runs this file with ``MPDEM_REAL_GPU=1``) the same tests check the compiled
 kernels, whose float arithmetic is explicitly rounded.
 """
 import ast
+import dataclasses
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from mpdem.engine import cpu, gpu
 from mpdem.engine.base import Physics
 from mpdem.errors import DeviceError
 from mpdem.io import checkpoint
+from mpdem.planes import Plane
 from mpdem.kernels.gpu import rounded, runtime
 from mpdem.state import State
 
@@ -62,7 +64,8 @@ def stepped(engine, phys, steps, grid=None):
 CASES = {
     "mu0": physics(mu=0.0),
     "mu0.5-gamma_t": physics(mu=0.5, gamma_t=20.0),
-    "hertz-wall": physics(mu=0.5, model="hertz", gamma_t=10.0, wall=True),
+    # a lid just above the lattice's top layer (its centres near 4.99 d), which some spheres touch
+    "hertz-wall-lid": physics(mu=0.5, model="hertz", gamma_t=10.0, wall=True, planes=(Plane.lid(5.49),)),
     "rotate-limit": physics(mu=1.0, rescale_history=True, limit_damping=True),
 }
 
@@ -85,9 +88,13 @@ def test_gpu_engine_steps_the_cpu_engines_bits(case):
     assert got.contacts() == want.contacts()
     assert got.force_ratio() == want.force_ratio()
     assert got.last_overlap == want.last_overlap > 0
+    if phys.planes:
+        # the lid acted: without it the CPU's pile ends elsewhere
+        free = stepped(cpu.Engine, dataclasses.replace(phys, planes=()), 30)[1]
+        assert checkpoint.digest(checkpoint.gather_state(free)) != checkpoint.digest(a)
 
 
-ONE_LAUNCH = ["mu0", "mu0.5-gamma_t", "hertz-wall"]
+ONE_LAUNCH = ["mu0", "mu0.5-gamma_t", "hertz-wall-lid"]
 
 
 @pytest.mark.parametrize("case", ONE_LAUNCH)
