@@ -17,7 +17,7 @@ from ..io import rundir
 from ..analysis import fits
 from . import contrasts, depth, paper, ratio, samples
 from .figures import FIGURES
-from .runs import NAN, families, fmt_kn, fmt_pm, md_table as _table
+from .runs import NAN, families, fmt_kn, fmt_pm, md_table as _table, off_columns as _off_columns
 
 # findings written by hand beside the results, copied into the README by every collect
 NOTES = "NOTES.md"
@@ -30,20 +30,6 @@ def _size_note(s):
     if paper.is_paper_size(N, L_x, L_y):
         return ""
     return f"; N = {N}, {L_x:g}d x {L_y:g}d box (paper: {paper.REFERENCE['N']}, {paper.REFERENCE['L']:g}d)"
-
-
-def _off_columns(s):
-    """A set's parameters that the tables' columns do not show, where away from their defaults: the
-    tangential damping (as a fraction of gamma_n), the contact model, the pour's kinetic energy."""
-    out = {}
-    g_t, g_n = s.params.get("contact.gamma_t", 0.0), s.params.get("contact.gamma_n", 0.0)
-    if g_t:
-        out["gamma_t"] = f"{g_t / g_n:.4g} gamma_n" if g_n else f"{g_t:g}"
-    if s.params.get("contact.model", "hooke") != "hooke":
-        out["model"] = s.params["contact.model"]
-    if s.params.get("pour.K0", 0.0):
-        out["K0"] = f"{s.params['pour.K0']:g}"
-    return out
 
 
 def _extras(s):

@@ -197,3 +197,16 @@ def fmt_pm(m, e=NAN, base=3, n=None):
         return f"{m:.{d}f} ± {e:.{d}f}"
     return f"{m:.{d}f}" + (" (1 seed)" if n == 1 else "")
 
+
+def off_columns(s):
+    """A set's parameters that the tables' columns do not show, where away from their defaults: the
+    tangential damping (as a fraction of gamma_n), the contact model, the pour's kinetic energy."""
+    out = {}
+    g_t, g_n = s.params.get("contact.gamma_t", 0.0), s.params.get("contact.gamma_n", 0.0)
+    if g_t:
+        out["gamma_t"] = f"{g_t / g_n:.4g} gamma_n" if g_n else f"{g_t:g}"
+    if s.params.get("contact.model", "hooke") != "hooke":
+        out["model"] = s.params["contact.model"]
+    if s.params.get("pour.K0", 0.0):
+        out["K0"] = f"{s.params['pour.K0']:g}"
+    return out

@@ -19,7 +19,7 @@ import os
 from dataclasses import dataclass, field
 
 from . import verdict as V
-from .runs import NAN, fmt_kn, mean_sem
+from .runs import NAN, fmt_kn, mean_sem, off_columns
 
 # the paper-size stiffening ladders (physics.md 6.6): runs/ladder-size/<mu>_s<seed>/kn<K>/
 LADDER_DIR = "ladder-size"
@@ -375,10 +375,9 @@ class Context:
         return len(s.runs) if s else 0
 
     def matches(self, s, sel, extra):
-        from .comparison import _off_columns
         if s.extra != dict(extra):
             return False
-        off = _off_columns(s)
+        off = off_columns(s)
         for k, v in sel.items():
             if k in ("K0", "gamma_t", "model"):
                 continue
