@@ -72,30 +72,37 @@ MSG
   fi
   have_system || { echo "setup: $pkgs installed but $mpicc/$h5pc still not found" >&2; exit 1; }
 fi
-# a single-node Slurm for the `slurm` tests (tools/local-slurm.sh): best effort, as root with apt
-if ! command -v slurmctld >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-  say "installing slurm-wlm and munge (the job templates are tested against a real Slurm)"
-  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null 2>&1 \
-    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null; } \
-    || say "slurm-wlm not installed; the slurm tests will say so and not run"
-fi
+# The tools the tests use beside mpdem (a real Slurm, shellcheck, LAMMPS), each best effort, installed in the
+# background while the environment below is made (apt's unpacking beside pip's builds); waited for before
+# setup ends
+extras() {
+  # a single-node Slurm for the `slurm` tests (tools/local-slurm.sh): best effort, as root with apt
+  if ! command -v slurmctld >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing slurm-wlm and munge (the job templates are tested against a real Slurm)"
+    DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null 2>&1 \
+      || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq slurm-wlm munge >/dev/null; } \
+      || say "slurm-wlm not installed; the slurm tests will say so and not run"
+  fi
 
-# shellcheck lints the job scripts in the tests; a developer tool, so best effort
-if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-  say "installing shellcheck (lints jobs/ in the tests)"
-  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null 2>&1 \
-    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null; } \
-    || say "shellcheck not installed; the lint test of jobs/ will be skipped"
-fi
+  # the shellcheck linter checks the job scripts in the tests; a developer tool, so best effort
+  if ! command -v shellcheck >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing shellcheck (lints jobs/ in the tests)"
+    DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null 2>&1 \
+      || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends shellcheck >/dev/null; } \
+      || say "shellcheck not installed; the lint test of jobs/ will be skipped"
+  fi
 
-# LAMMPS (its GRANULAR package): `export --format lammps-input` and `lammps-local` are checked against a
-# real LAMMPS run in the tests (tests/test_lammps_input.py); best effort, as root with apt
-if ! command -v lmp >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-  say "installing lammps (the LAMMPS input and contact dump are tested against a real LAMMPS)"
-  DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null 2>&1 \
-    || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null; } \
-    || say "lammps not installed; the LAMMPS comparison tests will say so and not run"
-fi
+  # LAMMPS (its GRANULAR package): `export --format lammps-input` and `lammps-local` are checked against a
+  # real LAMMPS run in the tests (tests/test_lammps_input.py); best effort, as root with apt
+  if ! command -v lmp >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing lammps (the LAMMPS input and contact dump are tested against a real LAMMPS)"
+    DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null 2>&1 \
+      || { apt_get update -qq && DEBIAN_FRONTEND=noninteractive apt_get install -y -qq --no-install-recommends lammps >/dev/null; } \
+      || say "lammps not installed; the LAMMPS comparison tests will say so and not run"
+  fi
+}
+extras &
+extras_pid=$!
 
 mpi_version=$("$mpiexec_real" --version 2>&1 | head -n 1 | tr -c 'A-Za-z0-9.' '_')
 hdf5_version=$(pkg-config --modversion "$h5pc")
@@ -106,6 +113,7 @@ stamp_text="$key wrapper=2 numpy=$NUMPY numba=$NUMBA scipy=$SCIPY pytest=$PYTEST
 if [ -f "$venv/.mpdem-setup" ] && [ "$(cat "$venv/.mpdem-setup")" = "$stamp_text" ] \
    && "$venv/bin/python" -c 'import mpdem, h5py, mpi4py, numba, scipy, matplotlib; assert h5py.get_config().mpi' 2>/dev/null; then
   say "environment up to date ($venv)"
+  wait "$extras_pid" || true
   exit 0
 fi
 [ -x "$venv/bin/python" ] || { say "creating $venv"; "$python" -m venv "$venv"; }
@@ -181,4 +189,5 @@ PY
 PATH="$venv/bin:$PATH" timeout 120 mpiexec -n 2 "$venv/bin/python" "$check/check.py" "$check/t.h5"
 rm -rf "$check"
 echo "$stamp_text" > "$venv/.mpdem-setup"
+wait "$extras_pid" || true
 say "ready: $venv ($flavour, HDF5 $hdf5_version, h5py mpi=True)"
