@@ -150,3 +150,29 @@ def test_work_balance_splits_the_measured_seconds(comm):
     assert abs(after[0] - want) <= 1.0
     assert after[0] < counts[0]
     assert len(gather_owned(comm, st)) == N
+
+
+def test_bounds_from_height_histograms_are_the_exact_quantiles_within_a_bin(comm):
+    """``histogram_bounds`` (each rank's heights counted in bins, the counts summed or gathered: no rank
+    sees another's heights) puts each bound within a bin of the exact quantile that ``balanced_bounds``
+    takes from every height, by count and by each rank's work; every rank gets the same bounds."""
+    from mpdem.decomp import HIST_BINS
+    P, r = comm.Get_size(), comm.Get_rank()
+    g = np.random.default_rng(7)
+    z_all = np.concatenate([g.uniform(0.5, 30.0, 3000), g.normal(12.0, 2.0, 2000)])
+    owner = g.integers(0, P, len(z_all))
+    works = np.array([1.0 + q for q in range(P)])
+    mine = z_all[owner == r]
+    dom = Domain(comm, r_list=1.2)
+    width = (z_all.max() - z_all.min()) / HIST_BINS
+    by_count = dom.histogram_bounds(mine)
+    cost = np.array([works[q] / (owner == q).sum() for q in owner])
+    by_work = dom.histogram_bounds(mine, works)
+    for got, want in ((by_count, dom.balanced_bounds(z_all)), (by_work, dom.balanced_bounds(z_all, cost))):
+        assert got.shape == (P - 1,) and np.all(np.diff(got) >= 0)
+        assert np.all(np.abs(got - want) <= 1.5 * width), (got, want)
+        assert all(np.array_equal(got, other) for other in comm.allgather(got))
+    # the counts below each bound: r / P of all, but for the heights in the bound's bin
+    for q, b in enumerate(by_count, start=1):
+        in_bin = int(np.sum(np.abs(z_all - b) <= width))
+        assert abs(int((z_all < b).sum()) - q * len(z_all) / P) <= in_bin + 1

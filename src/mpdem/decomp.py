@@ -12,7 +12,11 @@ At neighbour-list rebuilds (``rebuild``):
    mobile particles, or with ``by_work`` each rank's compute seconds since
    the last rebuild (the engine's, without communication): the bounds then
    split all mobile heights into equal sums of each particle's share of its
-   rank's work (a rank's seconds over its particles);
+   rank's work (a rank's seconds over its particles). No rank sees the
+   others' heights: each counts its own in ``HIST_BINS`` bins over the
+   global height range, the counts are summed (or gathered, to weight each
+   rank's by its work), and the bounds fall where the sums reach r / P,
+   within a bin (the pile's height / HIST_BINS) of the exact quantiles;
 3. halo: every rank receives the particles within ``r_list`` of its slab
    from the ranks whose slabs reach that far (not only the next ones, so a
    slab thinner than the halo still gets its ghosts right); the plan is kept
@@ -36,6 +40,10 @@ from .state import FIELDS, PARTICLE, State, concat_rows, select_rows
 
 # what travels with a particle that changes rank: per-particle fields, then per-contact ones
 MOVING = tuple(f for f in FIELDS if f.migrates)
+
+# bins of the mobile heights' histogram the bounds are cut from (``Domain.histogram_bounds``): a bound falls within
+# (height range / HIST_BINS) of the exact quantile, and a rank sends these counts, not its heights
+HIST_BINS = 4096
 
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11
@@ -139,6 +147,44 @@ class Domain:
                 inner.append(0.5 * (z[k - 1] + z[k]))
         return np.array(inner)
 
+    def histogram_bounds(self, z_mobile, works=None):
+        """Inner bounds splitting every rank's mobile heights into equal counts, or, with ``works`` (each
+        rank's seconds, (P,) float), into equal sums of each particle's share of its rank's seconds; from
+        this rank's heights ``z_mobile`` [d] alone (every rank calls it).
+
+        The global height range (one max reduction), then each rank's counts in ``HIST_BINS`` equal bins
+        over it: summed exactly (``sum_int``), or gathered (P x HIST_BINS integers) and weighted by
+        works[r] / (rank r's count) in rank order, so every rank computes the same bounds; a bound is
+        where the cumulative sum reaches r / P, placed linearly within its bin. Messages of a few tens
+        of kB whatever the particle count (``balanced_bounds`` takes every height)."""
+        n = len(z_mobile)
+        ext = self.max_many(np.array([-z_mobile.min() if n else -math.inf, z_mobile.max() if n else -math.inf]))
+        lo, hi = -float(ext[0]), float(ext[1])
+        P = self.size
+        if not lo <= hi:
+            return np.zeros(P - 1)
+        width = (hi - lo) / HIST_BINS if hi > lo else 1.0
+        idx = np.minimum(((z_mobile - lo) / width).astype(np.int64), HIST_BINS - 1)
+        counts = np.bincount(idx, minlength=HIST_BINS).astype(np.int64)
+        if works is None:
+            hist = np.array(self.sum_int(counts), dtype=float)
+        else:
+            parts = self.allgather(counts)
+            hist = np.zeros(HIST_BINS)
+            for part, w in zip(parts, works):
+                m = int(part.sum())
+                if m:
+                    hist += part * (float(w) / m)
+        cum = np.cumsum(hist)
+        inner = []
+        for r in range(1, P):
+            target = cum[-1] * r / P
+            b = min(int(np.searchsorted(cum, target)), HIST_BINS - 1)
+            before = cum[b - 1] if b else 0.0
+            frac = (target - before) / hist[b] if hist[b] > 0 else 0.0
+            inner.append(lo + (b + min(max(frac, 0.0), 1.0)) * width)
+        return np.array(inner)
+
     def set_bounds(self, z_mobile_all):
         """Initial bounds at the quantiles of all mobile heights."""
         self.bounds[1:-1] = self.balanced_bounds(z_mobile_all)
@@ -165,8 +211,7 @@ class Domain:
         hold every particle once. Bounds are set at the quantiles of all
         mobile heights, then rows travel to the rank that owns them.
         """
-        zm = a["x"][a["fixed"] == 0, 2]
-        self.set_bounds(np.concatenate(self.allgather(zm)))
+        self.bounds[1:-1] = self.histogram_bounds(a["x"][a["fixed"] == 0, 2])
         if self.parallel:
             owner = self.owner_of(a["x"][:, 2])
             parts = [_subset(a, np.flatnonzero(owner == r)) for r in range(self.size)]
@@ -200,13 +245,8 @@ class Domain:
         mean = measure.sum() / self.size
         if mean > 0 and measure.max() / mean > 1.0 + self.tolerance:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
-            parts = self.allgather(zs)
-            z_all = np.concatenate(parts)
-            cost = None
-            if works is not None:
-                # each particle carries its rank's seconds over its particles
-                cost = np.concatenate([np.full(len(p), w / max(len(p), 1)) for p, w in zip(parts, works)])
-            target = self.balanced_bounds(z_all, cost)
+            # each particle carries its rank's seconds over its particles (``works``), or counts one
+            target = self.histogram_bounds(zs, works)
             self.bounds[1:-1] += self.damping * (target - self.bounds[1:-1])
             # keep the bounds ordered (damping of ordered targets keeps them so)
             self.bounds[1:-1] = np.maximum.accumulate(self.bounds[1:-1])
