@@ -593,13 +593,13 @@ _PINNED = {}
 
 
 def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history):
-    """``advance`` compiled for one run's options (item 5 of docs/gpu.md's levers): the forces' layout
+    """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
     (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
     code, so that the compiler drops the branches the run never takes (and their registers). Its
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
-    numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine``
-    checks); the same arithmetic, so the same bits. One kernel a set of constants."""
+    numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
+    the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants."""
     key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
            bool(rescale_history))
     if key not in _PINNED:
