@@ -73,8 +73,10 @@ def test_packed_rows_come_back_bit_for_bit():
 
 
 def _domain(bounds, rank, r_list=1.2):
+    """Rank ``rank``'s view of slabs with ``bounds`` (no MPI: the decisions alone)."""
     d = Domain(None, r_list=r_list)
     d.size, d.rank = len(bounds) - 1, rank
+    d._set_grid((1, 1, d.size))
     d.bounds = np.array(bounds, float)
     return d
 

@@ -334,7 +334,16 @@ def after_loop(eng, dom, st, baseline, phases):
                 balanced="work" if dom.work_imbalance is not None else "owned", per_rank=dom.allgather(spent),
                 grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
                 engine_bytes=int(dom.sum_int(np.array([eng.memory_bytes()]))[0]),
-                threads=count())
+                threads=count(), grid=dom.grid, **halo_figures(dom, st))
+
+
+def halo_figures(dom, st):
+    """ghosts_per_owned (ghost rows over owned rows, summed over ranks) and refresh_bytes (the bytes every
+    step's ghost refresh sends, summed over ranks) of the halo now (collectives)."""
+    plan = dom._plan
+    sent = 0 if plan is None else int(plan.send_buf.nbytes)
+    ghosts, owned, sent = dom.sum_int(np.array([st.n_rows - st.n_own, st.n_own, sent]))
+    return dict(ghosts_per_owned=int(ghosts) / max(int(owned), 1), refresh_bytes=int(sent))
 
 
 def report_lines(fig):
@@ -351,6 +360,8 @@ def report_lines(fig):
         f"{fig['wall_max']:.2f} s (after {WARMUP_STEPS} untimed), {fig['rebuilds']} list rebuilds, contacts per "
         f"mobile particle {fig['contacts'] / n_mob:.2f}, E_k/N {fig['ek'] / n_mob:.2e}"
         + (f", imbalance (max/mean {fig['balanced']}) {fig['imbalance']:.2f}" if par else ""),
+        *([f"bench: grid {' x '.join(map(str, fig['grid']))}, {fig['ghosts_per_owned']:.3f} ghosts per owned row, "
+           f"the refresh sends {fig['refresh_bytes'] / 1e6:.3f} MB a step (all ranks)"] if par else []),
         "bench: the loop by phase" + (" (rank 0's loop)" if par else "") + ":",
         *phase_lines(*fig["phases"], fig["wall"]),
         *(["bench: seconds per rank: " + "; ".join(

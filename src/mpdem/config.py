@@ -184,6 +184,11 @@ SCHEMA = (
        "none, limit_damping, rescale_history, the other engine.gpu_* choices) as constants, so that the compiler "
        "drops the code the run never takes; false = one kernel for every option; no effect on results", bool,
        restart=True, physics=False),
+    _k("decomp", "grid", (),
+       "the ranks' grid of domains [Px, Py, Pz]: Px x Py columns of equal widths in x and y, each cut into Pz "
+       "slabs along z that balance its work (the product is the number of ranks); [] = chosen from the ranks, "
+       "the box and the pile's height (the least halo a rank: a tall narrow pile stays all slabs [1, 1, P], a "
+       "wide low one gets columns); no effect on results", tuple, restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
@@ -674,6 +679,7 @@ def resolve(raw):
     for key in ("output.checkpoint_every", "output.checkpoint_seconds", "output.snapshot_every"):
         need(key, vals[key] >= 0, "0 (off) or a positive interval")
     need("output.checkpoint_keep", vals["output.checkpoint_keep"] >= 1, "checkpoint_keep >= 1")
+    need("decomp.grid", len(vals["decomp.grid"]) in (0, 3), "[] (chosen) or three integers [Px, Py, Pz]")
     need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
     need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
     need("bed.seed", vals["bed.seed"] >= -1, "-1 (run.seed) or a seed >= 0")

@@ -1,33 +1,41 @@
-"""Slab decomposition along z: where particles live and how ranks agree.
+"""Decomposition into a grid of domains: where particles live and how ranks agree.
 
 The only module that moves particles between ranks (ARCHITECTURE.md).
-Rank r owns the particles with z in [b_r, b_{r+1}), b_0 = -inf, b_P = +inf.
-At neighbour-list rebuilds (``rebuild``):
+The ranks form a Px x Py x Pz grid (``domains``): Px x Py columns of equal
+widths in x and y, each cut into Pz slabs along z. The rank of slab k of a
+column owns the particles of the column with z in [b_k, b_{k+1}), b_0 = -inf,
+b_Pz = +inf; each column balances its own slab bounds. Px = Py = 1 is the
+slab decomposition. At neighbour-list rebuilds (``rebuild``):
 
-1. migrate: owned particles that left the slab go to their owner, with
+1. migrate: owned particles that left the domain go to their owner, with
    force, torque and contact slots;
-2. rebalance: when max/mean over the ranks of the balanced measure exceeds
-   ``1 + tolerance``, the inner bounds move (damped) toward the heights that
-   split it equally, and particles migrate again. The measure is the owned
+2. rebalance: in each column where max/mean over its ranks of the balanced
+   measure exceeds ``1 + tolerance``, the inner bounds move (damped) toward
+   the heights that split it equally, every rank learns the new bounds, and
+   particles migrate again. The measure is the owned
    mobile particles, or with ``by_work`` each rank's compute seconds since
    the last rebuild (the engine's, without communication): the bounds then
    split all mobile heights into equal sums of each particle's share of its
    rank's work (a rank's seconds over its particles). No rank sees the
    others' heights: each counts its own in ``HIST_BINS`` bins over the
-   global height range, the counts are summed (or gathered, to weight each
-   rank's by its work), and the bounds fall where the sums reach r / P,
-   within a bin (the pile's height / HIST_BINS) of the exact quantiles;
-3. halo: every rank receives the particles within ``r_list`` of its slab
-   from the ranks whose slabs reach that far (not only the next ones, so a
-   slab thinner than the halo still gets its ghosts right); the plan is kept
-   and ``refresh`` re-sends x, v, omega of the same rows on the other steps.
+   column's height range, the counts are summed over the column's ranks (or
+   gathered, to weight each rank's by its work), and the bounds fall where
+   the sums reach k / Pz, within a bin (the pile's height / HIST_BINS) of the
+   exact quantiles;
+3. halo: every rank receives the particles within ``r_list`` of its box
+   (periodic in x and y) from the ranks whose boxes reach that far (not only
+   the next ones, so a domain thinner than the halo still gets its ghosts
+   right); the plan is kept and ``refresh`` re-sends x, v, omega of the same
+   rows on the other steps.
 
 Rows travel as contiguous numpy arrays through ``parallel.Channel``: counts
 first, then data only between ranks that have something to send.
 
 Nothing here changes arithmetic: forces depend only on ids and positions, so
-the state is bit-identical for any number of ranks. Reductions are exact
-(max, integer sums). Periodicity in x and y stays inside each rank.
+the state is bit-identical for any number of ranks and any grid. Reductions
+are exact (max, integer sums). Ghosts keep their owners' coordinates in
+[0, L): the minimum image of the force kernels joins them across a periodic
+face, as it joins the rows of one rank.
 """
 from __future__ import annotations
 
@@ -35,6 +43,7 @@ import math
 
 import numpy as np
 
+from . import domains
 from .parallel import channel
 from .state import FIELDS, PARTICLE, State, concat_rows, select_rows
 
@@ -61,23 +70,74 @@ class Domain:
     r_list : float
         Halo width: contact distance plus skin [d].
     tolerance, damping : float
-        Rebalance when max/mean of the measure > 1 + tolerance; move bounds by
-        this fraction of the way to the balanced ones.
+        Rebalance a column when max/mean of the measure over its ranks > 1 + tolerance; move its
+        bounds by this fraction of the way to the balanced ones.
     by_work : bool
         Balance the measured work (``rebuild``'s ``work``), not the counts.
+    grid : None, "auto" or (Px, Py, Pz)
+        The grid of domains (``domains``): None is all slabs (1, 1, P); "auto" is chosen from the
+        ranks, the box and the pile's height when the particles are first placed (``scatter``,
+        ``distribute``).
+
+    Attributes
+    ----------
+    grid : (Px, Py, Pz)
+    zb : (Px Py, Pz + 1) float64
+        Every column's slab bounds [d]; ``bounds`` is this rank's column's row (a view).
     """
 
-    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False):
+    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False, grid=None):
         self.net = channel(net)
         self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
         self.by_work = by_work
         # max/mean of the ranks' work at the last rebuild (None: not balancing work, or not measured)
         self.work_imbalance = None
-        self.bounds = np.array([-math.inf] + [math.inf] * self.size)
         self.n_migrated = 0
         self.n_rebalances = 0
         self._plan = None
+        self.L_x = self.L_y = None
+        self.auto = isinstance(grid, str) and grid == "auto"
+        self.col_net = self.net
+        self._set_grid((1, 1, self.size) if grid is None or self.auto else domains.check(grid, self.size))
+
+    def _set_grid(self, grid):
+        """Take the grid (Px, Py, Pz): this rank's column and slab, the column's Channel (a split of
+        ``net``, collective, when there are several columns), every column's bounds unset."""
+        Px, Py, Pz = self.grid = tuple(grid)
+        self.n_columns = Px * Py
+        self.col, self.iz = divmod(self.rank, Pz)
+        self.ix, self.iy = divmod(self.col, Py)
+        self.zb = np.tile(np.array([-math.inf] + [math.inf] * Pz), (self.n_columns, 1))
+        self.col_net = self.net if self.n_columns == 1 else self.net.split(self.col, self.iz)
+        self._set_box(self.L_x, self.L_y)
+
+    def _set_box(self, L_x, L_y):
+        """The box's periods [d] and the columns' bounds in x and y."""
+        self.L_x, self.L_y = L_x, L_y
+        if L_x is not None:
+            self.xb = domains.axis_bounds(L_x, self.grid[0])
+            self.yb = domains.axis_bounds(L_y, self.grid[1])
+
+    def _place(self, L_x, L_y, n_mobile, z_range):
+        """Before the particles are first placed: the box, and the grid where it is chosen ("auto") from
+        ``n_mobile`` mobile spheres spanning ``z_range`` [d] (the same numbers on every rank)."""
+        self._set_box(L_x, L_y)
+        if self.auto:
+            self.auto = False
+            height = domains.settled_height(n_mobile, L_x, L_y, z_range)
+            grid = domains.choose(self.size, L_x, L_y, height, self.r_list)
+            if grid != self.grid:
+                self._set_grid(grid)
+
+    @property
+    def bounds(self):
+        """This rank's column's slab bounds, (Pz + 1,) float64 [d] (a view of ``zb``)."""
+        return self.zb[self.col]
+
+    @bounds.setter
+    def bounds(self, value):
+        self.zb[self.col] = value
 
     @property
     def parallel(self):
@@ -86,7 +146,7 @@ class Domain:
     @property
     def comm_seconds(self):
         """Wall seconds spent communicating so far [s] (refresh and reductions included)."""
-        return self.net.seconds
+        return self.net.seconds + (self.col_net.seconds if self.col_net is not self.net else 0.0)
 
     # -- exact reductions (order independent, so rank-count independent) --
     def max_many(self, values):
@@ -111,21 +171,37 @@ class Domain:
         return self.net.allgather(obj)
 
     # -- bounds --
-    def owner_of(self, z):
-        """Rank owning each height z (array of int)."""
-        return np.searchsorted(self.bounds[1:-1], z, side="right")
+    def column_of(self, x):
+        """Column (ix Py + iy) of each position, (n,) int64; x : (n, 3) [d]."""
+        if self.n_columns == 1:
+            return np.zeros(len(x), np.int64)
+        ix = np.searchsorted(self.xb[1:-1], x[:, 0], side="right")
+        iy = np.searchsorted(self.yb[1:-1], x[:, 1], side="right")
+        return ix * self.grid[1] + iy
+
+    def owner_of(self, x):
+        """Rank owning each position, (n,) int64; x : (n, 3) [d]."""
+        Pz = self.grid[2]
+        if self.n_columns == 1:
+            return np.searchsorted(self.zb[0, 1:-1], x[:, 2], side="right")
+        col = self.column_of(x)
+        iz = np.zeros(len(x), np.int64)
+        for c in np.unique(col):
+            at = col == c
+            iz[at] = np.searchsorted(self.zb[c, 1:-1], x[at, 2], side="right")
+        return col * Pz + iz
 
     @classmethod
     def from_config(cls, net, cfg):
         """The Domain of a run's Config: halo 1 + ``integration.skin``, the ``decomp`` keys."""
         d = cfg.decomp
         return cls(net, r_list=1.0 + cfg.integration.skin, tolerance=d.balance_tolerance,
-                   damping=d.balance_damping, by_work=d.balance_by == "work")
+                   damping=d.balance_damping, by_work=d.balance_by == "work", grid=tuple(d.grid) or "auto")
 
     def balanced_bounds(self, z_mobile_all, cost=None):
-        """Inner bounds splitting the mobile heights into equal counts, or equal sums of
-        ``cost`` (one positive value per height) if given."""
-        n, P = len(z_mobile_all), self.size
+        """Inner bounds splitting the mobile heights (of one column) into Pz equal counts, or equal sums
+        of ``cost`` (one positive value per height) if given."""
+        n, P = len(z_mobile_all), self.grid[2]
         if cost is None:
             z = np.sort(z_mobile_all)
             below = [(r * n) // P for r in range(1, P)]
@@ -148,28 +224,30 @@ class Domain:
         return np.array(inner)
 
     def histogram_bounds(self, z_mobile, works=None):
-        """Inner bounds splitting every rank's mobile heights into equal counts, or, with ``works`` (each
-        rank's seconds, (P,) float), into equal sums of each particle's share of its rank's seconds; from
-        this rank's heights ``z_mobile`` [d] alone (every rank calls it).
+        """Inner slab bounds of this rank's column splitting its ranks' mobile heights into equal counts,
+        or, with ``works`` (each of the column's ranks' seconds, (Pz,) float), into equal sums of each
+        particle's share of its rank's seconds; from this rank's heights ``z_mobile`` [d] alone (every
+        rank of the column calls it; on one column, every rank).
 
-        The global height range (one max reduction), then each rank's counts in ``HIST_BINS`` equal bins
-        over it: summed exactly (``sum_int``), or gathered (P x HIST_BINS integers) and weighted by
-        works[r] / (rank r's count) in rank order, so every rank computes the same bounds; a bound is
-        where the cumulative sum reaches r / P, placed linearly within its bin. Messages of a few tens
-        of kB whatever the particle count (``balanced_bounds`` takes every height)."""
+        The column's height range (one max reduction), then each rank's counts in ``HIST_BINS`` equal
+        bins over it: summed exactly (``sum_int``), or gathered (Pz x HIST_BINS integers) and weighted
+        by works[k] / (rank k's count) in rank order, so every rank computes the same bounds; a bound
+        is where the cumulative sum reaches k / Pz, placed linearly within its bin. Messages of a few
+        tens of kB whatever the particle count (``balanced_bounds`` takes every height)."""
+        net = self.col_net
         n = len(z_mobile)
-        ext = self.max_many(np.array([-z_mobile.min() if n else -math.inf, z_mobile.max() if n else -math.inf]))
+        ext = net.max_many(np.array([-z_mobile.min() if n else -math.inf, z_mobile.max() if n else -math.inf]))
         lo, hi = -float(ext[0]), float(ext[1])
-        P = self.size
+        P = net.size
         if not lo <= hi:
             return np.zeros(P - 1)
         width = (hi - lo) / HIST_BINS if hi > lo else 1.0
         idx = np.minimum(((z_mobile - lo) / width).astype(np.int64), HIST_BINS - 1)
         counts = np.bincount(idx, minlength=HIST_BINS).astype(np.int64)
         if works is None:
-            hist = np.array(self.sum_int(counts), dtype=float)
+            hist = np.array(net.sum_int(counts), dtype=float)
         else:
-            parts = self.allgather(counts)
+            parts = net.allgather(counts)
             hist = np.zeros(HIST_BINS)
             for part, w in zip(parts, works):
                 m = int(part.sum())
@@ -185,42 +263,74 @@ class Domain:
             inner.append(lo + (b + min(max(frac, 0.0), 1.0)) * width)
         return np.array(inner)
 
-    def set_bounds(self, z_mobile_all):
-        """Initial bounds at the quantiles of all mobile heights."""
-        self.bounds[1:-1] = self.balanced_bounds(z_mobile_all)
+    def set_bounds(self, x_mobile_all):
+        """Initial slab bounds of every column at the quantiles of its mobile heights; x_mobile_all :
+        (n, 3) positions of all mobile particles [d]."""
+        col = self.column_of(x_mobile_all)
+        for c in range(self.n_columns):
+            self.zb[c, 1:-1] = self.balanced_bounds(x_mobile_all[col == c, 2])
 
-    def select(self, z):
-        """Mask of the rows this rank owns among heights z."""
-        return self.owner_of(z) == self.rank
+    def select(self, x):
+        """Mask of the rows this rank owns among positions x, (n, 3) [d]."""
+        return self.owner_of(x) == self.rank
 
     def scatter(self, a, L_x, L_y):
         """This rank's State from the whole particle set ``a`` held on every rank.
 
         ``a`` has ``id, x, v, omega, fixed`` and, for a state that carries
         contact histories, ``count, partner, ds`` (rows in the same order).
-        Sets the bounds at the quantiles of the mobile heights first.
+        Chooses the grid where it is "auto", and sets the bounds at the
+        quantiles of the mobile heights first.
         """
-        self.set_bounds(a["x"][a["fixed"] == 0, 2])
-        return _local_state(a, np.flatnonzero(self.select(a["x"][:, 2])), L_x, L_y)
+        x_mob = a["x"][a["fixed"] == 0]
+        z_range = float(np.ptp(x_mob[:, 2])) if len(x_mob) else 0.0
+        self._place(L_x, L_y, len(x_mob), z_range)
+        self.set_bounds(x_mob)
+        return _local_state(a, np.flatnonzero(self.select(a["x"])), L_x, L_y)
 
     def distribute(self, a, L_x, L_y):
         """This rank's State from a share of the particles read by each rank.
 
         ``a`` holds some rows (``id, x, v, omega, f, torque, fixed, count,
         partner, ds``, as ``checkpoint.read`` gives them); together the ranks
-        hold every particle once. Bounds are set at the quantiles of all
-        mobile heights, then rows travel to the rank that owns them.
+        hold every particle once. Chooses the grid where it is "auto"; on
+        several columns the rows first travel to their column; each column's
+        bounds are set at the quantiles of its mobile heights, every rank
+        learns them, then rows travel to the rank that owns them.
         """
+        x_mob = a["x"][a["fixed"] == 0]
+        n = len(x_mob)
+        ext = self.max_many(np.array([-x_mob[:, 2].min() if n else -math.inf, x_mob[:, 2].max() if n else -math.inf]))
+        n_mobile = int(self.sum_int(np.array([n]))[0])
+        self._place(L_x, L_y, n_mobile, max(float(ext[1]) + float(ext[0]), 0.0) if n_mobile else 0.0)
+        if self.n_columns > 1:
+            # to the rank of the row's column with this rank's slab index: the column's ranks then hold its rows
+            dest = self.column_of(a["x"]) * self.grid[2] + self.iz
+            a = self._send_to(a, dest)
         self.bounds[1:-1] = self.histogram_bounds(a["x"][a["fixed"] == 0, 2])
+        self._share_bounds()
         if self.parallel:
-            owner = self.owner_of(a["x"][:, 2])
-            parts = [_subset(a, np.flatnonzero(owner == r)) for r in range(self.size)]
-            a = merge_sorted(self.net.alltoall(parts))
+            a = self._send_to(a, self.owner_of(a["x"]))
         return _local_state(a, np.arange(len(a["id"])), L_x, L_y)
+
+    def _send_to(self, a, dest):
+        """The rows of state-array dict ``a`` sent to ranks ``dest`` (one per row), those received here
+        merged in id order (pickled, once a run)."""
+        parts = [_subset(a, np.flatnonzero(dest == r)) for r in range(self.size)]
+        return merge_sorted(self.net.alltoall(parts))
+
+    def _share_bounds(self):
+        """Every rank learns every column's slab bounds (one max reduction of Px Py (Pz - 1) values;
+        nothing on one column or with one slab a column)."""
+        if self.n_columns == 1 or self.grid[2] == 1:
+            return
+        inner = np.full((self.n_columns, self.grid[2] - 1), -math.inf)
+        inner[self.col] = self.zb[self.col, 1:-1]
+        self.zb[:, 1:-1] = np.asarray(self.max_many(inner.ravel())).reshape(inner.shape)
 
     # -- particle movement --
     def rebuild(self, state, work=0.0):
-        """Migrate, rebalance if uneven, then build the halo (ghost rows).
+        """Migrate, rebalance the uneven columns, then build the halo (ghost rows).
 
         ``work``: this rank's compute seconds since the last rebuild [s] (the measure
         with ``by_work``; counts are balanced until every rank has measured some).
@@ -242,27 +352,32 @@ class Domain:
             else:
                 works = None
                 self.work_imbalance = None
-        mean = measure.sum() / self.size
-        if mean > 0 and measure.max() / mean > 1.0 + self.tolerance:
+        # every rank sees every column's measure, so all agree on which columns rebalance
+        per_column = np.asarray(measure, float).reshape(self.n_columns, self.grid[2])
+        uneven = [bool(m.sum() > 0 and m.max() / (m.sum() / len(m)) > 1.0 + self.tolerance) for m in per_column]
+        if uneven[self.col]:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
             # each particle carries its rank's seconds over its particles (``works``), or counts one
-            target = self.histogram_bounds(zs, works)
+            mine = None if works is None else works[self.col * self.grid[2]:(self.col + 1) * self.grid[2]]
+            target = self.histogram_bounds(zs, mine)
             self.bounds[1:-1] += self.damping * (target - self.bounds[1:-1])
             # keep the bounds ordered (damping of ordered targets keeps them so)
             self.bounds[1:-1] = np.maximum.accumulate(self.bounds[1:-1])
             self.n_rebalances += 1
+        if any(uneven):
+            self._share_bounds()
             self._migrate(state)
         self._halo(state)
 
     def _migrate(self, state):
-        """Send owned particles outside this slab, with their slots, to their owners.
+        """Send owned particles outside this domain, with their slots, to their owners.
 
-        A particle may jump several slabs when the bounds move, so every rank
+        A particle may jump several domains when the bounds move, so every rank
         learns from every rank how much comes (one Alltoall of counts); the
         rows then travel only between ranks that exchange something.
         """
         n = state.n_own
-        owner = self.owner_of(state.x[:n, 2])
+        owner = self.owner_of(state.x[:n])
         leave = owner != self.rank
         counts = np.zeros((self.size, 2), np.int64)
         sends = {}
@@ -282,38 +397,80 @@ class Domain:
         parts = [_unpack(*recvs[s], *got[s]) for s in sorted(recvs)]
         self.n_migrated += state.append(parts)
 
+    def boxes(self):
+        """Every rank's box: (lo, hi), each (P, 3) float64 [d], the z bounds from ``zb`` (+-inf at the
+        ends), x and y from the columns' bounds (the whole period on one column along that axis)."""
+        r = np.arange(self.size)
+        ix, iy, iz = domains.coords(r, self.grid)
+        col = ix * self.grid[1] + iy
+        lo, hi = np.empty((self.size, 3)), np.empty((self.size, 3))
+        for a, (b, i) in enumerate(((self.xb, ix), (self.yb, iy))):
+            lo[:, a], hi[:, a] = b[i], b[i + 1]
+        lo[:, 2], hi[:, 2] = self.zb[col, iz], self.zb[col, iz + 1]
+        return lo, hi
+
     def reach(self):
         """Ranks this rank may send ghosts to, and may receive ghosts from.
 
-        Rank s may send to rank r when slab s meets slab r widened by
-        ``r_list``; every rank evaluates the same expressions on the same
-        bounds, so sender and receiver agree.
+        Rank s may send to rank r when domain s meets domain r widened by
+        ``r_list`` (periodic in x and y); every rank evaluates the same
+        expressions on the same bounds, so sender and receiver agree.
 
         Returns
         -------
         to, frm : (k,) int64
             Ranks, ascending; this rank is in neither.
         """
-        b = self.bounds
-        lo, hi = b[:-1] - self.r_list, b[1:] + self.r_list
-        # may[s, r]: some z in [b_s, b_s+1) lies in [lo_r, hi_r), the test _halo applies to rows
-        may = (b[:-1, None] < hi[None, :]) & (lo[None, :] < b[1:, None])
-        np.fill_diagonal(may, False)
-        return np.flatnonzero(may[self.rank]), np.flatnonzero(may[:, self.rank])
+        if self.n_columns == 1:
+            b = self.zb[0]
+            lo, hi = b[:-1] - self.r_list, b[1:] + self.r_list
+            # may[s, r]: some z in [b_s, b_s+1) lies in [lo_r, hi_r), the test _halo applies to rows
+            may = (b[:-1, None] < hi[None, :]) & (lo[None, :] < b[1:, None])
+            np.fill_diagonal(may, False)
+            return np.flatnonzero(may[self.rank]), np.flatnonzero(may[:, self.rank])
+        lo, hi = self.boxes()
+        r, me = self.r_list, self.rank
+
+        def meets(a_lo, a_hi, b_lo, b_hi):
+            # boxes a meet boxes b widened by r_list: z as is, x and y modulo the period
+            hit = (a_lo[..., 2] < b_hi[..., 2] + r) & (b_lo[..., 2] - r < a_hi[..., 2])
+            for axis, L in ((0, self.L_x), (1, self.L_y)):
+                hit &= domains.overlap_periodic(a_lo[..., axis], a_hi[..., axis], b_lo[..., axis] - r,
+                                                b_hi[..., axis] + r, L)
+            return hit
+        to = meets(lo[me], hi[me], lo, hi)
+        frm = meets(lo, hi, lo[me], hi[me])
+        to[me] = frm[me] = False
+        return np.flatnonzero(to), np.flatnonzero(frm)
+
+    def _in_reach(self, x, lo, hi):
+        """Mask of positions x, (n, 3) [d], within ``r_list`` of the box [lo, hi) (periodic in x and y)."""
+        r = self.r_list
+        z = x[:, 2]
+        mask = (z >= lo[2] - r) & (z < hi[2] + r)
+        if self.n_columns > 1:
+            for axis, L, parts in ((0, self.L_x, self.grid[0]), (1, self.L_y, self.grid[1])):
+                if parts > 1:
+                    mask &= domains.in_periodic(x[:, axis], lo[axis] - r, hi[axis] + r, L)
+        return mask
 
     def _halo(self, state):
-        """Send the ranks in reach the owned rows within r_list of their slabs; append ghosts.
+        """Send the ranks in reach the owned rows within r_list of their domains; append ghosts.
 
         Counts go to every rank in reach, rows only where there are some. The
         ghost rows are stored in ascending rank order of their owners, and the
         refresh plan of x, v, omega is built and run once to fill them.
         """
         n = state.n_own
-        z = state.x[:n, 2]
-        lo = self.bounds[:-1] - self.r_list
-        hi = self.bounds[1:] + self.r_list
         to, frm = self.reach()
-        send = {int(r): np.flatnonzero((z >= lo[r]) & (z < hi[r])) for r in to}
+        if self.n_columns == 1:
+            z = state.x[:n, 2]
+            lo = self.zb[0, :-1] - self.r_list
+            hi = self.zb[0, 1:] + self.r_list
+            send = {int(r): np.flatnonzero((z >= lo[r]) & (z < hi[r])) for r in to}
+        else:
+            blo, bhi = self.boxes()
+            send = {int(r): np.flatnonzero(self._in_reach(state.x[:n], blo[r], bhi[r])) for r in to}
         got = {int(s): np.zeros(1, np.int64) for s in frm}
         self.net.exchange({r: [np.array([len(rows)], np.int64)] for r, rows in send.items()},
                           {s: [c] for s, c in got.items()}, TAG_HALO_COUNT)

@@ -226,6 +226,16 @@ class Channel:
         self.mpi.Request.Waitall(reqs)
         self.seconds += time.perf_counter() - t
 
+    def split(self, color, key):
+        """A Channel of the ranks that give the same ``color``, ranked by ``key`` (a collective of this
+        Channel; the ranks of a column of domains, ``decomp``). On one rank, this Channel."""
+        if not self.parallel:
+            return self
+        t = time.perf_counter()
+        comm = self.comm.Split(int(color), int(key))
+        self.seconds += time.perf_counter() - t
+        return Channel(comm)
+
     def ghost_plan(self, send_rows, recv_rows, n_fields=3):
         """A ``GhostPlan`` on this communicator (see there); freed at exit if still live."""
         plan = GhostPlan(self, send_rows, recv_rows, n_fields)

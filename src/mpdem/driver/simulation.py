@@ -219,7 +219,8 @@ class Run:
                  f"(epsilon = {cfg.contact.epsilon:.4g}), gamma_t = {law.gamma_t:g}, mu = {law.mu:g}")
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
                  f"E_stop = {cfg.stop.E_stop:.3g} ({cfg.stop.rule}), max_steps = {cfg.run.max_steps}, "
-                 f"seed = {cfg.run.seed}, ranks = {self.domain.size}")
+                 f"seed = {cfg.run.seed}, ranks = {self.domain.size}"
+                 + (f" (grid {' x '.join(map(str, self.domain.grid))})" if self.domain.parallel else ""))
         if self.schedule:
             self.log(self.schedule.describe(p.dt))
 
