@@ -110,3 +110,65 @@ def test_a_grid_that_is_not_the_ranks_is_refused_on_every_rank(comm):
     cfg = config.load(None, PILE + ["run.max_steps=10", f"decomp.grid=[{P + 1}, 1, 1]"])
     with pytest.raises(mpdem.errors.ConfigError, match=rf"decomp.grid = \[{P + 1}, 1, 1\]: {P + 1} domains for {P} "):
         run(cfg, os.path.join(shared_dir(comm), "bad"), comm)
+
+
+def write_tiles(path, tiles, L=6.0, n=5, layers=6, seed=3):
+    """``tiles`` copies side by side in x of a loose stack of n x n layers on an n x n bed, each L x L:
+    a sphere over each hollow of the layer below, 0.001 d above contact, jittered by 2e-4 d in x and y."""
+    a = L / n
+    grid = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * a
+    h = np.sqrt(1.0 - a * a / 2) + 0.001
+    mob = np.concatenate([np.column_stack([(grid + a / 2 * (k % 2 == 0)) % L, np.full(n * n, 0.5 + (k + 1) * h)])
+                          for k in range(layers)])
+    mob[:, :2] = (mob[:, :2] + 2e-4 * np.random.default_rng(seed).uniform(-1, 1, (len(mob), 2))) % L
+    one = np.concatenate([mob, np.column_stack([grid, np.full(n * n, 0.5)])])
+    x = np.concatenate([one + [t * L, 0.0, 0.0] for t in range(tiles)])
+    fixed = np.tile(np.r_[np.zeros(len(mob), np.uint8), np.ones(n * n, np.uint8)], tiles)
+    from mpdem.io import tables
+    tables.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
+
+
+def traffic(comm, tiles, grid):
+    """A rank's bytes a step of the ghost refresh and of the reductions, bytes a rebuild of its exchanges and
+    of its pickled calls, its rows (owned and ghost) and its engine's arrays, the largest over ``comm``'s
+    ranks, in 600 steps of ``tiles`` stacks on ``grid``."""
+    from mpi4py import MPI
+    base = shared_dir(comm)
+    path = os.path.join(base, "tiles.txt")
+    if comm.Get_rank() == 0:
+        write_tiles(path, tiles)
+    comm.Barrier()
+    cfg = config.load(None, ["run.max_steps=600", f"box.L_x={6.0 * tiles}", "box.L_y=6.0", f'run.initial_file="{path}"',
+                             "output.progress_every=100000", "integration.skin=0.05", f"decomp.grid={list(grid)}"])
+    r = Run.new(cfg, os.path.join(base, "run"), comm, quiet=True)
+    before = r.domain.sent
+    r.run()
+    sent = {k: v - before[k] for k, v in r.domain.sent.items()}
+    rebuilds = max(r.engine.n_rebuilds, 1)
+    out = dict(refresh=sent["refresh"] / 600, reductions=sent["reductions"] / 600,
+               exchanges=sent["exchanges"] / rebuilds, pickled=sent["pickled"] / rebuilds, rows=r.state.n_rows,
+               memory=r.engine.memory_bytes())
+    r.finish()
+    return {k: comm.allreduce(v, op=MPI.MAX) for k, v in out.items()}
+
+
+def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm):
+    """Weak scaling at 4 ranks: one stack on 2 ranks (2 x 1 x 1; each half of COMM_WORLD runs its own)
+    against two stacks side by side on 4 (4 x 1 x 1): each rank holds the same box of the same stack, so
+    its refresh, reductions, rebuild exchanges, rows and arrays stay put, within what the rank count itself
+    adds (the all-to-all of counts and the balance's per-rank numbers); an all-to-all of the rows, a gather
+    of every height or a halo of the whole bed would double them."""
+    if comm.Get_size() != 4:
+        return
+    half = comm.Split(comm.Get_rank() // 2, comm.Get_rank())
+    try:
+        small = traffic(half, 1, (2, 1, 1))
+    finally:
+        half.Free()
+    large = traffic(comm, 2, (4, 1, 1))
+    assert small["refresh"] > 0 and small["exchanges"] > 0 and small["pickled"] > 0
+    for k in ("refresh", "reductions", "rows", "memory"):
+        assert 0.8 <= large[k] / small[k] <= 1.25, (k, small[k], large[k])
+    # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds)
+    for k in ("exchanges", "pickled"):
+        assert large[k] <= 1.25 * small[k] + 64 * comm.Get_size(), (k, small[k], large[k])

@@ -148,6 +148,13 @@ class Domain:
         """Wall seconds spent communicating so far [s] (refresh and reductions included)."""
         return self.net.seconds + (self.col_net.seconds if self.col_net is not self.net else 0.0)
 
+    @property
+    def sent(self):
+        """Bytes this rank has sent so far by kind (``Channel.sent``), its column's Channel included."""
+        if self.col_net is self.net:
+            return dict(self.net.sent)
+        return {k: v + self.col_net.sent[k] for k, v in self.net.sent.items()}
+
     # -- exact reductions (order independent, so rank-count independent) --
     def max_many(self, values):
         """Element-wise global max of a float array; NaN becomes +inf first.

@@ -86,6 +86,20 @@ def _everywhere(e):
     return e
 
 
+def payload(obj):
+    """The bytes a pickled exchange of ``obj`` carries, near enough: arrays' bytes, 8 a number or a
+    string's length, summed through dicts, lists and tuples (pickle's framing left out)."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if isinstance(obj, dict):
+        return sum(payload(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(payload(v) for v in obj)
+    if isinstance(obj, (str, bytes)):
+        return len(obj)
+    return 8
+
+
 def channel(net):
     """``net`` as a Channel: a Channel itself, or one made for a communicator or None."""
     return net if isinstance(net, Channel) else Channel(net)
@@ -103,6 +117,10 @@ class Channel:
     ----------
     seconds : float
         Wall seconds spent in communication so far [s].
+    sent : dict of str -> int
+        Bytes this rank has sent so far, by kind: "reductions" (its buffer of each allreduce),
+        "exchanges" (the rebuild's counts and rows), "refresh" (the ghost refresh of every step), and
+        "pickled" (what the pickled exchanges carry: the arrays' bytes and 8 a number, ``payload``).
     """
 
     def __init__(self, comm=None):
@@ -114,6 +132,7 @@ class Channel:
             from mpi4py import MPI
             self.mpi = MPI
         self.seconds = 0.0
+        self.sent = dict.fromkeys(("reductions", "exchanges", "refresh", "pickled"), 0)
         self._max = {}      # length -> (buffer, read-only view)
         self._sum = {}      # shape -> (buffer, read-only view)
 
@@ -176,6 +195,7 @@ class Channel:
             t = time.perf_counter()
             self.comm.Allreduce(self.mpi.IN_PLACE, buf, op=op)
             self.seconds += time.perf_counter() - t
+            self.sent["reductions"] += buf.nbytes
 
     # -- contiguous exchanges (rebuilds) --
     def alltoall_counts(self, counts):
@@ -198,6 +218,7 @@ class Channel:
         t = time.perf_counter()
         self.comm.Alltoall(counts, out)
         self.seconds += time.perf_counter() - t
+        self.sent["exchanges"] += counts.nbytes
         return out
 
     def exchange(self, sends, recvs, tag):
@@ -223,6 +244,7 @@ class Channel:
             reqs += [self.comm.Irecv(a, source=peer, tag=tag + k) for k, a in enumerate(arrays) if a.size]
         for peer, arrays in sends.items():
             reqs += [self.comm.Isend(a, dest=peer, tag=tag + k) for k, a in enumerate(arrays) if a.size]
+            self.sent["exchanges"] += sum(a.nbytes for a in arrays)
         self.mpi.Request.Waitall(reqs)
         self.seconds += time.perf_counter() - t
 
@@ -248,6 +270,7 @@ class Channel:
         if not self.parallel:
             return [obj]
         t = time.perf_counter()
+        self.sent["pickled"] += payload(obj) * (self.size - 1)
         out = self.comm.allgather(obj)
         self.seconds += time.perf_counter() - t
         return out
@@ -257,6 +280,7 @@ class Channel:
         if not self.parallel:
             return list(objs)
         t = time.perf_counter()
+        self.sent["pickled"] += sum(payload(o) for r, o in enumerate(objs) if r != self.rank)
         out = self.comm.alltoall(objs)
         self.seconds += time.perf_counter() - t
         return out
@@ -266,6 +290,7 @@ class Channel:
         if not self.parallel:
             return [obj]
         t = time.perf_counter()
+        self.sent["pickled"] += payload(obj) if self.rank != root else 0
         out = self.comm.gather(obj, root=root)
         self.seconds += time.perf_counter() - t
         return out
@@ -275,6 +300,8 @@ class Channel:
         if not self.parallel:
             return obj
         t = time.perf_counter()
+        if self.rank == root:
+            self.sent["pickled"] += payload(obj) * (self.size - 1)
         out = self.comm.bcast(obj, root=root)
         self.seconds += time.perf_counter() - t
         return out
@@ -295,6 +322,7 @@ class Channel:
             t = time.perf_counter()
             self.comm.Allreduce(self.mpi.IN_PLACE, a, op=self.mpi.SUM)
             self.seconds += time.perf_counter() - t
+            self.sent["reductions"] += a.nbytes
         return a
 
     def barrier(self):
@@ -416,6 +444,7 @@ class GhostPlan:
         for start, block in self.recvs:
             self._scatter(fields, start, block)
         self.channel.seconds += time.perf_counter() - t
+        self.channel.sent["refresh"] += self.send_buf.nbytes
 
     def free(self):
         """Release the persistent requests (the plan cannot run afterwards)."""
