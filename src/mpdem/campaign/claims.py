@@ -107,8 +107,11 @@ CLAIMS = [
           also=[Window("S12", "10-30"), S("S08", "z", "N 5000"), S("S02", "z", "N 2000"),
                 S("S13", "z", "stop 100 × stricter")],
           if_differs=("open", "below the paper (and the reference implementation at N = 2000) by some 0.009; a "
-                              "100 times stricter stop raises one pile by 0.002 (S13); the pours that never reach "
-                              "the stop rule (2 of 6 at μ = 0) may bias the rest: not yet counted")),
+                              "100 times stricter stop raises one pile by 0.002 (S13); the 2 of 6 pours that have "
+                              "not reached the stop rule (seed 4 and bed 102, still rearranging at E_k/N 2-4e-6) "
+                              "hold z = 6.105 and 6.119 at their newest checkpoints (NOTES.md, 2026-11-28): "
+                              "leaving them out raises the mean, so they do not explain a mean below the paper's "
+                              "unless they climb past 6.144 before they stop")),
     Claim("2", "z, μ = 0, ε = 0.26", "6.144 ± 0.002", "compare", 6.144, 0.002, ours=[S("S11")],
           also=[S("S01", "z", "N 2000")]),
     Claim("3", "z at μ = 0 the same for ε = 0.88 and 0.26", "equal (both 6.144 ± 0.002)", "compare", 0.0,
