@@ -419,17 +419,19 @@ def _main(argv):
     if n_threads and net.rank == 0:
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
-    from .errors import MpdemError
+    from .errors import Interrupted, MpdemError
     handlers = {"run": cmd_run, "restart": cmd_restart, "stiffen": cmd_stiffen, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, net)
     except MpdemError as e:
+        # a stop signal before the first step (``watch``): its own status, not an error
+        stopped = isinstance(e, Interrupted)
         if e.agreed:               # every rank is here with the same message: one line, no abort
             if net.rank == 0:
-                sys.stderr.write(f"mpdem: error: {e}\n")
+                sys.stderr.write(f"mpdem: {'' if stopped else 'error: '}{e}\n")
                 sys.stderr.flush()
-            _exit(net, EXIT_ERROR)
+            _exit(net, e.status if stopped else EXIT_ERROR)
         _fail(net, f"mpdem: error: {e}")
     except NotImplementedError as e:
         _fail(net, f"mpdem: error: {e}")

@@ -1,0 +1,143 @@
+"""The set-up's watch: progress said at least every half minute, and SIGTERM or SIGINT honoured
+within seconds, before the first step.
+
+A new run's set-up (the bed, the pour's insertion, the checks of the initial state, the rows sent
+to their ranks, the first neighbour-list build) is cut into short calls of work (``build``:
+``insert_random`` in batches, ``make_bed``'s settle in calls of ``SETTLE_ROW_STEPS``
+sphere-steps). Between two calls the work looks at its ``Watch``: a progress line when
+``every`` seconds have passed since the last line (on rank 0, through the run's log), and a stop
+signal received since the set-up began ends it with ``Interrupted``.
+
+Nothing is saved during the set-up, so a stop there ends the process at once: one line, exit
+status 128 + the signal's number (143 for SIGTERM, 130 for SIGINT, as a shell reports a process
+ended by that signal), no state file. A stop must reach every rank together, or the others would
+wait in a collective for ever: work that every rank does alike (the insertion, the first build)
+looks with ``everywhere=True``, which agrees the signals by one max over the ranks; work of rank 0
+alone (making the bed) looks on its own, and its ``Interrupted`` reaches the other ranks with the
+bed's broadcast (``parallel.Channel.on_root``). SIGUSR1, a batch system's early warning, is not a
+stop here: the run's first step takes it and writes a checkpoint (``driver.simulation``).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+from .errors import Interrupted
+
+# the signals that stop a set-up
+STOP = (signal.SIGTERM, signal.SIGINT)
+# the longest time between two progress lines of a set-up [s] (a call of work lasts a few seconds
+# at most, so a line comes well within half a minute)
+EVERY = 20.0
+# the environment variable that sets another such time [s] (the tests: lines after every call)
+EVERY_ENV = "MPDEM_SETUP_PROGRESS"
+
+
+def every_default():
+    """``$MPDEM_SETUP_PROGRESS`` seconds if set (a number >= 0), else ``EVERY`` [s]."""
+    try:
+        t = float(os.environ.get(EVERY_ENV, EVERY))
+    except ValueError:
+        return EVERY
+    return t if t >= 0 else EVERY
+
+
+class Watch:
+    """The looks of a set-up between its calls of work.
+
+    Parameters
+    ----------
+    log : callable
+        Takes a progress line (the run's ``Logger``: rank 0 prints it and keeps it in the log).
+    net : parallel.Channel or None
+        The run's ranks (None: one).
+    signals : list or None
+        Signal numbers received so far; the watch's handlers append to it (the command line's
+        list, shared with the run's loop).
+    every : float or None
+        Seconds between progress lines at most [s]; None: ``every_default()``.
+    clock : callable
+        Seconds, monotonic [s].
+
+    Use it as a context manager: inside, SIGTERM and SIGINT are recorded instead of ending the
+    process (SIGINT raises no KeyboardInterrupt), and the handlers before it are back after it.
+    """
+
+    def __init__(self, log, net=None, signals=None, every=None, clock=time.monotonic):
+        self.log, self.net = log, net
+        self.signals = [] if signals is None else signals
+        self.every, self.clock = every_default() if every is None else every, clock
+        self.t0 = self.last = clock()
+        self.phase = "the set-up"
+        self._old = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._old = {s: signal.signal(s, self._record) for s in STOP}
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+        self._old = {}
+        return False
+
+    def _record(self, signum, frame):
+        self.signals.append(int(signum))
+
+    def pending(self):
+        """The highest stop signal received so far (0: none)."""
+        return max((s for s in self.signals if s in STOP), default=0)
+
+    def elapsed(self):
+        """Seconds since the set-up began [s]."""
+        return self.clock() - self.t0
+
+    def begin(self, phase, line=None):
+        """A new phase of the set-up (named in a stop's message), with a line said at once."""
+        self.phase = phase
+        if line:
+            self.say(line)
+
+    def say(self, line):
+        """Say ``line`` now, with the seconds since the set-up began."""
+        self.log(f"{line} ({self.elapsed():.0f} s)")
+        self.last = self.clock()
+
+    def __call__(self, line=None, everywhere=False):
+        """A look between two calls of work: raise ``Interrupted`` on a stop signal, else say
+        ``line`` (a callable giving it, or a str) if ``every`` seconds passed since the last line.
+
+        Parameters
+        ----------
+        line : str, callable or None
+        everywhere : bool
+            Every rank looks here together (collective): the signals are agreed over the ranks,
+            and a stop raises on all of them.
+        """
+        sig = self.pending()
+        if everywhere and self.net is not None and self.net.parallel:
+            sig = int(self.net.max_many([float(sig)])[0])
+        if sig:
+            e = interrupted(sig, self.phase)
+            note = getattr(self.log, "note", None)     # the log file keeps it too (the run's Logger)
+            if note is not None:
+                note(f"stop: {e}")
+            raise e
+        if line is not None and self.clock() - self.last >= self.every:
+            self.say(line() if callable(line) else line)
+
+    def local(self, line_of=None):
+        """A look for work of this rank alone (``make_bed``'s ``progress``): takes the work's line."""
+        return lambda line=None: self(line if line_of is None else line_of(line))
+
+
+def interrupted(sig, phase):
+    """The ``Interrupted`` of stop signal ``sig`` received during ``phase`` (agreed: every rank raises it)."""
+    name = signal.Signals(sig).name
+    e = Interrupted(f"stopped by {name} during {phase}, before the first step: nothing was saved; start "
+                    f"the run again (with --force to reuse its directory)", 128 + sig)
+    e.agreed = True
+    return e

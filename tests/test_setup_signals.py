@@ -1,0 +1,72 @@
+"""SIGTERM and SIGINT during a new run's set-up (issue 57, item 6): honoured within seconds, with
+one line, exit status 128 + the signal, no traceback and no state file (``mpdem.watch``)."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def start(tmp_path, sets, env=None):
+    """``python -m mpdem run`` in a process of its own, with a progress line after every short call."""
+    args = [sys.executable, "-m", "mpdem", "run", "--out", str(tmp_path / "run")]
+    for s in sets + ["run.max_steps=10"]:
+        args += ["--set", s]
+    e = dict(os.environ, PYTHONPATH=str(ROOT / "src"), MPDEM_SETUP_PROGRESS="0", MPDEM_BED_CACHE=str(tmp_path / "beds"),
+             **(env or {}))
+    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=e, cwd=tmp_path)
+
+
+def stop_at(proc, marker, sig, limit=120):
+    """Send ``sig`` once a stdout line starts with ``marker`` (work under way: the kernels compiled);
+    the seconds from the signal to the exit, and stdout and stderr."""
+    t_end = time.monotonic() + limit
+    seen = []
+    for line in proc.stdout:
+        seen.append(line)
+        if line.startswith(marker):
+            break
+        assert time.monotonic() < t_end, "".join(seen)
+    else:
+        pytest.fail(f"no line {marker!r} before the run ended: {''.join(seen)}{proc.stderr.read()}")
+    t = time.monotonic()
+    proc.send_signal(sig)
+    try:
+        out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"{sig.name} not honoured within 30 s")
+    return time.monotonic() - t, "".join(seen) + out, err
+
+
+def assert_clean_stop(tmp_path, seconds, err, rc, sig, phase):
+    assert seconds < 5.0, f"{seconds:.1f} s from {sig.name} to the exit"
+    assert rc == 128 + sig
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert lines[-1].startswith(f"mpdem: stopped by {sig.name} during {phase}, before the first step: nothing "
+                                f"was saved")
+    # nothing under a state file's name, and no bed kept from a bed not finished
+    assert not list((tmp_path / "run").rglob("*.h5"))
+    if phase == "the making of the bed":
+        assert not (tmp_path / "beds").exists() or not list((tmp_path / "beds").glob("bed-*.npz"))
+    assert f"stopped by {sig.name}" in (tmp_path / "run" / "log.txt").read_text()
+
+
+def test_sigterm_while_the_bed_is_made_stops_the_run_within_seconds(tmp_path):
+    # a 24 d x 24 d bed: 4608 spheres settled for 40 tau, minutes of work in calls of about a second
+    proc = start(tmp_path, ["box.L_x=24.0", "box.L_y=24.0", "pour.N=100"])
+    seconds, out, err = stop_at(proc, "bed: settling", signal.SIGTERM)
+    assert_clean_stop(tmp_path, seconds, err, proc.returncode, signal.SIGTERM, "the making of the bed")
+
+
+def test_sigint_during_the_insertion_stops_the_run_within_seconds(tmp_path):
+    # a small bed, made quickly, under a pour of 3e6 spheres (tens of seconds of insertion)
+    proc = start(tmp_path, ["box.L_x=6.0", "box.L_y=6.0", "bed.settle_time=1.0", "pour.N=3000000"])
+    seconds, out, err = stop_at(proc, "pour: ", signal.SIGINT)
+    assert_clean_stop(tmp_path, seconds, err, proc.returncode, signal.SIGINT, "the pour's insertion")
