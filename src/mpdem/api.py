@@ -240,12 +240,16 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     if cfg.engine.device == "gpu":
         from .engine import gpu
         gpu.require()       # no GPU here: one line, before the run directory is made
+    # a run that cannot fit in memory: one line on every rank, before the run directory is made
+    from . import footprint
+    memory_line = footprint.check(cfg, net, footprint.initial_count(cfg, initial))
 
     def go(held):
+        say = Logger(os.path.join(out, "log.txt"), quiet, net.rank)
         if held is not None and held.taken_over:
-            say = Logger(os.path.join(out, "log.txt"), quiet, net.rank)
             say.warn(held.taken_over)
-            say.close()
+        say(memory_line)
+        say.close()
         r = Run.new(cfg, out, net, lammps_initial=initial, quiet=quiet, walltime=walltime, margin=walltime_margin,
                     t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         return _go(r)
