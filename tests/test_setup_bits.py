@@ -75,3 +75,24 @@ def test_the_bed_settled_in_short_calls_is_the_bed_of_one_call_a_tenth(monkeypat
     assert digest(made.x) == digest(bed_in_one_call_a_tenth(cfg))
     settle = [ln for ln in lines if "settling" in ln]
     assert len(settle) >= 1500 // 7 and settle[-1].endswith("step 1500/1500")
+
+
+def test_the_loop_in_shorter_quiet_spans_gives_the_same_digest(tmp_path, monkeypatch):
+    # a large pile's spans between the loop's looks at signals are cut to QUIET_ROW_STEPS sphere-steps;
+    # cut a small pile's to some forty steps, which no schedule's step divides (500 between samples)
+    from mpdem.driver import simulation
+    sets = {"pour.N": 200, "box.L_x": 5.0, "box.L_y": 5.0, "pour.phi_i": 0.3, "pour.K0": 5.0,
+            "bed.settle_time": 1.0, "stop.sample_interval": 0.05, "run.max_steps": 6000}
+    cfg = mpdem.load_config(**sets)
+    whole = mpdem.run(cfg, str(tmp_path / "whole"))
+    spans = []
+    quiet = simulation.Run._quiet_steps
+
+    def seen(self, *a, **k):
+        spans.append(quiet(self, *a, **k))
+        return spans[-1]
+    monkeypatch.setattr(simulation.Run, "_quiet_steps", seen)
+    monkeypatch.setattr(simulation, "QUIET_ROW_STEPS", 37 * 250)
+    cut = mpdem.run(cfg, str(tmp_path / "cut"))
+    assert 37 <= max(spans) < 60 and whole.steps == cut.steps == 6000
+    assert cut.digest == whole.digest

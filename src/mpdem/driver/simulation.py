@@ -44,6 +44,9 @@ from ..state import State
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 # steps an engine may run in one go between the driver's looks at signals and the wall clock (``run_quiet``)
 QUIET_MOST = 2000
+# and at most this many sphere-steps of this rank's rows (a few seconds: a stop signal is honoured
+# within seconds however large the pile)
+QUIET_ROW_STEPS = 40_000_000
 
 
 class StepFlags(NamedTuple):
@@ -332,8 +335,12 @@ class Run:
 
     def _quiet_steps(self, step, max_steps, progress, most=QUIET_MOST):
         """Steps after ``step`` that no schedule reads after (no stop sample, progress line,
-        snapshot, step checkpoint; short of ``max_steps``), up to ``most``: the engine may run them
-        without stopping (``run_quiet``). Their flags are those of the first of them."""
+        snapshot, step checkpoint; short of ``max_steps``), up to ``most`` and to ``QUIET_ROW_STEPS``
+        sphere-steps of a rank's share of the pile: the engine may run them without stopping
+        (``run_quiet``). Their flags are those of the first of them. The same on every rank (the
+        steps after them are collective)."""
+        share = (self.n_mobile + self.n_bed) // self.domain.size
+        most = min(most, max(1, QUIET_ROW_STEPS // max(share, 1)))
         return quiet_span(step, max_steps, (self.stop, progress, self.snapshots, self.checkpoints), most)
 
     def _flags_now(self):
