@@ -70,3 +70,31 @@ def test_sigint_during_the_insertion_stops_the_run_within_seconds(tmp_path):
     proc = start(tmp_path, ["box.L_x=6.0", "box.L_y=6.0", "bed.settle_time=1.0", "pour.N=3000000"])
     seconds, out, err = stop_at(proc, "pour: ", signal.SIGINT)
     assert_clean_stop(tmp_path, seconds, err, proc.returncode, signal.SIGINT, "the pour's insertion")
+
+
+GUARDED = """
+import os, signal, sys, time
+from mpdem.watch import Watch
+with Watch(print) as w:
+    w.begin("a long compile")
+    print("ready", flush=True)
+    t = time.monotonic()
+    while time.monotonic() - t < 30:      # Python work without a look, as numba's compiler is
+        sum(range(1000))
+print("not stopped")
+"""
+
+
+def test_a_stop_that_no_look_takes_ends_the_process_after_the_grace(tmp_path):
+    from mpdem.watch import GRACE
+    proc = subprocess.Popen([sys.executable, "-c", GUARDED], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+    assert proc.stdout.readline().strip() == "ready"
+    t = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    seconds = time.monotonic() - t
+    assert GRACE <= seconds < GRACE + 2.0
+    assert proc.returncode == 128 + signal.SIGTERM and "not stopped" not in out
+    assert err.strip() == ("mpdem: stopped by SIGTERM during a long compile, before the first step: nothing was saved; "
+                           "start the run again (with --force to reuse its directory)")

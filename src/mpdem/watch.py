@@ -16,11 +16,21 @@ looks with ``everywhere=True``, which agrees the signals by one max over the ran
 alone (making the bed) looks on its own, and its ``Interrupted`` reaches the other ranks with the
 bed's broadcast (``parallel.Channel.on_root``). SIGUSR1, a batch system's early warning, is not a
 stop here: the run's first step takes it and writes a checkpoint (``driver.simulation``).
+
+Some work has no short calls to look between: numba compiling or loading its kernels (the first
+calls of a process), the first neighbour-list build. There a guard thread, told of each signal at
+once through ``signal.set_wakeup_fd``, ends the process itself when a stop has waited ``GRACE``
+seconds for a look: the same line (rank 0), the same status, ``os._exit`` (no file is open for
+writing under its real name during the set-up: every file is written under a temporary name and
+renamed). Under mpiexec the launcher then ends the other ranks. The guard needs the interpreter's
+lock, which a running numba kernel holds, so the kernels stay in short calls all the same.
 """
 from __future__ import annotations
 
 import os
+import select
 import signal
+import sys
 import threading
 import time
 
@@ -31,6 +41,8 @@ STOP = (signal.SIGTERM, signal.SIGINT)
 # the longest time between two progress lines of a set-up [s] (a call of work lasts a few seconds
 # at most, so a line comes well within half a minute)
 EVERY = 20.0
+# seconds a stop signal waits for a look before the guard thread ends the process [s]
+GRACE = 3.0
 # the environment variable that sets another such time [s] (the tests: lines after every call)
 EVERY_ENV = "MPDEM_SETUP_PROGRESS"
 
@@ -72,17 +84,77 @@ class Watch:
         self.t0 = self.last = clock()
         self.phase = "the set-up"
         self._old = {}
+        self._guard, self._stopping = None, False
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
             self._old = {s: signal.signal(s, self._record) for s in STOP}
+            self._start_guard()
         return self
 
     def __exit__(self, *exc):
+        self._stop_guard()
         for s, h in self._old.items():
             signal.signal(s, h)
         self._old = {}
         return False
+
+    # -- the guard thread: a stop that no look takes within GRACE seconds ends the process --
+    def _start_guard(self):
+        self._stopping = False
+        try:
+            r, w = os.pipe()
+            os.set_blocking(w, False)
+            self._old_fd = signal.set_wakeup_fd(w)
+        except (OSError, ValueError):
+            self._guard = None
+            return
+        self._pipe = (r, w)
+        self._guard = threading.Event()
+        threading.Thread(target=self._watch_signals, args=(r, self._guard), daemon=True,
+                         name="mpdem-setup-guard").start()
+
+    def _stop_guard(self):
+        if getattr(self, "_guard", None) is None:
+            return
+        self._guard.set()
+        signal.set_wakeup_fd(self._old_fd)
+        self._guard = None
+        # the thread closes the pipe's read end; this side closes its write end
+        os.close(self._pipe[1])
+
+    def _watch_signals(self, fd, done):
+        """The guard thread: the stop signals as they come (the wakeup fd's bytes), and the end of the
+        process when one has waited ``GRACE`` seconds for a look."""
+        first, sig = None, 0
+        try:
+            while not done.is_set():
+                ready, _, _ = select.select([fd], [], [], 0.25)
+                if ready:
+                    try:
+                        got = os.read(fd, 64)
+                    except OSError:
+                        got = b""
+                    stops = [b for b in got if b in STOP]
+                    if stops:
+                        sig = max(sig, *stops)
+                        first = first if first is not None else self.clock()
+                if first is not None and self.clock() - first >= GRACE and not done.is_set() and not self._stopping:
+                    self._end_now(sig)
+        finally:
+            os.close(fd)
+
+    def _end_now(self, sig):
+        """End the process from the guard thread: the stop's line (rank 0), its status."""
+        e = interrupted(sig, self.phase)
+        note = getattr(self.log, "note", None)
+        if self.net is None or self.net.rank == 0:
+            if note is not None:
+                note(f"stop: {e}")
+            sys.stderr.write(f"mpdem: {e}\n")
+            sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(e.status)
 
     def _record(self, signum, frame):
         self.signals.append(int(signum))
@@ -121,6 +193,7 @@ class Watch:
         if everywhere and self.net is not None and self.net.parallel:
             sig = int(self.net.max_many([float(sig)])[0])
         if sig:
+            self._stopping = True
             e = interrupted(sig, self.phase)
             note = getattr(self.log, "note", None)     # the log file keeps it too (the run's Logger)
             if note is not None:
