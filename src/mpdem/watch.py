@@ -22,8 +22,9 @@ calls of a process), the first neighbour-list build. There a guard thread, told 
 once through ``signal.set_wakeup_fd``, ends the process itself when a stop has waited ``GRACE``
 seconds for a look: the same line (rank 0), the same status, ``os._exit`` (no file is open for
 writing under its real name during the set-up: every file is written under a temporary name and
-renamed). Under mpiexec the launcher then ends the other ranks. The guard needs the interpreter's
-lock, which a running numba kernel holds, so the kernels stay in short calls all the same.
+renamed). Under mpiexec the launcher then ends the other ranks. The guard also says a line when
+no look has said one for ``every`` seconds. It needs the interpreter's lock, which a running numba
+kernel holds, so the kernels stay in short calls all the same.
 """
 from __future__ import annotations
 
@@ -141,6 +142,9 @@ class Watch:
                         first = first if first is not None else self.clock()
                 if first is not None and self.clock() - first >= GRACE and not done.is_set() and not self._stopping:
                     self._end_now(sig)
+                # no look for a while (numba compiling): a line all the same
+                if self.every and self.clock() - self.last >= self.every and not done.is_set():
+                    self.say(f"set-up: {self.phase} goes on")
         finally:
             os.close(fd)
 
