@@ -98,3 +98,21 @@ def test_a_stop_that_no_look_takes_ends_the_process_after_the_grace(tmp_path):
     assert proc.returncode == 128 + signal.SIGTERM and "not stopped" not in out
     assert err.strip() == ("mpdem: stopped by SIGTERM during a long compile, before the first step: nothing was saved; "
                            "start the run again (with --force to reuse its directory)")
+
+
+def test_the_watch_says_a_line_when_its_time_has_come_and_stops_on_a_stop_signal():
+    from mpdem.errors import Interrupted
+    from mpdem.watch import Watch
+    now, lines, signals = [0.0], [], []
+    w = Watch(lines.append, signals=signals, every=20.0, clock=lambda: now[0])
+    w.begin("the pour's insertion")
+    for t in range(0, 61, 2):       # a look every 2 s of work
+        now[0] = float(t)
+        w(lambda: f"placed at {now[0]:.0f}")
+    assert lines == ["placed at 20 (20 s)", "placed at 40 (40 s)", "placed at 60 (60 s)"]
+    signals.append(int(signal.SIGUSR1))      # a batch system's warning: the first step's checkpoint
+    w("ignored")
+    signals.append(int(signal.SIGINT))
+    with pytest.raises(Interrupted, match="^stopped by SIGINT during the pour's insertion, before the first step") as e:
+        w("not said")
+    assert e.value.status == 130 and e.value.agreed

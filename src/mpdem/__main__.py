@@ -14,7 +14,9 @@
 
 Exit status: 0 finished (converged), 3 finished at run.max_steps without
 converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
-a checkpoint ("not finished, restart me"), 1 error, 2 usage error.
+a checkpoint ("not finished, restart me"), 1 error, 2 usage error, 128 + the
+signal (143 SIGTERM, 130 SIGINT) stopped before the first step, nothing saved
+(``watch``).
 
 MPI starts here (``parallel.world``) and its Channel is passed down; an
 exception on any rank aborts all ranks with its message.

@@ -23,7 +23,7 @@ once through ``signal.set_wakeup_fd``, ends the process itself when a stop has w
 seconds for a look: the same line (rank 0), the same status, ``os._exit`` (no file is open for
 writing under its real name during the set-up: every file is written under a temporary name and
 renamed). Under mpiexec the launcher then ends the other ranks. The guard also says a line when
-no look has said one for ``every`` seconds. It needs the interpreter's lock, which a running numba
+no look has said one for ``every`` + ``GUARD_LATER`` seconds (28 s). It needs the interpreter's lock, which a running numba
 kernel holds, so the kernels stay in short calls all the same.
 """
 from __future__ import annotations
@@ -44,6 +44,8 @@ STOP = (signal.SIGTERM, signal.SIGINT)
 EVERY = 20.0
 # seconds a stop signal waits for a look before the guard thread ends the process [s]
 GRACE = 3.0
+# seconds after ``every`` at which the guard says its line when no look has said one [s]
+GUARD_LATER = 8.0
 # the environment variable that sets another such time [s] (the tests: lines after every call)
 EVERY_ENV = "MPDEM_SETUP_PROGRESS"
 
@@ -142,8 +144,8 @@ class Watch:
                         first = first if first is not None else self.clock()
                 if first is not None and self.clock() - first >= GRACE and not done.is_set() and not self._stopping:
                     self._end_now(sig)
-                # no look for a while (numba compiling): a line all the same
-                if self.every and self.clock() - self.last >= self.every and not done.is_set():
+                # no look for a while (numba compiling): a line all the same, later than a look's would be
+                if self.every and self.clock() - self.last >= self.every + GUARD_LATER and not done.is_set():
                     self.say(f"set-up: {self.phase} goes on")
         finally:
             os.close(fd)
