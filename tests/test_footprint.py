@@ -1,6 +1,7 @@
 """The memory a run needs (``mpdem.footprint``): the estimate against a run's measured peak, and
 the refusal of a run that cannot fit, in one line before any work (issue 57, item 6)."""
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -95,3 +96,17 @@ def test_the_limit_of_the_environment(text, value):
 def test_a_limit_that_is_not_a_size_is_one_line():
     with pytest.raises(mpdem.errors.MemoryRefused, match="MPDEM_MEMORY_LIMIT='lots': accepted bytes"):
         footprint.available(env={footprint.ENV: "lots"})
+
+
+def test_a_restart_on_too_little_memory_is_refused_in_one_line(tmp_path):
+    r = run(tmp_path, ["pour.N=100", "box.L_x=4.0", "box.L_y=4.0", "bed.settle_time=0.5", "run.max_steps=10"])
+    assert r.returncode == 3, r.stderr
+    e = dict(os.environ, PYTHONPATH=str(ROOT / "src"), **{footprint.ENV: "1M"})
+    p = subprocess.run([sys.executable, "-m", "mpdem", "restart", str(tmp_path / "run"), "--set", "run.max_steps=20"],
+                       capture_output=True, text=True, env=e, timeout=120)
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    # one line, naming the spheres of the state file it would go on from
+    assert re.fullmatch(r"mpdem: error: \d+ spheres of \S+final\.h5 on 1 rank\(s\) need about .*", p.stderr.strip())
+    assert "more than the 1.05 MB available (MPDEM_MEMORY_LIMIT=1M)" in p.stderr
+    # nothing changed: the run's final state is its last
+    assert not list((tmp_path / "run" / "checkpoints").glob("*.h5"))

@@ -318,9 +318,14 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
         # the files are chosen and read under the lock: no other writer can change them meanwhile
         t = rs.open_target(out, net, items)
         rs.check_room(t, net)
+        # a pile that cannot fit on these ranks: one line on every rank, before its arrays are made
+        from . import footprint
+        n = int(t.attrs["n"])
+        memory_line = footprint.check(t.cfg, net, n, label=f"{n} spheres of {t.path}")
         say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
         if held is not None and held.taken_over:
             say.warn(held.taken_over)
+        say(memory_line)
         status = rs.verdict(t, say)
         say.close()
         if status is not None:

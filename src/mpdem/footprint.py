@@ -317,32 +317,37 @@ def words(b):
     return f"{b / 1e3:.3g} kB"
 
 
-def what(cfg, n_file):
-    """The spheres of a run, in words (``pour.N = 1000000 spheres``)."""
+def what(cfg, n_file, label=None):
+    """The spheres of a run, in words (``pour.N = 1000000 spheres``), or ``label``."""
+    if label:
+        return label
     return f"{n_file} spheres of run.initial_file" if n_file is not None else f"pour.N = {cfg.pour.N} spheres"
 
 
-def verdict(cfg, ranks, local, n_file=None, env=None):
+def verdict(cfg, ranks, local, n_file=None, env=None, label=None):
     """(the log's line on the memory, the refusal's line or None) for a run of ``cfg`` on ``ranks``
-    ranks, ``local`` of them on this node."""
+    ranks, ``local`` of them on this node; ``label`` names its spheres in the lines."""
     est = of_config(cfg, ranks, n_file)
     avail, where = available(local, env)
     need = est.node(local)
     share = f"{local} ranks of this node {words(need)}, " if local > 1 else ""
-    line = (f"memory: {what(cfg, n_file)} (+ bed) on {ranks} rank(s) need about {words(est.rank0())} on rank 0 "
+    line = (f"memory: {what(cfg, n_file, label)} (+ bed) on {ranks} rank(s) need about {words(est.rank0())} on rank 0 "
             f"(its peak at {est.peak_phase()}), {words(est.other())} on another; {share}available "
             f"{words(avail) if avail is not None else '?'} ({where})")
     if avail is None or need <= avail:
         return line, None
-    refuse = (f"{what(cfg, n_file)} on {ranks} rank(s) need about {words(est.rank0())} on rank 0 (its peak at "
+    refuse = (f"{what(cfg, n_file, label)} on {ranks} rank(s) need about {words(est.rank0())} on rank 0 (its peak at "
               f"{est.peak_phase()}){f' and {words(need)} for the {local} ranks of this node' if local > 1 else ''}"
               f", more than the {words(avail)} available ({where}): run fewer spheres, more nodes, or give the "
               f"job more memory ({ENV} sets what is available; off: no check)")
     return line, refuse
 
 
-def check(cfg, net, n_file=None, env=None):
+def check(cfg, net, n_file=None, env=None, label=None):
     """Refuse a run that cannot fit, on every rank, before any work (collective); the log's line.
+
+    ``n_file``: the spheres of a pile read from a file (``initial_count``; a restart's state file),
+    None for a pour; ``label`` names them in the lines.
 
     Raises
     ------
@@ -354,7 +359,7 @@ def check(cfg, net, n_file=None, env=None):
     if n_file is not None and n_file < 0:
         return "memory: not estimated (the initial file's spheres are counted as it is read)"
     try:
-        line, refuse = verdict(cfg, net.size, min(ranks_on_node(), net.size), n_file, env)
+        line, refuse = verdict(cfg, net.size, min(ranks_on_node(), net.size), n_file, env, label)
     except MemoryRefused as e:
         line, refuse = "", str(e)
     net.agree(refuse, MemoryRefused)
