@@ -2,7 +2,8 @@
 
 The insertion draws its candidates in short batches and the bed-making settle runs in short
 calls, so that a run can say its progress and honour a stop signal between them; the initial
-state must be the one the single long calls made.
+state must be the one the single long calls made. The run's loop, too, looks at signals after
+spans of at most ``QUIET_ROW_STEPS`` sphere-steps, with the digest of its longer spans.
 """
 import hashlib
 import math

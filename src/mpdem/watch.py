@@ -20,7 +20,7 @@ stop here: the run's first step takes it and writes a checkpoint (``driver.simul
 Some work has no short calls to look between: numba compiling or loading its kernels (the first
 calls of a process), the first neighbour-list build. There a guard thread, told of each signal at
 once through ``signal.set_wakeup_fd``, ends the process itself when a stop has waited ``GRACE``
-seconds for a look: the same line (rank 0), the same status, ``os._exit`` (no file is open for
+seconds for a look (another rank than 0 a second more, so that rank 0 says the line): the same line (rank 0), the same status, ``os._exit`` (no file is open for
 writing under its real name during the set-up: every file is written under a temporary name and
 renamed). Under mpiexec the launcher then ends the other ranks. The guard also says a line when
 no look has said one for ``every`` + ``GUARD_LATER`` seconds (28 s). It needs the interpreter's lock, which a running numba
@@ -130,6 +130,8 @@ class Watch:
         """The guard thread: the stop signals as they come (the wakeup fd's bytes), and the end of the
         process when one has waited ``GRACE`` seconds for a look."""
         first, sig = None, 0
+        # rank 0 first, so that its line is said before the launcher ends the other ranks
+        grace = GRACE if self.net is None or self.net.rank == 0 else GRACE + 1.0
         try:
             while not done.is_set():
                 ready, _, _ = select.select([fd], [], [], 0.25)
@@ -142,7 +144,7 @@ class Watch:
                     if stops:
                         sig = max(sig, *stops)
                         first = first if first is not None else self.clock()
-                if first is not None and self.clock() - first >= GRACE and not done.is_set() and not self._stopping:
+                if first is not None and self.clock() - first >= grace and not done.is_set() and not self._stopping:
                     self._end_now(sig)
                 # no look for a while (numba compiling): a line all the same, later than a look's would be
                 if self.every and self.clock() - self.last >= self.every + GUARD_LATER and not done.is_set():
