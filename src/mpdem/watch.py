@@ -43,7 +43,7 @@ STOP = (signal.SIGTERM, signal.SIGINT)
 # at most, so a line comes well within half a minute)
 EVERY = 20.0
 # seconds a stop signal waits for a look before the guard thread ends the process [s]
-GRACE = 3.0
+GRACE = 2.0
 # seconds after ``every`` at which the guard says its line when no look has said one [s]
 GUARD_LATER = 8.0
 # the environment variable that sets another such time [s] (the tests: lines after every call)
