@@ -74,7 +74,9 @@ def test_sigint_during_the_insertion_stops_the_run_within_seconds(tmp_path):
 
 GUARDED = """
 import os, signal, sys, time
+from mpdem import watch
 from mpdem.watch import Watch
+watch.ENDS_PROCESS = True       # as the command line's process
 with Watch(print) as w:
     w.begin("a long compile")
     print("ready", flush=True)

@@ -367,6 +367,9 @@ def parser():
 def main(argv=None, program=False):
     """The command line; ``program``: this process is ``python -m mpdem`` and ends after it."""
     import signal
+    if program:
+        from . import watch
+        watch.ENDS_PROCESS = True      # a set-up's stop may end the process itself (``watch``)
     old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
            for s in (signal.SIGTERM, signal.SIGUSR1)}
     # an in-process caller (tests) gets its thread settings back

@@ -20,7 +20,8 @@ stop here: the run's first step takes it and writes a checkpoint (``driver.simul
 Some work has no short calls to look between: numba compiling or loading its kernels (the first
 calls of a process), the first neighbour-list build. There a guard thread, told of each signal at
 once through ``signal.set_wakeup_fd``, ends the process itself when a stop has waited ``GRACE``
-seconds for a look (another rank than 0 a second more, so that rank 0 says the line): the same line (rank 0), the same status, ``os._exit`` (no file is open for
+seconds for a look (another rank than 0 a second more, so that rank 0 says the line; only in the
+command line's process, ``ENDS_PROCESS``): the same line (rank 0), the same status, ``os._exit`` (no file is open for
 writing under its real name during the set-up: every file is written under a temporary name and
 renamed). Under mpiexec the launcher then ends the other ranks. The guard also says a line when
 no look has said one for ``every`` + ``GUARD_LATER`` seconds (28 s). It needs the interpreter's lock, which a running numba
@@ -42,6 +43,9 @@ STOP = (signal.SIGTERM, signal.SIGINT)
 # the longest time between two progress lines of a set-up [s] (a call of work lasts a few seconds
 # at most, so a line comes well within half a minute)
 EVERY = 20.0
+# whether the guard thread may end the process: the command line's (``python -m mpdem``) alone, never
+# a Python session's that called ``mpdem.run`` (there a stop waits for a look and raises)
+ENDS_PROCESS = False
 # seconds a stop signal waits for a look before the guard thread ends the process [s]
 GRACE = 2.0
 # seconds after ``every`` at which the guard says its line when no look has said one [s]
@@ -144,7 +148,8 @@ class Watch:
                     if stops:
                         sig = max(sig, *stops)
                         first = first if first is not None else self.clock()
-                if first is not None and self.clock() - first >= grace and not done.is_set() and not self._stopping:
+                if (ENDS_PROCESS and first is not None and self.clock() - first >= grace and not done.is_set()
+                        and not self._stopping):
                     self._end_now(sig)
                 # no look for a while (numba compiling): a line all the same, later than a look's would be
                 if self.every and self.clock() - self.last >= self.every + GUARD_LATER and not done.is_set():
