@@ -108,38 +108,43 @@ class Watch:
 
     # -- the guard thread: a stop that no look takes within GRACE seconds ends the process --
     def _start_guard(self):
-        self._stopping = False
-        try:
-            r, w = os.pipe()
-            os.set_blocking(w, False)
-            self._old_fd = signal.set_wakeup_fd(w)
-        except (OSError, ValueError):
-            self._guard = None
-            return
-        self._pipe = (r, w)
+        """The guard thread; told of the signals through a wakeup fd where it may end the process
+        (``ENDS_PROCESS``: a Python session keeps its own wakeup fd, an event loop's)."""
+        self._stopping, self._pipe = False, None
+        if ENDS_PROCESS:
+            try:
+                r, w = os.pipe()
+                os.set_blocking(w, False)
+                self._old_fd = signal.set_wakeup_fd(w)
+                self._pipe = (r, w)
+            except (OSError, ValueError):
+                self._pipe = None
         self._guard = threading.Event()
-        threading.Thread(target=self._watch_signals, args=(r, self._guard), daemon=True,
-                         name="mpdem-setup-guard").start()
+        threading.Thread(target=self._watch_signals, args=(self._pipe[0] if self._pipe else None, self._guard),
+                         daemon=True, name="mpdem-setup-guard").start()
 
     def _stop_guard(self):
         if getattr(self, "_guard", None) is None:
             return
         self._guard.set()
-        signal.set_wakeup_fd(self._old_fd)
         self._guard = None
-        # the thread closes the pipe's read end; this side closes its write end
-        os.close(self._pipe[1])
+        if self._pipe is not None:
+            signal.set_wakeup_fd(self._old_fd)
+            # the thread closes the pipe's read end; this side closes its write end
+            os.close(self._pipe[1])
 
     def _watch_signals(self, fd, done):
-        """The guard thread: the stop signals as they come (the wakeup fd's bytes), and the end of the
-        process when one has waited ``GRACE`` seconds for a look."""
+        """The guard thread: the stop signals as they come (the wakeup fd's bytes, ``fd``; None: none),
+        the end of the process when one has waited ``GRACE`` seconds for a look, and a line when no
+        look has said one for a while."""
         first, sig = None, 0
         # rank 0 first, so that its line is said before the launcher ends the other ranks
         grace = GRACE if self.net is None or self.net.rank == 0 else GRACE + 1.0
         try:
             while not done.is_set():
-                ready, _, _ = select.select([fd], [], [], 0.25)
-                if ready:
+                if fd is None:
+                    done.wait(0.25)
+                elif select.select([fd], [], [], 0.25)[0]:
                     try:
                         got = os.read(fd, 64)
                     except OSError:
@@ -148,14 +153,14 @@ class Watch:
                     if stops:
                         sig = max(sig, *stops)
                         first = first if first is not None else self.clock()
-                if (ENDS_PROCESS and first is not None and self.clock() - first >= grace and not done.is_set()
-                        and not self._stopping):
+                if first is not None and self.clock() - first >= grace and not done.is_set() and not self._stopping:
                     self._end_now(sig)
                 # no look for a while (numba compiling): a line all the same, later than a look's would be
                 if self.every and self.clock() - self.last >= self.every + GUARD_LATER and not done.is_set():
                     self.say(f"set-up: {self.phase} goes on")
         finally:
-            os.close(fd)
+            if fd is not None:
+                os.close(fd)
 
     def _end_now(self, sig):
         """End the process from the guard thread: the stop's line (rank 0), its status."""
