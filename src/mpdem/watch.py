@@ -50,6 +50,8 @@ ENDS_PROCESS = False
 GRACE = 2.0
 # seconds after ``every`` at which the guard says its line when no look has said one [s]
 GUARD_LATER = 8.0
+# how to go on after a new run's stop (its line's end)
+AGAIN_NEW = "start the run again (with --force to reuse its directory)"
 # the environment variable that sets another such time [s] (the tests: lines after every call)
 EVERY_ENV = "MPDEM_SETUP_PROGRESS"
 
@@ -79,17 +81,20 @@ class Watch:
         Seconds between progress lines at most [s]; None: ``every_default()``.
     clock : callable
         Seconds, monotonic [s].
+    again : str
+        How to go on after a stop, in the stop's line (a new run's: start it again).
 
     Use it as a context manager: inside, SIGTERM and SIGINT are recorded instead of ending the
     process (SIGINT raises no KeyboardInterrupt), and the handlers before it are back after it.
     """
 
-    def __init__(self, log, net=None, signals=None, every=None, clock=time.monotonic):
+    def __init__(self, log, net=None, signals=None, every=None, clock=time.monotonic, again=AGAIN_NEW):
         self.log, self.net = log, net
         self.signals = [] if signals is None else signals
         self.every, self.clock = every_default() if every is None else every, clock
         self.t0 = self.last = clock()
         self.phase = "the set-up"
+        self.again = again
         self._old = {}
         self._guard, self._stopping = None, False
 
@@ -164,7 +169,7 @@ class Watch:
 
     def _end_now(self, sig):
         """End the process from the guard thread: the stop's line (rank 0), its status."""
-        e = interrupted(sig, self.phase)
+        e = interrupted(sig, self.phase, self.again)
         note = getattr(self.log, "note", None)
         if self.net is None or self.net.rank == 0:
             if note is not None:
@@ -212,7 +217,7 @@ class Watch:
             sig = int(self.net.max_many([float(sig)])[0])
         if sig:
             self._stopping = True
-            e = interrupted(sig, self.phase)
+            e = interrupted(sig, self.phase, self.again)
             note = getattr(self.log, "note", None)     # the log file keeps it too (the run's Logger)
             if note is not None:
                 note(f"stop: {e}")
@@ -225,10 +230,11 @@ class Watch:
         return lambda line=None: self(line if line_of is None else line_of(line))
 
 
-def interrupted(sig, phase):
-    """The ``Interrupted`` of stop signal ``sig`` received during ``phase`` (agreed: every rank raises it)."""
+def interrupted(sig, phase, again=AGAIN_NEW):
+    """The ``Interrupted`` of stop signal ``sig`` received during ``phase`` (agreed: every rank raises it);
+    ``again`` says how to go on."""
     name = signal.Signals(sig).name
-    e = Interrupted(f"stopped by {name} during {phase}, before the first step: nothing was saved; start "
-                    f"the run again (with --force to reuse its directory)", 128 + sig)
+    e = Interrupted(f"stopped by {name} during {phase}, before the first step: nothing was saved; {again}",
+                    128 + sig)
     e.agreed = True
     return e

@@ -172,7 +172,9 @@ class Run:
         self.margin = (min(60.0, walltime / 20) if margin is None else margin) if walltime else 0.0
         self.signals = [] if signals is None else signals
         # the set-up's watch (``watch``): progress lines and stop signals until the first step
-        self.watch = Watch(self.log, self.domain.net, self.signals).__enter__()
+        again = (f"restart it again (`python -m mpdem restart {out_dir}`)" if target is not None
+                 else "start the run again (with --force to reuse its directory)")
+        self.watch = Watch(self.log, self.domain.net, self.signals, again=again).__enter__()
         try:
             self._set_up(cfg, out_dir, target, lammps_initial)
         except BaseException:
