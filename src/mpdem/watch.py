@@ -20,12 +20,13 @@ stop here: the run's first step takes it and writes a checkpoint (``driver.simul
 Some work has no short calls to look between: numba compiling or loading its kernels (the first
 calls of a process), the first neighbour-list build. There a guard thread, told of each signal at
 once through ``signal.set_wakeup_fd``, ends the process itself when a stop has waited ``GRACE``
-seconds for a look (another rank than 0 a second more, so that rank 0 says the line; only in the
-command line's process, ``ENDS_PROCESS``): the same line (rank 0), the same status, ``os._exit`` (no file is open for
-writing under its real name during the set-up: every file is written under a temporary name and
-renamed). Under mpiexec the launcher then ends the other ranks. The guard also says a line when
-no look has said one for ``every`` + ``GUARD_LATER`` seconds (28 s). It needs the interpreter's lock, which a running numba
-kernel holds, so the kernels stay in short calls all the same.
+seconds for a look (on a rank other than 0 a second more, so that rank 0 says the line; only in
+the command line's process, ``ENDS_PROCESS``): the same line on rank 0, the same status,
+``os._exit``. No file is open for writing under its real name during the set-up (every file is
+written under a temporary name and renamed); under mpiexec the launcher then ends the other ranks.
+The guard also says a line when no look has said one for ``every`` + ``GUARD_LATER`` seconds
+(28 s). It needs the interpreter's lock, which a running numba kernel holds, so the kernels stay
+in short calls all the same.
 """
 from __future__ import annotations
 
