@@ -14,7 +14,9 @@
 
 Exit status: 0 finished (converged), 3 finished at run.max_steps without
 converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
-a checkpoint ("not finished, restart me"), 1 error, 2 usage error.
+a checkpoint ("not finished, restart me"), 1 error, 2 usage error, 128 + the
+signal (143 SIGTERM, 130 SIGINT) stopped before the first step, nothing saved
+(``watch``).
 
 MPI starts here (``parallel.world``) and its Channel is passed down; an
 exception on any rank aborts all ranks with its message.
@@ -365,6 +367,9 @@ def parser():
 def main(argv=None, program=False):
     """The command line; ``program``: this process is ``python -m mpdem`` and ends after it."""
     import signal
+    if program:
+        from . import watch
+        watch.ENDS_PROCESS = True      # a set-up's stop may end the process itself (``watch``)
     old = {s: signal.signal(s, lambda signum, frame: SIGNALS.append(int(signum)))
            for s in (signal.SIGTERM, signal.SIGUSR1)}
     # an in-process caller (tests) gets its thread settings back
@@ -419,17 +424,19 @@ def _main(argv):
     if n_threads and net.rank == 0:
         for w in threads_warnings(n_threads, usable_cores()):
             sys.stderr.write(f"mpdem: warning: {w}\n")
-    from .errors import MpdemError
+    from .errors import Interrupted, MpdemError
     handlers = {"run": cmd_run, "restart": cmd_restart, "stiffen": cmd_stiffen, "info": cmd_info, "export": cmd_export,
                 "bench": cmd_bench, "analyze": cmd_analyze, "collect": cmd_collect}
     try:
         return handlers[args.cmd](args, net)
     except MpdemError as e:
+        # a stop signal before the first step (``watch``): its own status, not an error
+        stopped = isinstance(e, Interrupted)
         if e.agreed:               # every rank is here with the same message: one line, no abort
             if net.rank == 0:
-                sys.stderr.write(f"mpdem: error: {e}\n")
+                sys.stderr.write(f"mpdem: {'' if stopped else 'error: '}{e}\n")
                 sys.stderr.flush()
-            _exit(net, EXIT_ERROR)
+            _exit(net, e.status if stopped else EXIT_ERROR)
         _fail(net, f"mpdem: error: {e}")
     except NotImplementedError as e:
         _fail(net, f"mpdem: error: {e}")

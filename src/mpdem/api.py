@@ -240,12 +240,16 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     if cfg.engine.device == "gpu":
         from .engine import gpu
         gpu.require()       # no GPU here: one line, before the run directory is made
+    # a run that cannot fit in memory: one line on every rank, before the run directory is made
+    from . import footprint
+    memory_line = footprint.check(cfg, net, footprint.initial_count(cfg, initial))
 
     def go(held):
+        say = Logger(os.path.join(out, "log.txt"), quiet, net.rank)
         if held is not None and held.taken_over:
-            say = Logger(os.path.join(out, "log.txt"), quiet, net.rank)
             say.warn(held.taken_over)
-            say.close()
+        say(memory_line)
+        say.close()
         r = Run.new(cfg, out, net, lammps_initial=initial, quiet=quiet, walltime=walltime, margin=walltime_margin,
                     t_start=time.monotonic() if t_start is None else t_start, signals=signals)
         return _go(r)
@@ -314,9 +318,14 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
         # the files are chosen and read under the lock: no other writer can change them meanwhile
         t = rs.open_target(out, net, items)
         rs.check_room(t, net)
+        # a pile that cannot fit on these ranks: one line on every rank, before its arrays are made
+        from . import footprint
+        n = int(t.attrs["n"])
+        memory_line = footprint.check(t.cfg, net, n, label=f"{n} spheres of {t.path}")
         say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
         if held is not None and held.taken_over:
             say.warn(held.taken_over)
+        say(memory_line)
         status = rs.verdict(t, say)
         say.close()
         if status is not None:

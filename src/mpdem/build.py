@@ -17,11 +17,15 @@ from .engine.base import Physics
 from .engine.cpu import Engine
 from .errors import InputError
 from .kernels.bundles import make_box
-from .kernels.insert import rsa_insert
+from .kernels.insert import rsa_batch, rsa_cells
 from .kernels.particle import VOLUME as SPHERE_VOLUME
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
+# candidates of one batch of the random insertion (``insert_random``): about a tenth of a second
+RSA_BATCH = 1 << 17
+# sphere-steps of one call of the bed-making settle between the caller's looks (``make_bed``)
+SETTLE_ROW_STEPS = 2_000_000
 
 
 def rng(seed, purpose):
@@ -29,7 +33,7 @@ def rng(seed, purpose):
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, purpose])))
 
 
-def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000):
+def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000, progress=None, batch=None):
     """Place n non-overlapping unit spheres uniformly in a box by RSA.
 
     Parameters
@@ -42,6 +46,12 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000):
         Spheres to avoid (the bed).
     max_tries : int
         Give up after ``max_tries * n`` candidates.
+    progress : callable or None
+        Called as ``progress(placed, n)`` after every batch of candidates (a set-up's
+        ``watch.Watch`` says progress and honours stop signals there).
+    batch : int or None
+        Candidates drawn and tried at a time (default ``RSA_BATCH``, about a tenth of a second of
+        work). Any size gives the same centres: the candidates are one stream, consumed in order.
 
     Returns
     -------
@@ -49,14 +59,19 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000):
     """
     out = np.zeros((n, 3))
     obs = np.zeros((0, 3)) if obstacles is None else np.ascontiguousarray(obstacles, float)
-    done, tried, batch = 0, 0, max(1024, 2 * n)
+    box = make_box(L_x, L_y)
+    head, nxt, pos, m, geo = rsa_cells(obs, n, box, z_lo, z_hi)
+    done, tried = 0, 0
+    batch = max(1, min(int(RSA_BATCH if batch is None else batch), max(1024, 2 * n)))
     while done < n:
         if tried > max_tries * n:
             raise InputError(f"random insertion placed only {done} of {n} spheres after {tried} tries; "
                              f"lower pour.phi_i")
         cand = gen.random((batch, 3))
-        done = rsa_insert(cand, obs, out, done, make_box(L_x, L_y), z_lo, z_hi)
+        done, m = rsa_batch(cand, out, done, head, nxt, pos, m, geo, box, z_lo, z_hi)
         tried += batch
+        if progress is not None:
+            progress(done, n)
     return out
 
 
@@ -96,12 +111,23 @@ def make_bed(cfg, progress=None):
     Settles ``settle_density * L_x * L_y`` frictionless spheres onto a flat
     frictionless floor at z = 0, cuts the slab of centres in
     [gap, gap + thickness], and shifts it so the lowest centre is at z = 0.
+
+    Parameters
+    ----------
+    cfg : Config
+    progress : callable or None
+        Takes a line of progress, after every short call of the settle (about
+        ``SETTLE_ROW_STEPS`` sphere-steps) and of the insertion; the caller decides
+        which to show (``watch.Watch`` shows one every half minute and honours stop
+        signals there).
     """
     b, L_x, L_y = cfg.bed, cfg.box.L_x, cfg.box.L_y
     n = max(1, round(b.settle_density * L_x * L_y))
     gen = rng(bed_seed(cfg), STREAM_BED)
     h = insertion_height(n, L_x, L_y, 0.3)
-    x = insert_random(gen, n, L_x, L_y, 0.5, 0.5 + h)
+    say = progress or (lambda line: None)
+    x = insert_random(gen, n, L_x, L_y, 0.5, 0.5 + h,
+                      progress=lambda done, want: say(f"bed: inserting {n} spheres to settle, {done} placed"))
     k_n = b.settle_k_n
     phys = Physics.of(k_n=k_n, k_t=0.0, gamma_n=gamma_n_from_epsilon(b.settle_epsilon, k_n),
                       gamma_t=0.0, mu=0.0, dt=1e-4 * math.sqrt(2e5 / k_n), skin=0.3,
@@ -110,11 +136,18 @@ def make_bed(cfg, progress=None):
     eng = Engine(state, phys, Domain(None))
     eng.start()
     steps = int(math.ceil(b.settle_time / phys.dt))
-    chunk = max(1, steps // 10)
-    for done in range(0, steps, chunk):
-        eng.advance(min(chunk, steps - done))
-        if progress:
-            progress(f"bed: settling {n} spheres, step {min(done + chunk, steps)}/{steps}")
+    # the deferred half-kicks are completed every tenth of the settle (the bed's bits depend on
+    # where), in calls short enough for the caller to look at signals and the clock between them
+    tenth = max(1, steps // 10)
+    per_call = max(1, SETTLE_ROW_STEPS // n)
+    for done in range(0, steps, tenth):
+        end = min(done + tenth, steps)
+        for at in range(done, end, per_call):
+            eng.run_quiet(min(per_call, end - at))
+            if at + per_call < end:
+                say(f"bed: settling {n} spheres, step {min(at + per_call, end)}/{steps}")
+        eng.complete()
+        say(f"bed: settling {n} spheres, step {end}/{steps}")
     xs = state.x[:n]
     sel = (xs[:, 2] >= b.gap) & (xs[:, 2] <= b.gap + b.thickness)
     bed = xs[sel].copy()

@@ -76,3 +76,25 @@ class ThreadsError(MpdemError, ValueError):
 
 class DeviceError(MpdemError, RuntimeError):
     """The engine's device cannot be used: no GPU, no CUDA runtime, or numba-cuda missing."""
+
+
+class Interrupted(MpdemError):
+    """A stop signal (SIGTERM, SIGINT) before there was anything to save: the set-up ended early.
+
+    Attributes
+    ----------
+    status : int
+        The exit status: 128 + the signal's number (143 for SIGTERM, 130 for SIGINT).
+    """
+
+    def __init__(self, message, status=EXIT_ERROR):
+        super().__init__(message)
+        self.status = int(status)
+
+    def __reduce__(self):
+        # sent between ranks (``Channel.on_root``) with its status
+        return (type(self), (str(self), self.status), {"agreed": self.agreed})
+
+
+class MemoryRefused(MpdemError):
+    """A run whose estimated memory a rank exceeds what the node has (said before any work)."""

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bedcache, build, state, stiffen
-from .errors import InputError
+from .errors import InputError, Interrupted
+from .watch import Watch
 from .io import tables
 from .io import checkpoint, lammps, packing
 
@@ -148,17 +149,24 @@ def from_packing(path, cfg, log=print):
             "fixed": np.asarray(arrays["fixed"], np.uint8)}
 
 
-def bed(cfg, net, log):
+def bed(cfg, net, log, watch=None):
     """The frozen bed of a pour: from ``bed.file``, or made by rank 0 (or read from the beds made
     before, ``bedcache``) and sent to all.
 
+    ``watch`` (``watch.Watch``) sees rank 0's making of the bed between its short calls (progress,
+    a stop signal); a stop there reaches every rank with the bed's broadcast.
     Warns when its areal density is outside [bed.density_min, bed.density_max].
     """
+    watch = watch or Watch(log, net)
     if cfg.bed.file:
         b = build.Bed(particles(cfg.bed.file, cfg, all_fixed=True, log=log)["x"].copy(),
                       note=f"from {cfg.bed.file}")
     else:
-        b = net.bcast(bedcache.made_bed(cfg, progress=log) if net.rank == 0 else None)
+        n = max(1, round(cfg.bed.settle_density * cfg.box.L_x * cfg.box.L_y))
+        watch.begin("the making of the bed",
+                    f"bed: making it on rank 0, or reading it from the beds made before ({n} spheres settled "
+                    f"for {cfg.bed.settle_time:g} tau)")
+        b = net.on_root(bedcache.made_bed, cfg, watch.local(), catch=(Interrupted,))
     dens = len(b.x) / (cfg.box.L_x * cfg.box.L_y)
     log(f"bed: {len(b.x)} frozen spheres, {dens:.3f} per d^2, z_bed = {b.z_top:.4f}; {b.note}")
     if not cfg.bed.density_min <= dens <= cfg.bed.density_max:
@@ -167,13 +175,20 @@ def bed(cfg, net, log):
     return b
 
 
-def pour(cfg, b, log):
-    """Mobile spheres inserted at random above bed ``b`` (docs/model.md 5.3): whole-state arrays."""
+def pour(cfg, b, log, watch=None):
+    """Mobile spheres inserted at random above bed ``b`` (docs/model.md 5.3): whole-state arrays.
+
+    Every rank inserts the same spheres; ``watch`` (``watch.Watch``) sees every batch of candidates,
+    on every rank together (progress, a stop signal agreed over the ranks)."""
     N, L_x, L_y = cfg.pour.N, cfg.box.L_x, cfg.box.L_y
     H = build.insertion_height(N, L_x, L_y, cfg.pour.phi_i)
     z0 = b.z_top + 1.0
-    log(f"pour: inserting {N} spheres at phi_i = {cfg.pour.phi_i:g} in z in [{z0:.3f}, {z0 + H:.3f}]")
-    xm = build.insert_random(build.rng(cfg.run.seed, build.STREAM_POUR), N, L_x, L_y, z0, z0 + H, obstacles=b.x)
+    watch = watch or Watch(log, None)
+    watch.begin("the pour's insertion", f"pour: inserting {N} spheres at phi_i = {cfg.pour.phi_i:g} in z in "
+                                        f"[{z0:.3f}, {z0 + H:.3f}]")
+    xm = build.insert_random(build.rng(cfg.run.seed, build.STREAM_POUR), N, L_x, L_y, z0, z0 + H, obstacles=b.x,
+                             progress=lambda done, n: watch(lambda: f"pour: {done} of {n} spheres placed",
+                                                            everywhere=True))
     vm = build.initial_velocities(build.rng(cfg.run.seed, build.STREAM_VELOCITY), N, cfg.pour.K0)
     nb = len(b.x)
     x = np.concatenate([xm, b.x])
@@ -181,7 +196,7 @@ def pour(cfg, b, log):
             "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)])}, H
 
 
-def initial_state(cfg, net, log, lammps_table=None):
+def initial_state(cfg, net, log, lammps_table=None, watch=None):
     """A new run's initial state, checked (docs/model.md 8), identical on every rank.
 
     Parameters
@@ -192,6 +207,8 @@ def initial_state(cfg, net, log, lammps_table=None):
     log : schedule.Logger
     lammps_table : dict or None
         A LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).
+    watch : watch.Watch or None
+        Sees the set-up's short calls of work: progress lines, stop signals (``Interrupted``).
 
     Returns
     -------
@@ -210,12 +227,16 @@ def initial_state(cfg, net, log, lammps_table=None):
         # a given settled pile rests in the bed's hollows
         z_floor = b.z_mean
     else:
-        b = bed(cfg, net, log)
-        p, h_insert = pour(cfg, b, log)
+        b = bed(cfg, net, log, watch)
+        p, h_insert = pour(cfg, b, log, watch)
         fixed, x = p["fixed"], p["x"]
         z_bed = b.z_top
         z_floor = z_bed + 0.5
-    build.check_initial(p["id"], x, fixed, L_x, L_y, z_floor, allow_overlap="count" in p,
+    # a pour overlaps nothing by construction (``kernels.insert``: a candidate closer than d to a placed
+    # sphere or a bed sphere, in the minimum image, is refused), so its search for overlaps, the
+    # longest part of the check, is left out
+    poured = not cfg.run.initial_file
+    build.check_initial(p["id"], x, fixed, L_x, L_y, z_floor, allow_overlap="count" in p or poured,
                         overlap_warn=cfg.checks.overlap_warn, warn=log.warn, wall=cfg.bed.wall)
     # the fields of this run: without the wall, a state file's wall histories are left out
     whole = {k: a for k, a in p.items() if state.optional_in(state.FIELD[k], {"wall": cfg.bed.wall})}

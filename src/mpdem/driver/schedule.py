@@ -43,6 +43,12 @@ class Logger:
             self.fh.write(msg + "\n")
             self.fh.flush()
 
+    def note(self, msg):
+        """``msg`` in the log file only (what the command line says on stderr besides)."""
+        if self.fh:
+            self.fh.write(msg + "\n")
+            self.fh.flush()
+
     def warn(self, msg):
         if self.rank == 0:
             print(f"warning: {msg}", file=sys.stderr, flush=True)

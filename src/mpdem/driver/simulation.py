@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import flowarrest, initial, memory, stiffen, threads
+from ..watch import Watch
 from ..io import tables
 from ..io import checkpoint
 from . import summary
@@ -43,6 +44,9 @@ from ..state import State
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 # steps an engine may run in one go between the driver's looks at signals and the wall clock (``run_quiet``)
 QUIET_MOST = 2000
+# and at most this many sphere-steps of this rank's rows (a few seconds: a stop signal is honoured
+# within seconds however large the pile)
+QUIET_ROW_STEPS = 40_000_000
 
 
 class StepFlags(NamedTuple):
@@ -75,24 +79,28 @@ class Start:
     from_file: bool
 
 
-def new_start(cfg, out, domain, log, lammps_initial=None):
+def new_start(cfg, out, domain, log, lammps_initial=None, watch=None):
     """A new run: build or read the initial state, check it, write config.toml and bed.txt.
 
     ``lammps_initial``: a LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).
+    ``watch``: the set-up's ``watch.Watch`` (progress lines, stop signals).
     Returns a Start.
     """
+    watch = watch or Watch(log, domain.net)
     for w in cfg.warnings:
         log.warn(w)
     if domain.rank == 0:
         rundir.write_atomic(os.path.join(out, "config.toml"), cfg.to_toml())
         rundir.clear(out)
-    init = initial.initial_state(cfg, domain.net, log, lammps_initial)
+    init = initial.initial_state(cfg, domain.net, log, lammps_initial, watch=watch)
     w = init.whole
     bed = w["fixed"] == 1
     if init.n_bed and domain.rank == 0:
         tables.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
-    return Start(domain.scatter(w, cfg.box.L_x, cfg.box.L_y), init.n_mobile, init.n_bed, RunState(pile=init.pile),
-                 False)
+    watch(everywhere=True)
+    watch.begin("the distribution of the rows", f"set-up: {len(w['id'])} spheres to {domain.size} rank(s)")
+    st = domain.scatter(w, cfg.box.L_x, cfg.box.L_y)
+    return Start(st, init.n_mobile, init.n_bed, RunState(pile=init.pile), False)
 
 
 def file_start(t, out, domain, log):
@@ -163,8 +171,20 @@ class Run:
         self.t_end = None if walltime is None else t_start + walltime
         self.margin = (min(60.0, walltime / 20) if margin is None else margin) if walltime else 0.0
         self.signals = [] if signals is None else signals
+        # the set-up's watch (``watch``): progress lines and stop signals until the first step
+        again = (f"restart it again (`python -m mpdem restart {out_dir}`)" if target is not None
+                 else "start the run again (with --force to reuse its directory)")
+        self.watch = Watch(self.log, self.domain.net, self.signals, again=again).__enter__()
+        try:
+            self._set_up(cfg, out_dir, target, lammps_initial)
+        except BaseException:
+            self.watch.__exit__()
+            raise
+
+    def _set_up(self, cfg, out_dir, target, lammps_initial):
+        """The constructor's part that makes the rows, the schedules and the engine (under the watch)."""
         start = (file_start(target, out_dir, self.domain, self.log) if target is not None
-                 else new_start(cfg, out_dir, self.domain, self.log, lammps_initial))
+                 else new_start(cfg, out_dir, self.domain, self.log, lammps_initial, self.watch))
         rec = start.records
         self.state, self.n_mobile, self.n_bed = start.state, start.n_mobile, start.n_bed
         self.from_file = start.from_file
@@ -243,7 +263,10 @@ class Run:
         st, max_steps, N = self.state, self.cfg.run.max_steps, max(self.n_mobile, 1)
         eng, handlers = self.engine, {}
         try:
-            info = self._start()
+            try:
+                info = self._start()
+            finally:
+                self.watch.__exit__()
             self.checks.fatal(info, st.step)
             progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps,
                                 N, st.step, self.t0)
@@ -301,14 +324,26 @@ class Run:
         """Set the engine up (a state file's forces kept); start the loop's clocks. Returns the StepInfo."""
         self.t0 = time.perf_counter()
         self.checkpoints.start_clock()
+        w = self.watch
+        w(everywhere=True)
+        w.begin("the first neighbour-list build", f"set-up: first neighbour lists and forces of "
+                                                   f"{self.n_mobile + self.n_bed} spheres")
         if self.from_file:
-            return self.engine.start_from_file(self.history.max_overlap, self.history.n_rebuilds)
-        return self.engine.start()
+            info = self.engine.start_from_file(self.history.max_overlap, self.history.n_rebuilds)
+        else:
+            info = self.engine.start()
+        w(everywhere=True)
+        w.say("set-up: done; stepping")
+        return info
 
     def _quiet_steps(self, step, max_steps, progress, most=QUIET_MOST):
         """Steps after ``step`` that no schedule reads after (no stop sample, progress line,
-        snapshot, step checkpoint; short of ``max_steps``), up to ``most``: the engine may run them
-        without stopping (``run_quiet``). Their flags are those of the first of them."""
+        snapshot, step checkpoint; short of ``max_steps``), up to ``most`` and to ``QUIET_ROW_STEPS``
+        sphere-steps of a rank's share of the pile: the engine may run them without stopping
+        (``run_quiet``). Their flags are those of the first of them. The same on every rank (the
+        steps after them are collective)."""
+        share = (self.n_mobile + self.n_bed) // self.domain.size
+        most = min(most, max(1, QUIET_ROW_STEPS // max(share, 1)))
         return quiet_span(step, max_steps, (self.stop, progress, self.snapshots, self.checkpoints), most)
 
     def _flags_now(self):
