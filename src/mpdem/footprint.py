@@ -39,7 +39,8 @@ from .errors import MemoryRefused
 # the densest packing of equal spheres: the bound of the pile's density anywhere
 PHI_MAX = 0.74
 # a rank's process before any array of the pile: the interpreter, numpy, numba and its compiled
-# kernels, mpi4py, h5py [bytes] (measured: 0.2-0.3 GB resident after a small run's first step)
+# kernels, mpi4py, h5py [bytes] (measured: 0.2-0.3 GB resident after a small run's first step with
+# numba's cache warm; a process that has just compiled the kernels holds some 0.18 GB more)
 BASE = 300e6
 # the State's row capacity over its rows (``decomp._local_state``; ``State.append`` grows by 1.2)
 CAPACITY = 1.1
