@@ -48,7 +48,7 @@ test-serial:
 # test-validation together; tests/conftest.py hands the long validation runs out first, so that the short
 # tests fill the workers' ends)
 test-pytest:
-	$(PY) -m pytest -q -rs $(XDIST) -m "not slurm" tests
+	$(PY) -m pytest -q -rs --durations=25 $(XDIST) -m "not slurm" tests
 
 # every MPI test on 2 ranks; on 3 and 4 those of the decomposition itself (slabs, ghosts, migration, the state
 # files' collective writes): the runs of a feature (API, flow arrest, stiffening) match one rank at 2 ranks
