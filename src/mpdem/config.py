@@ -184,6 +184,12 @@ SCHEMA = (
        "none, limit_damping, rescale_history, the other engine.gpu_* choices) as constants, so that the compiler "
        "drops the code the run never takes; false = one kernel for every option; no effect on results", bool,
        restart=True, physics=False),
+    _k("engine", "gpu_rebuild", "host",
+       "how the GPU engine sizes a list rebuild it makes on the GPU (one rank): 'host' (the host reads the "
+       "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
+       "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "
+       "GPU and read with the next forces, builds them again with more room); no effect on results", str,
+       ("host", "device"), restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",

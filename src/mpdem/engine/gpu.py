@@ -44,6 +44,8 @@ REDUCTIONS = ("tree", "fused")
 SAMPLES = ("host", "device")
 # engine.gpu_drift
 DRIFTS = ("apart", "fused")
+# engine.gpu_rebuild
+REBUILDS = ("host", "device")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -122,6 +124,15 @@ class Engine(EngineBase):
         ``run_quiet``'s launches compiled for this engine's options and its law's model, friction,
         ``limit_damping`` and ``rescale_history`` as constants (``engine.gpu_pinned``,
         ``kernels.gpu.step.pinned_advance``); no effect on results.
+    rebuilds : {"host", "device"}
+        How a list rebuild on the GPU (one rank, not a ``SORT_EVERY``-th) is sized
+        (``engine.gpu_rebuild``): by the host, which reads the rows' z range and the lists' length back
+        and allocates the lists ("host"), or on the GPU alone, into lists of a fixed capacity whose
+        overflow the host sees when it next reads the step's reductions, and then builds them again
+        with room ("device", ``_rebuild_in_place``); no effect on results.
+    list_capacity : int
+        With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
+        than the first lists built on the GPU replace); grown on an overflow. No effect on results.
 
     Attributes
     ----------
@@ -132,7 +143,7 @@ class Engine(EngineBase):
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
-                 reductions="tree", samples="host", drift="apart", pinned=False):
+                 reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -153,6 +164,19 @@ class Engine(EngineBase):
         self.one_barrier = drift == "fused"
         # ``advance`` compiled for the run's options (``kernels.gpu.step.pinned_advance``)
         self.pinned = bool(pinned)
+        if rebuilds not in REBUILDS:
+            raise ValueError(f"rebuilds = {rebuilds!r}: accepted {', '.join(map(repr, REBUILDS))}")
+        # list rebuilds on the GPU with no host round trip, into lists of a fixed capacity (``_rebuild_in_place``)
+        self.in_place = rebuilds == "device"
+        # the entries those lists have room for (0: not yet sized), and their two sets of arrays, the old
+        # lists and the new (``_list_set``)
+        self._capacity = int(list_capacity)
+        self._sets = []
+        # a rebuild in place whose length and room the host has not yet read (``_settle``), and the lists it
+        # replaced (start, nbr, hist, stamp, entries), which an overflow brings back
+        self._pending = None
+        # rebuilds in place that ran out of room and were built again (``_settle``)
+        self.n_overflows = 0
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -184,17 +208,20 @@ class Engine(EngineBase):
         self._pairs_kept = False
         self._dev = {}            # the GPU's arrays by name (``_upload``)
         # the step's reductions (``kernels.gpu.step``), and a pinned host copy the step reads
-        self._red = self.cuda.to_device(np.array(self.k.NEUTRAL))
+        self._red = self.cuda.to_device(self._neutral_red())
         # whether ``_red``'s slots of ``forces`` are neutral (only ``kick_drift`` resets them: an evaluation
         # after another with no step between, at ``start`` or a rebuild step of ``run_quiet``, resets them first)
         self._red_fresh = True
-        self._red_host = self.cuda.pinned_array(len(self.k.NEUTRAL))
+        self._red_host = self.cuda.pinned_array(self.k.RED_SLOTS)
         self._launchers = {}
         # the per-step reductions of ``run_quiet``'s launches, and their pinned host copy
         self._rec = self.cuda.device_array((BATCH, len(self.k.NEUTRAL)))
         self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
         self._coop_blocks = None
         self._zr = self.cuda.to_device(np.zeros(2))   # the z range of the GPU's list build
+        # the same of the build in place (with the grid's lowest z), and its grid's z layers and cells
+        self._zr_in = self.cuda.to_device(np.array([math.inf, -math.inf, 0.0]))
+        self._dims = self.cuda.to_device(np.zeros(2, np.int64))
         self._sample_acc = {}     # the samples' accumulators on the GPU, by rows of limbs
         self.n_rebuilds = 0
         self.info = StepInfo()
@@ -204,6 +231,12 @@ class Engine(EngineBase):
         self.last_overlap = 0.0
         self._contacts = 0
         state.sync = self.sync_state
+
+    def _neutral_red(self):
+        """``_red``'s starting values: the step's ``NEUTRAL``, then no entries and no overflow."""
+        red = np.zeros(self.k.RED_SLOTS)
+        red[:len(self.k.NEUTRAL)] = self.k.NEUTRAL
+        return red
 
     # -- between host and GPU --
     def _grid(self, rows):
@@ -305,6 +338,7 @@ class Engine(EngineBase):
 
     def _download_history(self):
         """Each list entry's Delta s and stamp from the GPU (host arrays)."""
+        self._settle()
         k = self._k
         hist = self._dev["hist"][:max(k, 1)].copy_to_host()[:k]
         stamp = self._dev["stamp"][:max(k, 1)].copy_to_host()[:k]
@@ -312,6 +346,7 @@ class Engine(EngineBase):
 
     def _lists(self):
         """The lists as the host's history kernels read them (copied from the GPU if it built them)."""
+        self._settle()
         if not self._host_lists:
             n, k = self.state.n_own, self._k
             self.nbr_start[:n + 1] = self._dev["start"][:n + 1].copy_to_host()
@@ -347,8 +382,13 @@ class Engine(EngineBase):
         host: rows and history down, migration and ghosts (domain), the rows ordered by cell, the
         lists built, all up."""
         t = time.perf_counter()
+        # the rebuild in place before this one, if nothing has read its length yet (no evaluation between)
+        self._settle()
         if self.has_lists and not self.domain.parallel and self.n_rebuilds % SORT_EVERY:
-            self._rebuild_on_gpu()
+            if self.in_place:
+                self._rebuild_in_place()
+            else:
+                self._rebuild_on_gpu()
             self.n_rebuilds += 1
             self.timers["lists"] += time.perf_counter() - t
             return
@@ -435,6 +475,93 @@ class Engine(EngineBase):
         self._pairs_kept = False
         s.slots_current = False
 
+    def _rebuild_in_place(self):
+        """``_rebuild_on_gpu`` with no round trip through the host and no allocation once sized
+        (``engine.gpu_rebuild = "device"``): the cell grid's z layers from the z range on the GPU
+        (``kernels.gpu.lists.grid_depth``, at most the layers the cells' arrays hold), the lists into
+        the set of fixed-capacity arrays the current lists are not in (``_list_set``), their length and
+        whether it fit into ``_red`` (``write_partners_in``). The host reads those with the next
+        evaluation's reductions (``forces``, or ``_settle`` where something reads the lists first); on
+        an overflow the forces' kernels have done nothing, the old lists come back and the lists are
+        built as ``_rebuild_on_gpu`` builds them, the capacity grown. With a thread an entry or chunks
+        (whose launches are sized by the entries) the length is read at once. x_ref = x."""
+        s, d, L = self.state, self._dev, self.kl
+        n = s.n_own
+        grid, one = self._grid(n), (1, self.block)
+        if not self._capacity:
+            self._capacity = int(1.25 * self._k) + 64
+        nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
+        # the host path's bound on the z layers (z hashed above it), here the cells' arrays' room
+        nz_cap = max(3, 4 * (n // (nx * ny)) + 8)
+        room = nx * ny * nz_cap + 1
+        count, fill = self._buffer("cells", room, np.int32), self._buffer("fill", room, np.int32)
+        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
+        zr, dims = self._zr_in, self._dims
+        self._run(L.z_range, grid, (n, d["x"], zr))
+        self._run(L.grid_depth, (1, 1), (zr, nx, ny, nz_cap, self.r_list, dims))
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.bin_rows_in, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list, cell,
+                                        count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        new = self._list_set()
+        cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, dims, *make_box(s.L_x, s.L_y),
+                 self.r_list * self.r_list)
+        self._run(L.count_partners_in, grid, (n, *cells, new["start"]))
+        self._run(L.scan, one, (new["start"], n))
+        self._run(L.write_partners_in, grid, (n, *cells, new["start"], new["nbr"], self._red))
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        self._run(L.carry_history_in, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], new["start"],
+                                             new["nbr"], new["hist"], new["stamp"], stale))
+        self._pending = (d["start"], d["nbr"], d["hist"], d["stamp"], self._k)
+        d["start"], d["nbr"], d["hist"], d["stamp"] = new["start"], new["nbr"], new["hist"], new["stamp"]
+        self._k = None
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+        if self.by_entry and not self._settle():
+            self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
+            d["row"] = new["row"]
+
+    def _list_set(self):
+        """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry or
+        chunks) that the current lists are not in; both sets (re)allocated for a new capacity or row
+        count."""
+        n, c, cuda = self.state.n_own, self._capacity, self.cuda
+        if not self._sets or self._sets[0]["nbr"].shape[0] != c or self._sets[0]["start"].shape[0] != n + 1:
+            self._sets = [{"start": cuda.device_array(n + 1, np.int64), "nbr": cuda.device_array(c, np.int32),
+                           "hist": cuda.device_array((c, 3)), "stamp": cuda.device_array(c, np.uint32)}
+                          for _ in range(2)]
+            # one array of the entries' rows: the old lists' are not read again
+            self._sets[0]["row"] = self._sets[1]["row"] = cuda.device_array(c if self.by_entry else 1, np.int32)
+        return self._sets[1] if self._dev["nbr"] is self._sets[0]["nbr"] else self._sets[0]
+
+    def _settle(self, red=None):
+        """Read a rebuild in place's length and room (``_rebuild_in_place``) if none has been yet: from
+        ``red`` (``_red`` as copied to the host after the evaluation that followed it) or copied now.
+        On an overflow the lists it replaced come back, the capacity grows to a quarter more than the
+        lists need, and the lists are built as ``_rebuild_on_gpu`` builds them (the rows where they
+        were: the forces' kernels did nothing). Returns whether it built them again."""
+        if self._pending is None:
+            return False
+        k = self.k
+        if red is None:
+            red = self._red.copy_to_host(self._red_host)
+        old, self._pending = self._pending, None
+        entries = int(red[k.RED_ENTRIES])
+        if not red[k.RED_OVERFLOW]:
+            self._k = entries
+            return False
+        d = self._dev
+        d["start"], d["nbr"], d["hist"], d["stamp"], self._k = old
+        self._red[k.RED_ENTRIES:].copy_to_device(np.zeros(k.RED_SLOTS - k.RED_ENTRIES))
+        self.n_overflows += 1
+        self._capacity = int(1.25 * entries) + 64
+        self._sets = []
+        self._rebuild_on_gpu()
+        return True
+
     def _entry_rows(self, grid):
         """Each list entry's row on the GPU (``row``) when the forces take a thread an entry: from the
         host's lists (``grid`` None, after ``_upload``) or built on the GPU from its (a launch over
@@ -452,9 +579,12 @@ class Engine(EngineBase):
     def _pairs(self, keep):
         """``pair`` with room for every entry where an evaluation writes it (kept pairs, or the forces
         a thread an entry)."""
-        d, k = self._dev, max(self._k, 1)
+        d = self._dev
+        # the lists' capacity while their length is not yet read (``_rebuild_in_place``)
+        k = max(self._capacity if self._k is None else self._k, 1)
         if (keep or self.by_entry) and d["pair"].shape[0] < k:
-            d["pair"] = self.cuda.device_array((int(k * 1.1) + 64, 6))
+            # with rebuilds in place, room for as many entries as their lists (no allocation at their rebuilds)
+            d["pair"] = self.cuda.device_array((max(int(k * 1.1) + 64, self._capacity), 6))
         return d["pair"]
 
     def _buffer(self, name, size, dtype):
@@ -494,7 +624,8 @@ class Engine(EngineBase):
         planes_d, kinds_d = self._device_planes()
         box = make_box(s.L_x, s.L_y)
         if not self._red_fresh:
-            self._red.copy_to_device(np.array(k.NEUTRAL))
+            # the step's slots only: those of a rebuild in place (RED_ENTRIES, RED_OVERFLOW) are read below
+            self._red[:len(k.NEUTRAL)].copy_to_device(np.array(k.NEUTRAL))
         self._red_fresh = False
         if self.chunk_rows:
             chunks = -(-s.n_own // self.chunk_rows)
@@ -515,6 +646,13 @@ class Engine(EngineBase):
         red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
+        if self._pending is not None and red[k.RED_OVERFLOW]:
+            # the lists built in place did not fit and the kernels did nothing: this evaluation again, once
+            # the lists are built with room (with the stamps of the rebuild's evaluation)
+            self._epoch -= 1
+            self._settle(red)
+            return self.forces(increment, keep_pairs)
+        self._settle(red)
         return float(red[k.RED_OVERLAP]), int(red[k.RED_CONTACTS])
 
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
@@ -570,6 +708,8 @@ class Engine(EngineBase):
         ghosts are refreshed through the host every step) they are steps one by one."""
         if not self.steps_in_one_call or self.state.n_own == 0:
             return [self.step(flags, defer_kick=True) for _ in range(n)]
+        # a rebuild in place with no evaluation since (``rebuild`` called on its own): its length read
+        self._settle()
         s, p, d, k = self.state, self.phys, self._dev, self.k
         infos = []
         planes_d, kinds_d = self._device_planes()
@@ -678,8 +818,8 @@ class Engine(EngineBase):
             acc = self._sums(self.ks.balance_sums, 4, d["f"], d["fixed"], d["start"], d["stamp"], d["pair"],
                              np.uint32(self._epoch & 0xFFFFFFFF))
             return self._ratio(self.domain.sum_int(acc))
-        k = self._k
         self._lists()
+        k = self._k
         self._download_rows(("f",), s.n_own)
         pair = self._dev["pair"].copy_to_host()[:k]
         stamp = self._dev["stamp"].copy_to_host()[:k]
@@ -689,5 +829,6 @@ class Engine(EngineBase):
 
     def memory_bytes(self):
         """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch)."""
+        sets = {id(a): a for st in self._sets for a in st.values() if not any(a is b for b in self._dev.values())}
         return (sum(a.nbytes for a in self._dev.values()) + sum(a.nbytes for a in self._buffers.values())
-                + self._red.nbytes + self._rec.nbytes)
+                + sum(a.nbytes for a in sets.values()) + self._red.nbytes + self._rec.nbytes)

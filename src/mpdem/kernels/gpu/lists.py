@@ -19,6 +19,14 @@ The build, each step a launch:
 
 Only while the rows keep their places (one rank, no migration, no reordering): the old and the new
 lists name partners by the same row indices.
+
+The same build with no host round trip (``engine.gpu_rebuild = "device"``: the ``*_in`` kernels) reads
+what the host would have sized from the GPU's own arrays: ``grid_depth`` turns the z range into the
+grid's z layers (``dims``, at most the capacity of the cells' arrays; fewer layers only hash more rows
+into a cell, the lists are the same), and the lists go into arrays of a fixed capacity
+(``write_partners_in``), the entries counted into the record ``red`` with a flag when they do not fit;
+then nothing is written past the capacity and the host, which reads ``red`` anyway after the forces
+(whose kernels do nothing on the flag), builds the lists again with room.
 """
 import math
 
@@ -27,7 +35,8 @@ import numpy as np
 from ..neighbours import _next_cell
 from .reduce import BLOCK_MAX, max_into, min_into
 from .rounded import min_image, norm2
-from .runtime import cuda, device
+from .runtime import cuda, device, device_cuda
+from .step import RED_ENTRIES, RED_OVERFLOW
 
 
 @cuda.jit
@@ -45,14 +54,71 @@ def z_range(n_rows, x, out):
     max_into(out, 1, hi, room)
 
 
+@device
+def _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list):
+    """The cell of row i: columns of cx x cy [d] across the box, layers r_list [d] tall from zmin
+    hashed modulo nz."""
+    ix = min(int(x[i, 0] / cx), nx - 1)
+    iy = min(int(x[i, 1] / cy), ny - 1)
+    iz = int((x[i, 2] - zmin) / r_list) % nz
+    return (iz * ny + iy) * nx + ix
+
+
 @cuda.jit
 def bin_rows(n_rows, x, nx, ny, nz, cx, cy, zmin, r_list, cell, count):
     """cell[i]: the cell of row i; count[c + 1] += 1 for each row of cell c (count zeroed before)."""
     for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
-        ix = min(int(x[i, 0] / cx), nx - 1)
-        iy = min(int(x[i, 1] / cy), ny - 1)
-        iz = int((x[i, 2] - zmin) / r_list) % nz
-        c = (iz * ny + iy) * nx + ix
+        c = _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list)
+        cell[i] = c
+        cuda.atomic.add(count, c + 1, 1)
+
+
+@cuda.jit
+def grid_depth(zr, nx, ny, nz_cap, r_list, dims):
+    """The cell grid's z layers from the rows' z range, on the GPU (one thread does it).
+
+    Parameters
+    ----------
+    zr : (3,) float64
+        In: the rows' lowest and highest z [d] in zr[0], zr[1] (``z_range``'s). Out: the lowest in
+        zr[2], and zr[0], zr[1] back to (inf, -inf) for the next ``z_range``.
+    nx, ny : int
+        The grid's columns across the box.
+    nz_cap : int
+        The most z layers the cells' arrays hold (``nx * ny * nz_cap + 1`` counts).
+    r_list : float
+        A layer's height [d].
+    dims : (2,) int64, out
+        The z layers nz (as the host's build: one a layer of the range, at most ``nz_cap``) and the
+        cells nx * ny * nz.
+    """
+    if cuda.grid(1) == 0:
+        q = (zr[1] - zr[0]) / r_list
+        nz = nz_cap
+        if q >= 0.0 and q < nz_cap - 1:
+            nz = int(q) + 1
+        dims[0] = nz
+        dims[1] = nx * ny * nz
+        zr[2] = zr[0]
+        zr[0] = math.inf
+        zr[1] = -math.inf
+
+
+@cuda.jit
+def zero_cells(count, dims):
+    """count[0..dims[1]] = 0 (the cells' counts of ``grid_depth``'s grid; ``count`` int32)."""
+    for c in range(cuda.grid(1), dims[1] + 1, cuda.gridsize(1)):
+        count[c] = 0
+
+
+@cuda.jit
+def bin_rows_in(n_rows, x, nx, ny, cx, cy, zr, dims, r_list, cell, count):
+    """``bin_rows`` with the grid's z layers dims[0] and its lowest z zr[2] [d] read on the GPU
+    (``grid_depth``)."""
+    nz = dims[0]
+    zmin = zr[2]
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        c = _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list)
         cell[i] = c
         cuda.atomic.add(count, c + 1, 1)
 
@@ -62,6 +128,21 @@ def scan(a, n):
     """a[1..n] counts -> a[0..n] offsets in place (a[0] = 0; a[k] = the sum of the counts before k):
     one block, each thread a stretch of the array."""
     part = cuda.shared.array(BLOCK_MAX, np.int64)
+    _scan(a, n, part, a, False)
+
+
+@cuda.jit
+def scan_in(a, b, dims):
+    """``scan`` of the cells' counts a[1..dims[1]] (``grid_depth``'s cells), the offsets also copied to
+    b[0..dims[1]] (``fill_cells`` consumes that copy); one block."""
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    _scan(a, dims[1], part, b, True)
+
+
+@device_cuda
+def _scan(a, n, part, b, copy):
+    """The body of ``scan`` (every thread of the one block calls it; ``part`` (BLOCK_MAX,) int64 shared),
+    each offset also written to ``b`` with ``copy``."""
     t = cuda.threadIdx.x
     threads = cuda.blockDim.x
     stretch = (n + threads - 1) // threads
@@ -83,8 +164,12 @@ def scan(a, n):
     for k in range(lo, hi):
         run += a[k]
         a[k] = run
+        if copy:
+            b[k] = run
     if t == 0:
         a[0] = 0
+        if copy:
+            b[0] = 0
 
 
 @cuda.jit
@@ -155,26 +240,82 @@ def write_partners(n_own, x, ids, fixed, cell, start, order, nx, ny, nz, L_x, L_
 
 
 @cuda.jit
+def count_partners_in(n_own, x, ids, fixed, cell, start, order, nx, ny, dims, L_x, L_y, hx, hy, r2, counts):
+    """``count_partners`` with the grid's z layers dims[0] read on the GPU (``grid_depth``)."""
+    nz = dims[0]
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        m = 0
+        if not fixed[i]:
+            m = _partners(i, x, ids, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, counts, 0, False)
+        counts[i + 1] = m
+
+
+@cuda.jit
+def write_partners_in(n_own, x, ids, fixed, cell, start, order, nx, ny, dims, L_x, L_y, hx, hy, r2, nbr_start, nbr,
+                      red):
+    """``write_partners`` into lists of a fixed capacity, the grid's z layers dims[0] read on the GPU.
+
+    Parameters
+    ----------
+    nbr_start : (n_own + 1,) int64
+        The lists' offsets (``count_partners_in``, ``scan``); nbr_start[n_own] the entries K.
+    nbr : (C,) int32, out
+        Room for C entries (the capacity); written only when K <= C.
+    red : (RED_SLOTS,) float64, out
+        red[RED_ENTRIES] = K, red[RED_OVERFLOW] = 1.0 if K > C else 0.0 (by the grid's first thread;
+        the forces' kernels do nothing on the flag, the host builds the lists again).
+    """
+    k = nbr_start[n_own]
+    over = k > nbr.shape[0]
+    if cuda.grid(1) == 0:
+        red[RED_ENTRIES] = np.float64(k)
+        red[RED_OVERFLOW] = 1.0 if over else 0.0
+    if over:
+        return
+    nz = dims[0]
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        if not fixed[i]:
+            _partners(i, x, ids, cell, start, order, nx, ny, nz, L_x, L_y, hx, hy, r2, nbr, nbr_start[i], True)
+
+
+@device
+def _carry_row(i, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp, stale):
+    """Row i's new entries' Delta s and stamps (``carry_history``): a merge of its two lists by partner id."""
+    p = old_start[i]
+    pe = old_start[i + 1]
+    for k in range(new_start[i], new_start[i + 1]):
+        j = new_nbr[k]
+        jid = ids[j]
+        while p < pe and ids[old_nbr[p]] < jid:
+            p += 1
+        if p < pe and old_nbr[p] == j:
+            for a in range(3):
+                new_hist[k, a] = old_hist[p, a]
+            new_stamp[k] = old_stamp[p]
+        else:
+            for a in range(3):
+                new_hist[k, a] = 0.0
+            new_stamp[k] = stale
+
+
+@cuda.jit
 def carry_history(n_own, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp,
                   stale):
     """Each new entry's Delta s and stamp: the old entry's with the same partner, else zeros and
     ``stale`` (a stamp that says: not in contact at the last evaluation)."""
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
-        p = old_start[i]
-        pe = old_start[i + 1]
-        for k in range(new_start[i], new_start[i + 1]):
-            j = new_nbr[k]
-            jid = ids[j]
-            while p < pe and ids[old_nbr[p]] < jid:
-                p += 1
-            if p < pe and old_nbr[p] == j:
-                for a in range(3):
-                    new_hist[k, a] = old_hist[p, a]
-                new_stamp[k] = old_stamp[p]
-            else:
-                for a in range(3):
-                    new_hist[k, a] = 0.0
-                new_stamp[k] = stale
+        _carry_row(i, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp, stale)
+
+
+@cuda.jit
+def carry_history_in(n_own, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp,
+                     stale):
+    """``carry_history`` into lists of a fixed capacity (new_nbr's length, as new_hist's and new_stamp's):
+    nothing when the new lists did not fit (new_start[n_own] past it; ``write_partners_in``)."""
+    if new_start[n_own] > new_nbr.shape[0]:
+        return
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        _carry_row(i, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist, new_stamp, stale)
 
 
 @cuda.jit
@@ -206,6 +347,16 @@ def gather_rows(rows, x, v, omega, out):
 @cuda.jit
 def entry_rows(n_own, start, row):
     """row[e] = i for every entry e of row i's list (``start``: the lists' (n_own + 1,) offsets)."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        for e in range(start[i], start[i + 1]):
+            row[e] = i
+
+
+@cuda.jit
+def entry_rows_in(n_own, start, row):
+    """``entry_rows`` into a fixed capacity (``row``'s length): nothing when the lists did not fit."""
+    if start[n_own] > row.shape[0]:
+        return
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
         for e in range(start[i], start[i + 1]):
             row[e] = i

@@ -36,6 +36,14 @@ from ..law import PLANE_FLOOR, PLANE_ROUGH, Law
 RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
 # their values before any row adds to them; each kernel sets the other's back to these for its next launch
 NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
+# two slots after those of the engine's own ``red`` (the step's kernels launched one by one), written by a
+# list rebuild on the GPU with no host round trip (``lists.write_partners_in``; engine.gpu_rebuild =
+# "device"): the new lists' entries (exact below 2**53), and 1.0 when they did not fit the lists' capacity.
+# The forces' kernels then do nothing (``_overflowed``): the host reads both with the forces' reductions and
+# builds the lists again with room for them.
+RED_ENTRIES, RED_OVERFLOW = 6, 7
+# the length of the engine's ``red`` (``rec``'s rows, those of ``advance``, have ``len(NEUTRAL)``)
+RED_SLOTS = 8
 
 
 @device_cuda
@@ -47,6 +55,14 @@ def _reset_drift_slots(red):
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
         red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
         red[RED_BAD] = NEUTRAL[RED_BAD]
+
+
+@device
+def _overflowed(red):
+    """Whether the list rebuild before this evaluation ran out of room (``red[RED_OVERFLOW]``, a
+    ``RED_SLOTS`` record): the forces' kernels launched one by one then return at once, every thread
+    alike (no barrier waits), leaving the rows, the history and ``red`` as they were."""
+    return red[RED_OVERFLOW] != 0.0
 
 
 @device
@@ -350,9 +366,14 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         Each row's Delta s with the rough plane [d] (read and written only with one).
     planes : (P, 4) float64, kinds : (P,) int64
         The planes' normals and offsets [d] and kinds (``law.PLANE_*``).
-    red : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
-        owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
+    red : (RED_SLOTS,) float64
+        The step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
+        owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``. With
+        ``red[RED_OVERFLOW]`` set (a list rebuild on the GPU out of room) the kernel does nothing;
+        so do ``entry_forces``, ``row_sums`` and ``chunk_forces``.
     """
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
@@ -413,6 +434,8 @@ def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
     largest overlap [d] (RED_OVERLAP) and the contacts (RED_CONTACTS) into ``red``; sets the slots
     of ``kick_drift`` to ``NEUTRAL``. Other arguments as ``forces``'s; any grid.
     """
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, np.uint32(epoch & 0xFFFFFFFF),
@@ -440,6 +463,8 @@ def row_sums(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, 
     """The second half of ``forces`` after ``entry_forces``: each owned row's force and torque, a
     thread a row (gravity, its entries' in order, the planes'); the largest plane overlap into
     ``red[RED_OVERLAP]``. Any grid."""
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds,
                np.uint32(epoch & 0xFFFFFFFF), law, increment, red, room, False, (x, v, omega), x, 0.0, 0.0, 0.0, 0.0,
@@ -481,6 +506,8 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
     (as ``entry_forces``), then, after a block barrier, a thread a row sums its entries in list order
     and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
     ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
