@@ -31,13 +31,17 @@ from mpdem.state import State
 # the last three reduce a fused step's values in one tree a phase (``engine.gpu_reductions``); the second and
 # the fourth sum the stop rule's samples on the GPU (``engine.gpu_samples``); the second and the third launch
 # steps compiled for the run's options (``engine.gpu_pinned``), the third and the fourth drift the next step
-# in the forces' phase, the rows in two buffers (``engine.gpu_drift``).
+# in the forces' phase, the rows in two buffers (``engine.gpu_drift``); the second and the third rebuild the
+# lists on the GPU with no host round trip (``engine.gpu_rebuild``; a thread a row: REBUILD_GRIDS).
 GRIDS = ([dict(block=2, blocks=2),
-          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True),
-          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True),
+          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True, rebuilds="device"),
+          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True,
+               rebuilds="device"),
           dict(block=2, blocks=3, reductions="fused", samples="device", drift="fused")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True),
-               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True),
+         else [dict(block=128),
+               dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True, rebuilds="device"),
+               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True,
+                    rebuilds="device"),
                dict(block=256, reductions="fused", samples="device", drift="fused")])
 
 
@@ -210,6 +214,55 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
                 assert stamp2[e] == stamp[was] and np.array_equal(hist2[e], hist[was])
                 kept += stamp[was] == np.uint32(eng._epoch)
     assert kept > 50, "contacts among the carried entries"
+
+
+# rebuilds in place a thread a row (the lists' length read with the forces' reductions), at two launch shapes;
+# the second starts with room for 8 entries, so that its first rebuild in place overflows
+REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8)]
+                 if runtime.SIMULATOR else
+                 [dict(block=128, rebuilds="device"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8)])
+
+
+@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1)])
+def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, grid):
+    """``engine.gpu_rebuild = "device"``: a list rebuild nearly every step (a skin of 0.001 d; 27 spheres,
+    every 20th rebuild through the host), frictionless and frictional, each ``StepInfo``, the contact
+    counts read between, the digest, the kinetic sums and the force ratio are the CPU engine's. No
+    rebuild reads anything back before the forces that follow it. The second shape's first rebuild in place
+    overflows its room (8 entries), and so does one after a third of the steps (its room set back to 8,
+    the contacts' history not zero): the host sees it with the forces' reductions and builds again."""
+    phys = physics(mu=mu, gamma_t=20.0, skin=0.001)
+    x, v, omega, fixed, L = tight_lattice(m=3)
+    runs = []
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, REBUILD_GRIDS[grid])):
+        st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
+        eng = engine(st, phys, Domain(None), **kw)
+        eng.start()
+        eager = []
+        if engine is gpu.Engine:
+            settle = eng._settle
+            eng._settle = lambda red=None: (eager.append(red is None and eng._pending is not None), settle(red))[1]
+        infos = []
+        for stretch in range(3):
+            if stretch == 1 and engine is gpu.Engine and grid:
+                # room for 8 entries again, once the contacts carry a history: the next rebuild overflows
+                eng._capacity, eng._sets = 8, []
+            infos += eng.run_quiet(7)
+            infos.append(eng.info._replace(n_contacts=eng.contacts()))
+        infos.append(eng.step(keep_pairs=True))
+        runs.append((eng, st, infos, eager))
+    (want, st_c, a, _), (got, st_g, b, eager) = runs
+    assert got.n_rebuilds == want.n_rebuilds >= 21, "rebuilds in place and through the host"
+    assert got.n_overflows == (2 if grid else 0) and not any(eager)
+    assert len(a) == len(b) == 25
+    for s, (p, q) in enumerate(zip(a, b)):
+        assert p == q, f"record {s}: CPU {p}, GPU {q}"
+    g = checkpoint.gather_state(st_g)
+    assert int(g["count"].sum()) > 50 and (mu == 0.0 or np.any(g["ds"] != 0.0)), "a pile in contact"
+    assert checkpoint.digest(checkpoint.gather_state(st_c)) == checkpoint.digest(g)
+    assert got.kinetic() == want.kinetic() and got.force_ratio() == want.force_ratio()
 
 
 def test_any_grid_gives_the_same_bits():
