@@ -68,11 +68,13 @@ def cases():
     x, fixed, ids = np.zeros((n, 3)), np.zeros(n, np.uint8), np.zeros(n, np.int64)
     start, nbr = np.zeros(n + 1, np.int64), np.zeros(4, np.int32)
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))
-    red, rec, cells = np.zeros(6), np.zeros((4, 6)), np.zeros(n, np.int32)
+    red, rec, cells = np.zeros(step.RED_SLOTS), np.zeros((4, 6)), np.zeros(n, np.int32)
     acc = np.zeros((4, 72), np.int64)
     box = (10.0, 10.0, 5.0, 5.0)
     planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
+    dims = np.zeros(2, np.int64)
+    grid_in = (x, ids, fixed, cells, cells, cells, 3, 3, dims, *box, 1.44)
     advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,
                rec, True, 4, nbr, 16, True, x, x, x, True)
     return {
@@ -109,6 +111,16 @@ def cases():
         "lists.write_partners": (lists.write_partners, (n, *grid, start, nbr)),
         "lists.carry_history": (lists.carry_history, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
                                                       np.uint32(3))),
+        # the rebuild in place (engine.gpu_rebuild = "device")
+        "lists.grid_depth": (lists.grid_depth, (np.zeros(3), 3, 3, 8, 1.2, dims)),
+        "lists.zero_cells": (lists.zero_cells, (cells, dims)),
+        "lists.bin_rows_in": (lists.bin_rows_in, (n, x, 3, 3, 1.0, 1.0, np.zeros(3), dims, 1.2, cells, cells)),
+        "lists.scan_in": (lists.scan_in, (cells, cells, dims)),
+        "lists.count_partners_in": (lists.count_partners_in, (n, *grid_in, start)),
+        "lists.write_partners_in": (lists.write_partners_in, (n, *grid_in, start, nbr, red)),
+        "lists.carry_history_in": (lists.carry_history_in, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
+                                                            np.uint32(3))),
+        "lists.entry_rows_in": (lists.entry_rows_in, (n, start, nbr)),
         "lists.copy_rows": (lists.copy_rows, (n, x, x)),
         "lists.entry_rows": (lists.entry_rows, (n, start, nbr)),
         "lists.gather_rows": (lists.gather_rows, (ids, x, x, x, np.zeros((3, n, 3)))),
