@@ -34,7 +34,8 @@ from mpdem.state import State
 # in the forces' phase, the rows in two buffers (``engine.gpu_drift``); the second and the third rebuild the
 # lists on the GPU with no host round trip (``engine.gpu_rebuild``; a thread a row: REBUILD_GRIDS).
 GRIDS = ([dict(block=2, blocks=2),
-          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True, rebuilds="device"),
+          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True,
+               rebuilds="device"),
           dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True,
                rebuilds="device"),
           dict(block=2, blocks=3, reductions="fused", samples="device", drift="fused")] if runtime.SIMULATOR

@@ -47,6 +47,9 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
+    # list rebuilds on the GPU with no host round trip (their cost is the table's "rebuild ms" and the steps'
+    # share of the rebuilds in run_quiet)
+    "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},
     # every switch that cuts the fixed cost of a step at once, a thread a row and by chunks: launches compiled
     # for the run's options, the next step's drift in the forces' phase, a phase's reductions in one tree
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
