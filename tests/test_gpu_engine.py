@@ -217,23 +217,31 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
     assert kept > 50, "contacts among the carried entries"
 
 
-# rebuilds in place a thread a row (the lists' length read with the forces' reductions), at two launch shapes;
-# the second starts with room for 8 entries, so that its first rebuild in place overflows
+# rebuilds without the host a thread a row, at two launch shapes: in place (the lists' length read with the
+# forces' reductions), then inside the launches of many steps (``engine.gpu_rebuild = "launch"``); the second
+# and the fourth start with room for 8 entries, so that their first rebuild without the host overflows
 REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
-                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8)]
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
+                  dict(block=2, blocks=2, rebuilds="launch"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8)]
                  if runtime.SIMULATOR else
                  [dict(block=128, rebuilds="device"),
-                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8)])
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
+                  dict(block=128, rebuilds="launch"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8)])
 
 
-@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1)])
+@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1), (0.5, 2), (0.0, 3)])
 def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, grid):
-    """``engine.gpu_rebuild = "device"``: a list rebuild nearly every step (a skin of 0.001 d; 27 spheres,
-    every 20th rebuild through the host), frictionless and frictional, each ``StepInfo``, the contact
-    counts read between, the digest, the kinetic sums and the force ratio are the CPU engine's. No
+    """``engine.gpu_rebuild = "device"`` and ``"launch"``: a list rebuild nearly every step (a skin of
+    0.001 d; 27 spheres, every 20th rebuild through the host), frictionless and frictional, each
+    ``StepInfo``, the contact counts read between, the digest, the kinetic sums and the force ratio are
+    the CPU engine's. No
     rebuild reads anything back before the forces that follow it. The second shape's first rebuild in place
     overflows its room (8 entries), and so does one after a third of the steps (its room set back to 8,
-    the contacts' history not zero): the host sees it with the forces' reductions and builds again."""
+    the contacts' history not zero): the host sees it with the forces' reductions (in place) or the
+    launch's record (inside a launch, which ends there) and builds again. Inside the launches, most
+    rebuilds are phases of the launch."""
     phys = physics(mu=mu, gamma_t=20.0, skin=0.001)
     x, v, omega, fixed, L = tight_lattice(m=3)
     runs = []
@@ -247,7 +255,7 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
             eng._settle = lambda red=None: (eager.append(red is None and eng._pending is not None), settle(red))[1]
         infos = []
         for stretch in range(3):
-            if stretch == 1 and engine is gpu.Engine and grid:
+            if stretch == 1 and engine is gpu.Engine and grid % 2:
                 # room for 8 entries again, once the contacts carry a history: the next rebuild overflows
                 eng._capacity, eng._sets = 8, []
             infos += eng.run_quiet(7)
@@ -256,7 +264,8 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
         runs.append((eng, st, infos, eager))
     (want, st_c, a, _), (got, st_g, b, eager) = runs
     assert got.n_rebuilds == want.n_rebuilds >= 21, "rebuilds in place and through the host"
-    assert got.n_overflows == (2 if grid else 0) and not any(eager)
+    assert got.n_overflows == (2 if grid % 2 else 0) and not any(eager)
+    assert got.n_rebuilds_in_launch > (10 if grid >= 2 else -1) and (grid >= 2 or got.n_rebuilds_in_launch == 0)
     assert len(a) == len(b) == 25
     for s, (p, q) in enumerate(zip(a, b)):
         assert p == q, f"record {s}: CPU {p}, GPU {q}"

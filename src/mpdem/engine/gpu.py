@@ -45,7 +45,7 @@ SAMPLES = ("host", "device")
 # engine.gpu_drift
 DRIFTS = ("apart", "fused")
 # engine.gpu_rebuild
-REBUILDS = ("host", "device")
+REBUILDS = ("host", "device", "launch")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -124,12 +124,14 @@ class Engine(EngineBase):
         ``run_quiet``'s launches compiled for this engine's options and its law's model, friction,
         ``limit_damping`` and ``rescale_history`` as constants (``engine.gpu_pinned``,
         ``kernels.gpu.step.pinned_advance``); no effect on results.
-    rebuilds : {"host", "device"}
+    rebuilds : {"host", "device", "launch"}
         How a list rebuild on the GPU (one rank, not a ``SORT_EVERY``-th) is sized
         (``engine.gpu_rebuild``): by the host, which reads the rows' z range and the lists' length back
         and allocates the lists ("host"), or on the GPU alone, into lists of a fixed capacity whose
         overflow the host sees when it next reads the step's reductions, and then builds them again
-        with room ("device", ``_rebuild_in_place``); no effect on results.
+        with room ("device", ``_rebuild_in_place``); "launch": as "device", and with a thread a row
+        (``threads = "row"``, not ``pinned``) ``run_quiet``'s launches rebuild the lists themselves, as
+        phases of the launch (``kernels.gpu.step.advance_lists``); no effect on results.
     list_capacity : int
         With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
         than the first lists built on the GPU replace); grown on an overflow. No effect on results.
@@ -167,7 +169,9 @@ class Engine(EngineBase):
         if rebuilds not in REBUILDS:
             raise ValueError(f"rebuilds = {rebuilds!r}: accepted {', '.join(map(repr, REBUILDS))}")
         # list rebuilds on the GPU with no host round trip, into lists of a fixed capacity (``_rebuild_in_place``)
-        self.in_place = rebuilds == "device"
+        self.in_place = rebuilds in ("device", "launch")
+        # and inside ``run_quiet``'s launches (a thread a row, not pinned: ``advance_lists``)
+        self.in_launch = rebuilds == "launch" and threads == "row" and not self.pinned
         # the entries those lists have room for (0: not yet sized), and their two sets of arrays, the old
         # lists and the new (``_list_set``)
         self._capacity = int(list_capacity)
@@ -175,8 +179,10 @@ class Engine(EngineBase):
         # a rebuild in place whose length and room the host has not yet read (``_settle``), and the lists it
         # replaced (start, nbr, hist, stamp, entries), which an overflow brings back
         self._pending = None
-        # rebuilds in place that ran out of room and were built again (``_settle``)
+        # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
         self.n_overflows = 0
+        # rebuilds inside ``run_quiet``'s launches (``advance_lists``)
+        self.n_rebuilds_in_launch = 0
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -215,8 +221,10 @@ class Engine(EngineBase):
         self._red_host = self.cuda.pinned_array(self.k.RED_SLOTS)
         self._launchers = {}
         # the per-step reductions of ``run_quiet``'s launches, and their pinned host copy
-        self._rec = self.cuda.device_array((BATCH, len(self.k.NEUTRAL)))
-        self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
+        # (with rebuilds in the launches, each row's RED_ENTRIES and RED_OVERFLOW too)
+        cols = self.k.RED_SLOTS if self.in_launch else len(self.k.NEUTRAL)
+        self._rec = self.cuda.device_array((BATCH, cols))
+        self._rec_host = self.cuda.pinned_array((BATCH, cols))
         self._coop_blocks = None
         self._zr = self.cuda.to_device(np.zeros(2))   # the z range of the GPU's list build
         # the same of the build in place (with the grid's lowest z), and its grid's z layers and cells
@@ -273,6 +281,8 @@ class Engine(EngineBase):
     def _advance_name(self):
         """The launcher name of ``run_quiet``'s kernel: "advance", or with ``pinned`` the key of the one
         compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
+        if self.in_launch:
+            return "advance_lists"
         if not self.pinned:
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
@@ -488,14 +498,8 @@ class Engine(EngineBase):
         s, d, L = self.state, self._dev, self.kl
         n = s.n_own
         grid, one = self._grid(n), (1, self.block)
-        if not self._capacity:
-            self._capacity = int(1.25 * self._k) + 64
-        nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
-        # the host path's bound on the z layers (z hashed above it), here the cells' arrays' room
-        nz_cap = max(3, 4 * (n // (nx * ny)) + 8)
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
         room = nx * ny * nz_cap + 1
-        count, fill = self._buffer("cells", room, np.int32), self._buffer("fill", room, np.int32)
-        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
         zr, dims = self._zr_in, self._dims
         self._run(L.z_range, grid, (n, d["x"], zr))
         self._run(L.grid_depth, (1, 1), (zr, nx, ny, nz_cap, self.r_list, dims))
@@ -523,6 +527,34 @@ class Engine(EngineBase):
         if self.by_entry and not self._settle():
             self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
             d["row"] = new["row"]
+
+    def _cells(self):
+        """The cell grid of a rebuild without the host: (nx, ny, nz_cap, count, fill, cell, order), its
+        columns, its most z layers (the host path's bound, z hashed above it) and its arrays, with room for
+        that many cells and the rows; the lists' capacity set if not yet (a quarter more than the lists)."""
+        s = self.state
+        n = s.n_own
+        if not self._capacity:
+            self._capacity = int(1.25 * self._k) + 64
+        nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
+        nz_cap = max(3, 4 * (n // (nx * ny)) + 8)
+        room = nx * ny * nz_cap + 1
+        count, fill = self._buffer("cells", room, np.int32), self._buffer("fill", room, np.int32)
+        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
+        return nx, ny, nz_cap, count, fill, cell, order
+
+    def _launch_lists(self):
+        """``advance_lists``'s arguments after ``advance``'s (ids .. budget) and the list set its rebuilds
+        alternate with the current lists (``_list_set``): up to the rebuild before the next ``SORT_EVERY``-th
+        (which goes through the host)."""
+        s, d = self.state, self._dev
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
+        second = self._list_set()
+        r = self.n_rebuilds % SORT_EVERY
+        budget = SORT_EVERY - r if r else 0
+        return (d["id"], self._zr_in, count, fill, cell, order, second["start"], second["nbr"], second["hist"],
+                second["stamp"], nx, ny, nz_cap, s.L_x / nx, s.L_y / ny, self.r_list, self.r_list * self.r_list,
+                budget), second
 
     def _list_set(self):
         """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry or
@@ -716,24 +748,44 @@ class Engine(EngineBase):
         while len(infos) < n:
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
-            args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
+            head = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
-                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
-                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
+                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
+            tail = (max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
                     self.one_barrier)
+            if self.in_launch:
+                more, second = self._launch_lists()
+                args = head + tail + more
+            else:
+                args = head + (self.by_entry,) + tail
             name = self._advance_name()
             self._launch(name, *args, grid=self._cooperative_grid(name, args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
             s.slots_current = False
             overlap = self.last_overlap
-            whole = 0
+            whole = rebuilt = 0
             for r in rec:
-                if r[k.RED_BAD] or not math.sqrt(r[k.RED_D2]) < 0.5 * p.skin:
+                if r[k.RED_BAD]:
                     break
+                if not math.sqrt(r[k.RED_D2]) < 0.5 * p.skin:
+                    # a step that rebuilt the lists inside the launch is whole
+                    if not (self.in_launch and r[k.RED_ENTRIES] >= 0.0 and not r[k.RED_OVERFLOW]):
+                        break
+                    rebuilt += 1
+                    self._k = int(r[k.RED_ENTRIES])
                 infos.append(StepInfo(overlap, self.n_contacts, float(r[k.RED_ZMIN]), float(r[k.RED_ZMAX]), flags))
                 overlap = float(r[k.RED_OVERLAP])
                 whole += 1
+            if rebuilt:
+                self._rebuilt_in_launch(rebuilt, second)
+            if whole < m and self.in_launch and rec[whole][k.RED_OVERFLOW]:
+                # the step's lists did not fit: the host's rebuild below (in place) with room for them
+                need = int(rec[whole][k.RED_ENTRIES])
+                self.n_overflows += 1
+                if need > self._capacity:
+                    self._capacity = int(1.25 * need) + 64
+                    self._sets = []
             if whole:
                 self._epoch += whole
                 s.step += whole
@@ -748,6 +800,18 @@ class Engine(EngineBase):
                 # the step the launch ended at has drifted: its rebuild and forces on the host's path
                 infos.append(self._finish_step(rec[whole], self.last_overlap, flags))
         return infos
+
+    def _rebuilt_in_launch(self, rebuilt, second):
+        """The lists after ``rebuilt`` rebuilds inside a launch of ``advance_lists``: in ``second`` (the set
+        ``_launch_lists`` gave) after an odd number, where they were after an even one."""
+        d = self._dev
+        if rebuilt % 2:
+            for name in ("start", "nbr", "hist", "stamp"):
+                d[name] = second[name]
+        self.n_rebuilds += rebuilt
+        self.n_rebuilds_in_launch += rebuilt
+        self._host_lists = False
+        self._pairs_kept = False
 
     def _cooperative_grid(self, name, args):
         """The grid of ``advance``: one row (or entry, ``by_entry``) a thread if every block fits on the

@@ -36,7 +36,13 @@ from ..neighbours import _next_cell
 from .reduce import BLOCK_MAX, max_into, min_into
 from .rounded import min_image, norm2
 from .runtime import cuda, device, device_cuda
-from .step import RED_ENTRIES, RED_OVERFLOW
+
+# the slots of a rebuild without the host in the step's reduction records (``step.RED_D2`` .. ``RED_CONTACTS``
+# before them; the engine's ``red`` has ``RED_SLOTS``, and so do ``rec``'s rows with rebuilds inside the launch):
+# the new lists' entries (exact below 2**53; -1.0 in a row of ``rec``: no rebuild that step), and 1.0 when they
+# did not fit the lists' capacity (nothing written past it)
+RED_ENTRIES, RED_OVERFLOW = 6, 7
+RED_SLOTS = 8
 
 
 @cuda.jit
@@ -360,3 +366,110 @@ def entry_rows_in(n_own, start, row):
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
         for e in range(start[i], start[i + 1]):
             row[e] = i
+
+
+@device_cuda
+def rebuild_phases(n_own, x, x_ref, ids, fixed, L_x, L_y, hx, hy, old, new, stale, cells, grid_shape, red, room, part):
+    """A list rebuild as phases of a cooperative launch (``step.advance_lists``; engine.gpu_rebuild =
+    "launch"): every thread of the grid calls it, the phases parted by grid barriers. The build of the
+    ``*_in`` kernels, one phase each: the z range (and the cells' counts zeroed), the rows binned, the
+    cells' offsets (one block), the rows by cell (and the z range set back), each row's partners counted,
+    the lists' offsets (one block), the partners written sorted by id, the history carried and x_ref = x.
+
+    Parameters
+    ----------
+    n_own : int
+        Rows (one rank: no ghosts).
+    x : (n_own, 3) float64
+        The positions the lists are built from [d]; copied into ``x_ref`` (n_own, 3).
+    ids : (n_own,) int64, fixed : (n_own,) uint8
+        The rows' ids (the lists' order) and whether a row is the bed's (no list).
+    L_x, L_y, hx, hy : float
+        The periodic box and its halves [d].
+    old, new : tuples (start, nbr, hist, stamp)
+        The current lists ((n_own + 1,) int64 offsets, (K,) int32 partners, (K, 3) float64 Delta s [d],
+        (K,) uint32 stamps) and the arrays the new ones go into (their capacity: len(new nbr), as new
+        hist's and stamp's).
+    stale : uint32
+        The stamp of a new pair (not in contact at the last evaluation).
+    cells : tuple (zr, count, fill, cell, order)
+        (3,) float64 z range, (inf, -inf) between builds; (C + 1,) int32 counts and their copy, room for
+        ``grid_shape``'s nx * ny * nz_cap cells; (n_own,) int32 each row's cell and the rows by cell.
+    grid_shape : tuple (nx, ny, nz_cap, cx, cy, r_list, r2)
+        The grid's columns, its most z layers, a column's sides [d], a layer's height r_list [d] and
+        r_list**2 [d^2] (pairs closer than sqrt(r2) are listed).
+    red : float64 (>= RED_SLOTS,)
+        The step's record: red[RED_ENTRIES] = the new lists' entries K; red[RED_OVERFLOW] = 1.0 when K is
+        past the capacity (nothing written to the new lists then).
+    room : float64 shared (>= BLOCK_MAX,), part : int64 shared (BLOCK_MAX,)
+        The block's room for its reductions and for the scans.
+
+    Returns
+    -------
+    bool
+        True when the lists were built (the same answer in every thread), False on an overflow.
+    """
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    threads = cuda.gridsize(1)
+    zr, count, fill, cell, order = cells
+    nx, ny, nz_cap, cx, cy, r_list, r2 = grid_shape
+    o_start, o_nbr, o_hist, o_stamp = old
+    n_start, n_nbr, n_hist, n_stamp = new
+    lo = math.inf
+    hi = -math.inf
+    for i in range(first, n_own, threads):
+        lo = min(lo, x[i, 2])
+        hi = max(hi, x[i, 2])
+    for c in range(first, count.shape[0], threads):
+        count[c] = 0
+    min_into(zr, 0, lo, room)
+    max_into(zr, 1, hi, room)
+    grid.sync()
+    # the grid's z layers as ``grid_depth``'s, in every thread alike
+    q = (zr[1] - zr[0]) / r_list
+    nz = nz_cap
+    if q >= 0.0 and q < nz_cap - 1:
+        nz = int(q) + 1
+    zmin = zr[0]
+    for i in range(first, n_own, threads):
+        c = _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list)
+        cell[i] = c
+        cuda.atomic.add(count, c + 1, 1)
+    grid.sync()
+    if cuda.blockIdx.x == 0:
+        _scan(count, nx * ny * nz, part, fill, True)
+    grid.sync()
+    for i in range(first, n_own, threads):
+        at = cuda.atomic.add(fill, cell[i], 1)
+        order[at] = i
+    if first == 0:
+        zr[0] = math.inf
+        zr[1] = -math.inf
+    grid.sync()
+    for i in range(first, n_own, threads):
+        m = 0
+        if not fixed[i]:
+            m = _partners(i, x, ids, cell, count, order, nx, ny, nz, L_x, L_y, hx, hy, r2, n_start, 0, False)
+        n_start[i + 1] = m
+    grid.sync()
+    if cuda.blockIdx.x == 0:
+        _scan(n_start, n_own, part, n_start, False)
+    grid.sync()
+    k = n_start[n_own]
+    if first == 0:
+        red[RED_ENTRIES] = np.float64(k)
+    if k > n_nbr.shape[0]:
+        if first == 0:
+            red[RED_OVERFLOW] = 1.0
+        return False
+    for i in range(first, n_own, threads):
+        if not fixed[i]:
+            _partners(i, x, ids, cell, count, order, nx, ny, nz, L_x, L_y, hx, hy, r2, n_nbr, n_start[i], True)
+    grid.sync()
+    for i in range(first, n_own, threads):
+        _carry_row(i, ids, o_start, o_nbr, o_hist, o_stamp, n_start, n_nbr, n_hist, n_stamp, stale)
+        for a in range(3):
+            x_ref[i, a] = x[i, a]
+    grid.sync()
+    return True
