@@ -181,8 +181,9 @@ class Engine(EngineBase):
         self._pending = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
         self.n_overflows = 0
-        # rebuilds inside ``run_quiet``'s launches (``advance_lists``)
+        # rebuilds inside ``run_quiet``'s launches (``advance_lists``), and through the host (the rows ordered)
         self.n_rebuilds_in_launch = 0
+        self.n_rebuilds_by_host = 0
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -404,6 +405,7 @@ class Engine(EngineBase):
             return
         c0 = self.domain.comm_seconds
         s = self.state
+        self.n_rebuilds_by_host += 1
         if self.has_lists:
             self.sync_state()
         sort_rows(s, self.r_list)
