@@ -73,6 +73,10 @@ def cases():
     box = (10.0, 10.0, 5.0, 5.0)
     planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
+    rec8 = np.zeros((4, step.RED_SLOTS))
+    advance_lists = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True,
+                     0.1, 4, rec8, 4, nbr, 0, True, x, x, x, True, ids, np.zeros(3), cells, cells, cells, cells, start,
+                     nbr, hist, stamp, 3, 3, 8, 1.0, 1.0, 1.2, 1.44, 19)
     dims = np.zeros(2, np.int64)
     grid_in = (x, ids, fixed, cells, cells, cells, 3, 3, dims, *box, 1.44)
     advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,
@@ -84,6 +88,8 @@ def cases():
                                       5, *box, law, True, red)),
         "step.advance": (step.advance, advance),
         "step.advance_one": (step.advance_one, advance),
+        # list rebuilds inside the launch (engine.gpu_rebuild = "launch"), a thread a row
+        "step.advance_lists": (step.advance_lists, advance_lists),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
         # then chunks of 16 rows, the fused reductions and the fused drift (engine.gpu_drift)
         "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, False,
