@@ -47,6 +47,11 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
+    # list rebuilds as phases of the launches of many steps (no launch, copy or allocation of their own; their cost
+    # is in the steps' time of run_quiet), with and without the fused drift
+    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch"},
+    "row-rebuild-launch-drift": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch",
+                                 "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused"},
     # list rebuilds on the GPU with no host round trip (their cost is the table's "rebuild ms" and the steps'
     # share of the rebuilds in run_quiet)
     "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},

@@ -188,8 +188,10 @@ SCHEMA = (
        "how the GPU engine sizes a list rebuild it makes on the GPU (one rank): 'host' (the host reads the "
        "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
        "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "
-       "GPU and read with the next forces, builds them again with more room); no effect on results", str,
-       ("host", "device"), restart=True, physics=False),
+       "GPU and read with the next forces, builds them again with more room) or 'launch' (as 'device', and with "
+       "engine.gpu_threads = 'row' and engine.gpu_pinned = false the launches of many steps rebuild the lists "
+       "themselves, as phases of the launch); no effect on results", str, ("host", "device", "launch"), restart=True,
+       physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
