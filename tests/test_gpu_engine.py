@@ -222,13 +222,15 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
 # and the fourth start with room for 8 entries, so that their first rebuild without the host overflows
 REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
                   dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
-                  dict(block=2, blocks=2, rebuilds="launch"),
-                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8)]
+                  dict(block=2, blocks=2, rebuilds="launch", sort="device"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
+                       sort="device")]
                  if runtime.SIMULATOR else
                  [dict(block=128, rebuilds="device"),
                   dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
-                  dict(block=128, rebuilds="launch"),
-                  dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8)])
+                  dict(block=128, rebuilds="launch", sort="device"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
+                       sort="device")])
 
 
 @pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1), (0.5, 2), (0.0, 3)])
@@ -264,8 +266,8 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
         runs.append((eng, st, infos, eager))
     (want, st_c, a, _), (got, st_g, b, eager) = runs
     assert got.n_rebuilds == want.n_rebuilds >= 21, "rebuilds in place and through the host"
-    # the first and every SORT_EVERY-th through the host
-    assert got.n_rebuilds_by_host == 1 + (got.n_rebuilds - 1) // gpu.SORT_EVERY
+    # the first and every SORT_EVERY-th through the host, or (``sort="device"``) the first only
+    assert got.n_rebuilds_by_host == (1 if got.sort_on_gpu else 1 + (got.n_rebuilds - 1) // gpu.SORT_EVERY)
     assert got.n_overflows == (2 if grid % 2 else 0) and not any(eager)
     assert got.n_rebuilds_in_launch > (10 if grid >= 2 else -1) and (grid >= 2 or got.n_rebuilds_in_launch == 0)
     assert len(a) == len(b) == 46

@@ -30,8 +30,9 @@ from ..kernels.bundles import Lists, Near, Slots, make_box
 from ..kernels.exactsum import NLIMBS, new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
 from ..kernels.neighbours import build_neighbours, cell_axis
+from ..state import ROW_FIELDS
 from .base import NO_FLAGS, EngineBase, StepInfo
-from .order import sort_rows
+from .order import SORT_COLUMN, sort_rows
 
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
 # launches; a 20k pile runs some thousands of steps a second)
@@ -46,9 +47,32 @@ SAMPLES = ("host", "device")
 DRIFTS = ("apart", "fused")
 # engine.gpu_rebuild
 REBUILDS = ("host", "device", "launch")
+# engine.gpu_sort
+SORTS = ("host", "device")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
+
+
+def sort_columns(nx, ny):
+    """The order of ``order.sort_rows`` as ranks of the list build's cells, for a counting sort on the GPU:
+    for the column of cells (ix, iy) at ix + nx iy, (col_base, col_size, col_local), each (nx * ny,) int64:
+    the cells across the columns of about ``SORT_COLUMN`` x ``SORT_COLUMN`` before its own, those across its
+    own, and its place among them (y-major). The cell (ix, iy, iz) of a grid of nz layers then ranks
+    col_base nz + iz col_size + col_local: the columns one after the other, z-major inside each, a
+    permutation of the nx ny nz cells."""
+    cx = max(int(round(nx / SORT_COLUMN)), 1)
+    cy = max(int(round(ny / SORT_COLUMN)), 1)
+    ix = np.arange(nx)
+    iy = np.arange(ny)
+    bx, by = ix * cx // nx, iy * cy // ny
+    wx, wy = np.bincount(bx, minlength=cx), np.bincount(by, minlength=cy)
+    x0, y0 = np.concatenate([[0], np.cumsum(wx)[:-1]]), np.concatenate([[0], np.cumsum(wy)[:-1]])
+    size = np.outer(wy, wx).ravel()                    # by column (by cx + bx)
+    base = np.concatenate([[0], np.cumsum(size)[:-1]])
+    column = (by[:, None] * cx + bx[None, :]).ravel()  # by xy cell (iy nx + ix)
+    local = ((iy - y0[by])[:, None] * wx[bx][None, :] + (ix - x0[bx])[None, :]).ravel()
+    return base[column].astype(np.int64), size[column].astype(np.int64), local.astype(np.int64)
 
 
 def runtime_samples():
@@ -135,6 +159,12 @@ class Engine(EngineBase):
     list_capacity : int
         With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
         than the first lists built on the GPU replace); grown on an overflow. No effect on results.
+    sort : {"host", "device"}
+        Where every ``SORT_EVERY``-th rebuild on one rank orders the rows by cell (``engine.gpu_sort``):
+        through the host (rows and history down, ``order.sort_rows``, the lists built, all up), or on the
+        GPU (``_rebuild_sorted``: a counting sort by the same cells, the rows permuted, the lists built
+        and the history carried by partner id; the permutation copied back, which the host's State takes
+        at once). No effect on results.
 
     Attributes
     ----------
@@ -145,7 +175,8 @@ class Engine(EngineBase):
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
-                 reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0):
+                 reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0,
+                 sort="host"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -179,6 +210,13 @@ class Engine(EngineBase):
         # a rebuild in place whose length and room the host has not yet read (``_settle``), and the lists it
         # replaced (start, nbr, hist, stamp, entries), which an overflow brings back
         self._pending = None
+        if sort not in SORTS:
+            raise ValueError(f"sort = {sort!r}: accepted {', '.join(map(repr, SORTS))}")
+        # every SORT_EVERY-th rebuild's ordering of the rows on the GPU (``_rebuild_sorted``), and the spare
+        # arrays of the permutation
+        self.sort_on_gpu = sort == "device"
+        self._spare = {}
+        self._columns = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
         self.n_overflows = 0
         # rebuilds inside ``run_quiet``'s launches (``advance_lists``), and through the host (the rows ordered)
@@ -312,6 +350,7 @@ class Engine(EngineBase):
         for name in self._rows_of() + ("fixed", "id"):
             d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
         d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
+
         d["start"] = cuda.to_device(self.nbr_start[:s.n_own + 1])
         k = max(len(self.nbr_list), 1)
         d["nbr"] = cuda.to_device(self.nbr_list[:k] if len(self.nbr_list) else np.zeros(1, np.int32))
@@ -395,8 +434,11 @@ class Engine(EngineBase):
         t = time.perf_counter()
         # the rebuild in place before this one, if nothing has read its length yet (no evaluation between)
         self._settle()
-        if self.has_lists and not self.domain.parallel and self.n_rebuilds % SORT_EVERY:
-            if self.in_place:
+        on_gpu = self.has_lists and not self.domain.parallel
+        if on_gpu and (self.n_rebuilds % SORT_EVERY or self.sort_on_gpu):
+            if not self.n_rebuilds % SORT_EVERY:
+                self._rebuild_sorted()
+            elif self.in_place:
                 self._rebuild_in_place()
             else:
                 self._rebuild_on_gpu()
@@ -527,6 +569,85 @@ class Engine(EngineBase):
         self._pairs_kept = False
         s.slots_current = False
         if self.by_entry and not self._settle():
+            self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
+            d["row"] = new["row"]
+
+    def _rebuild_sorted(self):
+        """A rebuild that first orders the rows by cell, on the GPU (``engine.gpu_sort = "device"``; one
+        rank): the cells of ``order.sort_rows`` ranked (``sort_columns``, ``kernels.gpu.lists.sort_cells_of``),
+        a counting sort by them, each cell's rows by id (the same permutation whatever the atomics' order),
+        every row array permuted (``permute_rows``), then the lists built as ``_rebuild_in_place`` builds
+        them, the history carried by partner id from the old lists (``carry_history_moved``). The lists'
+        length is read back at once (a copy of 64 bytes every ``SORT_EVERY``-th rebuild): on an overflow
+        the lists are built again with room, the rows staying in their new order. The permutation is
+        copied back with it (4 bytes a row) and the host's State takes it at once: its rows in the GPU's
+        order (ids and the bed's flags current, the rest as stale as before; the slots are packed anew by
+        ``sync_state``). x_ref = x."""
+        s, d, L = self.state, self._dev, self.kl
+        n = s.n_own
+        grid, one = self._grid(n), (1, self.block)
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
+        room = nx * ny * nz_cap + 1
+        zr, dims = self._zr_in, self._dims
+        if self._columns is None or self._columns[0] != (nx, ny):
+            self._columns = ((nx, ny), tuple(self.cuda.to_device(a) for a in sort_columns(nx, ny)))
+        perm = self._buffer("perm", n, np.int32)
+        self._run(L.z_range, grid, (n, d["x"], zr))
+        self._run(L.grid_depth, (1, 1), (zr, nx, ny, nz_cap, self.r_list, dims))
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.sort_cells_of, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list,
+                                          *self._columns[1], cell, count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, perm))
+        self._run(L.sort_within_cells, self._grid(room), (dims, count, perm, d["id"]))
+        # the rows into their spares in the new order, then the spares current (the old ids kept there)
+        for name in self._rows_of() + ("fixed", "id"):
+            a = d[name]
+            b = self._spare.get(name)
+            if b is None or b.shape != a.shape or b.dtype != a.dtype:
+                b = self._spare[name] = self.cuda.device_array(a.shape, a.dtype)
+            self._run(L.permute_rows3 if a.ndim == 2 else L.permute_rows, grid, (n, perm, a, b))
+            d[name], self._spare[name] = b, a
+        old_ids = self._spare["id"]
+        # the lists of the rows in their new order (the z range is the same: ``dims`` stands)
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.bin_rows_in, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list, cell,
+                                        count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, dims, *make_box(s.L_x, s.L_y),
+                 self.r_list * self.r_list)
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        k = self.k
+        while True:
+            new = self._list_set()
+            self._run(L.count_partners_in, grid, (n, *cells, new["start"]))
+            self._run(L.scan, one, (new["start"], n))
+            self._run(L.write_partners_in, grid, (n, *cells, new["start"], new["nbr"], self._red))
+            self._run(L.carry_history_moved, grid, (n, perm, old_ids, d["id"], d["start"], d["nbr"], d["hist"],
+                                                    d["stamp"], new["start"], new["nbr"], new["hist"], new["stamp"],
+                                                    stale))
+            red = self._red.copy_to_host(self._red_host)
+            entries = int(red[k.RED_ENTRIES])
+            if not red[k.RED_OVERFLOW]:
+                break
+            # the flag is written again by the next build; the old lists are where they were
+            self.n_overflows += 1
+            self._capacity = int(1.25 * entries) + 64
+            self._sets = []
+        for name in ("start", "nbr", "hist", "stamp"):
+            d[name] = new[name]
+        self._k = entries
+        order = perm[:n].copy_to_host()
+        for name in ROW_FIELDS:
+            a = getattr(s, name)
+            a[:n] = a[:n][order]
+        s.n_rows = n
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+        if self.by_entry:
             self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
             d["row"] = new["row"]
 

@@ -359,6 +359,96 @@ def entry_rows(n_own, start, row):
 
 
 @cuda.jit
+def sort_cells_of(n_rows, x, nx, ny, cx, cy, zr, dims, r_list, col_base, col_size, col_local, cell, count):
+    """The rows' cells in the order the rows are sorted by (``engine.order.sort_rows``'s: columns of about
+    ``SORT_COLUMN`` x ``SORT_COLUMN`` cells one after the other, z-major inside each), for a counting sort
+    on the GPU (engine.gpu_sort = "device").
+
+    Parameters
+    ----------
+    n_rows : int
+    x : (n_rows, 3) float64
+        Positions [d].
+    nx, ny, cx, cy, zr, dims, r_list
+        The list build's grid, as ``bin_rows_in``'s (``grid_depth``'s dims and zr).
+    col_base, col_size, col_local : (nx * ny,) int64
+        For the column of cells (ix, iy) at ix + nx iy: the cells across the columns before its own,
+        those across its own, and its place among them (``engine.gpu.sort_columns``).
+    cell : (n_rows,) int32, out
+        Each row's rank of cell: col_base nz + iz col_size + col_local (a permutation of the cells).
+    count : int32, in and out
+        count[c + 1] += 1 for each row of ranked cell c (zeroed before).
+    """
+    nz = dims[0]
+    zmin = zr[2]
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        c = _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list)
+        xy = c % (nx * ny)
+        iz = c // (nx * ny)
+        r = col_base[xy] * nz + iz * col_size[xy] + col_local[xy]
+        cell[i] = r
+        cuda.atomic.add(count, r + 1, 1)
+
+
+@cuda.jit
+def sort_within_cells(dims, start, order, ids):
+    """Each cell's rows (order[start[c]:start[c + 1]], in whatever order the atomics left them) sorted by
+    id, a thread a cell: the permutation is the same whichever the threads' order."""
+    for c in range(cuda.grid(1), dims[1], cuda.gridsize(1)):
+        lo = start[c]
+        for k in range(lo + 1, start[c + 1]):
+            r = order[k]
+            key = ids[r]
+            p = k
+            while p > lo and ids[order[p - 1]] > key:
+                order[p] = order[p - 1]
+                p -= 1
+            order[p] = r
+
+
+@cuda.jit
+def permute_rows(n_rows, perm, src, dst):
+    """dst[i] = src[perm[i]] for the first n_rows rows (1-d arrays of any type; ``permute_rows3`` for (n, 3))."""
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        dst[i] = src[perm[i]]
+
+
+@cuda.jit
+def permute_rows3(n_rows, perm, src, dst):
+    """dst[i, :] = src[perm[i], :] for (n, 3) arrays."""
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        j = perm[i]
+        for a in range(3):
+            dst[i, a] = src[j, a]
+
+
+@cuda.jit
+def carry_history_moved(n_own, perm, old_ids, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr,
+                        new_hist, new_stamp, stale):
+    """``carry_history_in`` across a reordering of the rows: new row i was old row perm[i]; its new
+    entries merge with that row's old ones by partner id (``old_ids`` the rows' ids in the old order,
+    ``ids`` in the new). Nothing when the new lists did not fit their capacity."""
+    if new_start[n_own] > new_nbr.shape[0]:
+        return
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        o = perm[i]
+        p = old_start[o]
+        pe = old_start[o + 1]
+        for k in range(new_start[i], new_start[i + 1]):
+            jid = ids[new_nbr[k]]
+            while p < pe and old_ids[old_nbr[p]] < jid:
+                p += 1
+            if p < pe and old_ids[old_nbr[p]] == jid:
+                for a in range(3):
+                    new_hist[k, a] = old_hist[p, a]
+                new_stamp[k] = old_stamp[p]
+            else:
+                for a in range(3):
+                    new_hist[k, a] = 0.0
+                new_stamp[k] = stale
+
+
+@cuda.jit
 def entry_rows_in(n_own, start, row):
     """``entry_rows`` into a fixed capacity (``row``'s length): nothing when the lists did not fit."""
     if start[n_own] > row.shape[0]:
