@@ -48,10 +48,12 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
     # list rebuilds as phases of the launches of many steps (no launch, copy or allocation of their own; their cost
-    # is in the steps' time of run_quiet), with and without the fused drift
-    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch"},
+    # is in the steps' time of run_quiet), every 20th ordering the rows by cell on the GPU; with and without the
+    # fused drift
+    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
     "row-rebuild-launch-drift": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch",
-                                 "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused"},
+                                 "engine.gpu_sort": "device", "engine.gpu_drift": "fused",
+                                 "engine.gpu_reductions": "fused"},
     # list rebuilds on the GPU with no host round trip (their cost is the table's "rebuild ms" and the steps'
     # share of the rebuilds in run_quiet)
     "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},

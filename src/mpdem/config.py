@@ -192,6 +192,12 @@ SCHEMA = (
        "engine.gpu_threads = 'row' and engine.gpu_pinned = false the launches of many steps rebuild the lists "
        "themselves, as phases of the launch); no effect on results", str, ("host", "device", "launch"), restart=True,
        physics=False),
+    _k("engine", "gpu_sort", "host",
+       "where the GPU engine orders the particles by cell (neighbours near in memory) at every 20th list rebuild on "
+       "one rank: 'host' (rows and contact history copied down, sorted and the lists built there, all copied back) "
+       "or 'device' (a counting sort by the same cells on the GPU, the rows permuted and the history carried by "
+       "partner id there, the permutation copied back); no effect on results", str, ("host", "device"),
+       restart=True, physics=False),
     _k("decomp", "balance_by", "work",
        "what the slabs balance over the ranks: 'work' (each rank's compute seconds since the last list "
        "rebuild, the communication left out) or 'count' (owned mobile particles); no effect on results",
