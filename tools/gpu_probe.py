@@ -19,7 +19,8 @@ process goes on from the next (a timing shares the GPU with nothing):
   difference between two shapes of one variant is a race;
 - ``--steps`` steps timed ``--repeats`` times (CUDA events; the median): microseconds a step and nanoseconds
   per atom-step (all atoms, the bed's too, as the bench counts);
-- five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th);
+- five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th, unless
+  the variant orders the rows on the GPU);
 - a stop-rule sample (``kinetic`` and ``force_ratio`` after an evaluation that kept its pairs), timed;
 - each launched kernel's registers, local (spill) memory, shared memory and the cooperative grid's blocks;
 - at its first shape, TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats``
@@ -264,7 +265,8 @@ def measure(a, variant, block, big=True):
     rec["ns_atom_step"] = 1e3 * rec["step_us_median"] / atoms
     rebuilds = []
     for _ in range(REBUILDS):
-        host = eng.n_rebuilds % SORT_EVERY == 0
+        # (every SORT_EVERY-th orders the rows by cell: through the host unless engine.gpu_sort = "device")
+        host = eng.n_rebuilds % SORT_EVERY == 0 and not getattr(eng, "sort_on_gpu", False)
         clock.start()
         eng.rebuild()
         rebuilds.append({"ms": 1e3 * clock.stop(), "through_host": bool(host)})
