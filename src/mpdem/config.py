@@ -189,7 +189,7 @@ SCHEMA = (
        "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
        "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "
        "GPU and read with the next forces, builds them again with more room) or 'launch' (as 'device', and with "
-       "engine.gpu_threads = 'row' and engine.gpu_pinned = false the launches of many steps rebuild the lists "
+       "engine.gpu_threads = 'row' the launches of many steps rebuild the lists "
        "themselves, as phases of the launch); no effect on results", str, ("host", "device", "launch"), restart=True,
        physics=False),
     _k("engine", "gpu_sort", "host",

@@ -154,8 +154,9 @@ class Engine(EngineBase):
         and allocates the lists ("host"), or on the GPU alone, into lists of a fixed capacity whose
         overflow the host sees when it next reads the step's reductions, and then builds them again
         with room ("device", ``_rebuild_in_place``); "launch": as "device", and with a thread a row
-        (``threads = "row"``, not ``pinned``) ``run_quiet``'s launches rebuild the lists themselves, as
-        phases of the launch (``kernels.gpu.step.advance_lists``); no effect on results.
+        (``threads = "row"``) ``run_quiet``'s launches rebuild the lists themselves, as phases of the
+        launch (``kernels.gpu.step.advance_lists``, or ``pinned_advance``'s with ``pinned``); no effect
+        on results.
     list_capacity : int
         With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
         than the first lists built on the GPU replace); grown on an overflow. No effect on results.
@@ -201,8 +202,8 @@ class Engine(EngineBase):
             raise ValueError(f"rebuilds = {rebuilds!r}: accepted {', '.join(map(repr, REBUILDS))}")
         # list rebuilds on the GPU with no host round trip, into lists of a fixed capacity (``_rebuild_in_place``)
         self.in_place = rebuilds in ("device", "launch")
-        # and inside ``run_quiet``'s launches (a thread a row, not pinned: ``advance_lists``)
-        self.in_launch = rebuilds == "launch" and threads == "row" and not self.pinned
+        # and inside ``run_quiet``'s launches (a thread a row: ``advance_lists``)
+        self.in_launch = rebuilds == "launch" and threads == "row"
         # the entries those lists have room for (0: not yet sized), and their two sets of arrays, the old
         # lists and the new (``_list_set``)
         self._capacity = int(list_capacity)
@@ -320,13 +321,13 @@ class Engine(EngineBase):
     def _advance_name(self):
         """The launcher name of ``run_quiet``'s kernel: "advance", or with ``pinned`` the key of the one
         compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
-        if self.in_launch:
-            return "advance_lists"
         if not self.pinned:
+            if self.in_launch:
+                return "advance_lists"
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
         return ("advance", (self.by_entry, self.chunk_rows, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
-                            bool(law.limit_damping), bool(law.rescale_history)))
+                            bool(law.limit_damping), bool(law.rescale_history), self.in_launch))
 
     def _second_rows(self):
         """x, v and omega's second buffer on the GPU (``drift = "fused"``; shaped as x), else x, v, omega

@@ -663,19 +663,41 @@ def _no_lists(start, nbr, hist, stamp, x_ref):
 _PINNED = {}
 
 
-def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history):
+def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history, rebuild=False):
     """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
     (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
     code, so that the compiler drops the branches the run never takes (and their registers). Its
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
-    the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants."""
+    the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
+    ``rebuild`` it is ``advance_lists`` so compiled (a thread a row: ``by_entry`` false, ``chunk_rows`` 0), with
+    ``advance_lists``'s arguments."""
     key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
-           bool(rescale_history))
-    if key not in _PINNED:
-        BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE = key
+           bool(rescale_history), bool(rebuild))
+    if key in _PINNED:
+        return _PINNED[key]
+    BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
+    if REBUILD:
+        if BY_ENTRY or CHUNK_ROWS:
+            raise ValueError("rebuilds inside the launch take a thread a row")
 
+        def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
+                         kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
+                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget):
+            room = cuda.shared.array(ROOM, np.float64)
+            part = cuda.shared.array(BLOCK_MAX, np.int64)
+            constant = Law(law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu if FRICTION else 0.0, law.g_x, law.g_y,
+                           law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
+            lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order),
+                     (nx, ny, nz_cap, cx, cy, r_list, r2), part)
+            _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                   epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
+                   False, 0, FUSED, ONE, room, True, lists, budget)
+        pinned_lists.__name__ = pinned_lists.__qualname__ = "advance_lists_pinned"
+        _PINNED[key] = cuda.jit(pinned_lists)
+    else:
         def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
                    fused, xb, vb, wb, one):
