@@ -48,20 +48,15 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
-    # list rebuilds as phases of the launches of many steps (no launch, copy or allocation of their own; their cost
-    # is in the steps' time of run_quiet), every 20th ordering the rows by cell on the GPU; with and without the
-    # fused drift
-    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
-    "row-rebuild-launch-drift": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch",
-                                 "engine.gpu_sort": "device", "engine.gpu_drift": "fused",
-                                 "engine.gpu_reductions": "fused"},
-    # list rebuilds on the GPU with no host round trip (their cost is the table's "rebuild ms" and the steps'
-    # share of the rebuilds in run_quiet)
-    "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},
-    # every switch that cuts the fixed cost of a step at once, a thread a row and by chunks: launches compiled
-    # for the run's options, the next step's drift in the forces' phase, a phase's reductions in one tree
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                 "engine.gpu_reductions": "fused"},
+    # the same with the list rebuilds as phases of the launches of many steps (no launch, copy or allocation of their
+    # own; their cost is in the steps' time of run_quiet), every 20th ordering the rows by cell on the GPU
+    "row-all-rebuild": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                        "engine.gpu_reductions": "fused", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
+    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
+    # list rebuilds on the GPU with no host round trip, launched from the host (the table's "rebuild ms")
+    "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},
     "chunk16-all": {"engine.gpu_threads": "chunk16", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                     "engine.gpu_reductions": "fused"},
     "entry": {"engine.gpu_threads": "entry"},
