@@ -1016,7 +1016,10 @@ class Engine(EngineBase):
                                                              Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1)))
 
     def memory_bytes(self):
-        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch)."""
-        sets = {id(a): a for st in self._sets for a in st.values() if not any(a is b for b in self._dev.values())}
+        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch, the lists' second set and the
+        permutation's spares)."""
+        # the list sets and the permutation's spares not in use (those in use are ``_dev``'s)
+        spare = [a for st in self._sets for a in st.values()] + list(self._spare.values())
+        spare = {id(a): a for a in spare if not any(a is b for b in self._dev.values())}
         return (sum(a.nbytes for a in self._dev.values()) + sum(a.nbytes for a in self._buffers.values())
-                + sum(a.nbytes for a in sets.values()) + self._red.nbytes + self._rec.nbytes)
+                + sum(a.nbytes for a in spare.values()) + self._red.nbytes + self._rec.nbytes)
