@@ -672,13 +672,28 @@ class Engine(EngineBase):
         alternate with the current lists (``_list_set``): up to the rebuild before the next ``SORT_EVERY``-th
         (which goes through the host)."""
         s, d = self.state, self._dev
+        n = s.n_own
         nx, ny, nz_cap, count, fill, cell, order = self._cells()
         second = self._list_set()
         r = self.n_rebuilds % SORT_EVERY
-        budget = SORT_EVERY - r if r else 0
+        # with the rows ordered on the GPU, every rebuild inside (every SORT_EVERY-th ordering them first)
+        budget = BATCH if self.sort_on_gpu else (SORT_EVERY - r if r else 0)
+        names = self._rows_of()[:5] + ("wall_ds", "fixed", "id", "moved")
+        if "moved" not in d or d["moved"].shape[0] != d["x"].shape[0]:
+            # each GPU row's row in the host's State (rows ordered inside a launch: ``_take_moved``)
+            d["moved"] = self.cuda.to_device(np.arange(d["x"].shape[0], dtype=np.int32))
+        spares = []
+        for name in names:
+            a, b = d[name], self._spare.get(name)
+            if b is None or b.shape != a.shape or b.dtype != a.dtype:
+                b = self._spare[name] = self.cuda.device_array(a.shape, a.dtype)
+            spares.append(b)
+        if self._columns is None or self._columns[0] != (nx, ny):
+            self._columns = ((nx, ny), tuple(self.cuda.to_device(a) for a in sort_columns(nx, ny)))
+        perm = self._buffer("perm", n, np.int32)
         return (d["id"], self._zr_in, count, fill, cell, order, second["start"], second["nbr"], second["hist"],
                 second["stamp"], nx, ny, nz_cap, s.L_x / nx, s.L_y / ny, self.r_list, self.r_list * self.r_list,
-                budget), second
+                budget, self.sort_on_gpu, SORT_EVERY, r, d["moved"], *spares, perm, *self._columns[1]), second
 
     def _list_set(self):
         """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry or
@@ -902,7 +917,10 @@ class Engine(EngineBase):
                 overlap = float(r[k.RED_OVERLAP])
                 whole += 1
             if rebuilt:
+                before = self.n_rebuilds
                 self._rebuilt_in_launch(rebuilt, second)
+                if self.sort_on_gpu and any(r % SORT_EVERY == 0 for r in range(before, before + rebuilt)):
+                    self._take_moved()
             if whole < m and self.in_launch and rec[whole][k.RED_OVERFLOW]:
                 # the step's lists did not fit: the host's rebuild below (in place) with room for them
                 need = int(rec[whole][k.RED_ENTRIES])
@@ -924,6 +942,20 @@ class Engine(EngineBase):
                 # the step the launch ended at has drifted: its rebuild and forces on the host's path
                 infos.append(self._finish_step(rec[whole], self.last_overlap, flags))
         return infos
+
+    def _take_moved(self):
+        """The host State's rows put in the order a launch gave the GPU's (``kernels.gpu.lists.sort_phases``):
+        every per-particle field permuted by ``moved`` (each GPU row's row in the State; 4 bytes a row copied
+        back), which is then the identity again. The slots are stale (the GPU holds the history)."""
+        s, d = self.state, self._dev
+        n = s.n_own
+        order = d["moved"][:n].copy_to_host()
+        for name in ROW_FIELDS:
+            a = getattr(s, name)
+            a[:n] = a[:n][order]
+        s.n_rows = n
+        s.slots_current = False
+        d["moved"][:n].copy_to_device(np.arange(n, dtype=np.int32))
 
     def _rebuilt_in_launch(self, rebuilt, second):
         """The lists after ``rebuilt`` rebuilds inside a launch of ``advance_lists``: in ``second`` (the set

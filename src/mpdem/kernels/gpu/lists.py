@@ -459,7 +459,8 @@ def entry_rows_in(n_own, start, row):
 
 
 @device_cuda
-def rebuild_phases(n_own, x, x_ref, ids, fixed, L_x, L_y, hx, hy, old, new, stale, cells, grid_shape, red, room, part):
+def rebuild_phases(n_own, x, x_ref, ids, fixed, L_x, L_y, hx, hy, old, new, stale, cells, grid_shape, red, room, part,
+                   old_ids, perm, moved):
     """A list rebuild as phases of a cooperative launch (``step.advance_lists``; engine.gpu_rebuild =
     "launch"): every thread of the grid calls it, the phases parted by grid barriers. The build of the
     ``*_in`` kernels, one phase each: the z range (and the cells' counts zeroed), the rows binned, the
@@ -493,6 +494,10 @@ def rebuild_phases(n_own, x, x_ref, ids, fixed, L_x, L_y, hx, hy, old, new, stal
         past the capacity (nothing written to the new lists then).
     room : float64 shared (>= BLOCK_MAX,), part : int64 shared (BLOCK_MAX,)
         The block's room for its reductions and for the scans.
+    old_ids, perm, moved
+        With ``moved`` the rows were just reordered (``sort_phases``): new row i was old row perm[i]
+        ((n_own,) int32) and ``old_ids`` (n_own,) int64 are the rows' ids in the old order, which the old
+        lists name (the history carried by partner id, ``carry_history_moved``); else not read.
 
     Returns
     -------
@@ -558,8 +563,161 @@ def rebuild_phases(n_own, x, x_ref, ids, fixed, L_x, L_y, hx, hy, old, new, stal
             _partners(i, x, ids, cell, count, order, nx, ny, nz, L_x, L_y, hx, hy, r2, n_nbr, n_start[i], True)
     grid.sync()
     for i in range(first, n_own, threads):
-        _carry_row(i, ids, o_start, o_nbr, o_hist, o_stamp, n_start, n_nbr, n_hist, n_stamp, stale)
+        if moved:
+            _carry_row_moved(i, perm, old_ids, ids, o_start, o_nbr, o_hist, o_stamp, n_start, n_nbr, n_hist, n_stamp,
+                             stale)
+        else:
+            _carry_row(i, ids, o_start, o_nbr, o_hist, o_stamp, n_start, n_nbr, n_hist, n_stamp, stale)
         for a in range(3):
             x_ref[i, a] = x[i, a]
     grid.sync()
     return True
+
+
+@device
+def _carry_row_moved(i, perm, old_ids, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr, new_hist,
+                     new_stamp, stale):
+    """Row i's new entries' Delta s and stamps (``carry_history_moved``): new row i was old row perm[i]."""
+    o = perm[i]
+    p = old_start[o]
+    pe = old_start[o + 1]
+    for k in range(new_start[i], new_start[i + 1]):
+        jid = ids[new_nbr[k]]
+        while p < pe and old_ids[old_nbr[p]] < jid:
+            p += 1
+        if p < pe and old_ids[old_nbr[p]] == jid:
+            for a in range(3):
+                new_hist[k, a] = old_hist[p, a]
+            new_stamp[k] = old_stamp[p]
+        else:
+            for a in range(3):
+                new_hist[k, a] = 0.0
+            new_stamp[k] = stale
+
+
+@device_cuda
+def _gather3(n_own, perm, src, dst):
+    """dst[i] = src[perm[i]] for this thread's rows of (n, 3) arrays."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        j = perm[i]
+        for a in range(3):
+            dst[i, a] = src[j, a]
+
+
+@device_cuda
+def _copy3(n_own, src, dst, scatter, perm):
+    """dst[i] = src[i] (or, ``scatter``, dst[perm[i]] = src[i]) for this thread's rows of (n, 3) arrays."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        j = perm[i] if scatter else i
+        for a in range(3):
+            dst[j, a] = src[i, a]
+
+
+@device_cuda
+def sort_phases(n_own, rows, spares, perm, cells, grid_shape, columns, room, part, undo):
+    """The rows ordered by cell as phases of a cooperative launch (``engine.gpu_sort = "device"`` with
+    engine.gpu_rebuild = "launch"; every thread of the grid calls it, the phases parted by grid barriers):
+    the cells ranked in ``engine.order.sort_rows``'s order (``sort_cells_of``), a counting sort by them,
+    each cell's rows by id (``sort_within_cells``), then every row array gathered into its spare and copied
+    back; the ids are gathered into their spare only (the history's carry reads the old ones; the caller
+    copies them back). With ``undo``, instead, the permutation ``perm`` of the last call taken back (the
+    spares still hold the gathered rows): each row scattered to where it was.
+
+    Parameters
+    ----------
+    rows : tuple (x, v, omega, f, torque, wall_ds, fixed, ids, moved, xo, vo, wo)
+        The rows' current arrays ((n, 3) float64; wall_ds permuted only when it has a row a row;
+        (n,) uint8 and int64; (n,) int32 each row's row in the host's State, permuted with them), and
+        the fused drift's other buffer of x, v, omega (the rows copied there as well; the same arrays as
+        x, v, omega without it).
+    spares : tuple
+        Arrays shaped as ``rows``'s first nine, written.
+    perm : (n,) int32, out
+        New row i is old row perm[i].
+    cells, grid_shape : as ``rebuild_phases``'s
+    columns : tuple (col_base, col_size, col_local)
+        ``engine.gpu.sort_columns``'s (nx * ny,) int64 arrays.
+    """
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    threads = cuda.gridsize(1)
+    x, v, omega, f, torque, wall_ds, fixed, ids, moved, xo, vo, wo = rows
+    sx, sv, sw, sf, st, swall, sfixed, sids, smoved = spares
+    wall = wall_ds.shape[0] >= n_own
+    if not undo:
+        zr, count, fill, cell, order = cells
+        nx, ny, nz_cap, cx, cy, r_list, r2 = grid_shape
+        col_base, col_size, col_local = columns
+        lo = math.inf
+        hi = -math.inf
+        for i in range(first, n_own, threads):
+            lo = min(lo, x[i, 2])
+            hi = max(hi, x[i, 2])
+        for c in range(first, count.shape[0], threads):
+            count[c] = 0
+        min_into(zr, 0, lo, room)
+        max_into(zr, 1, hi, room)
+        grid.sync()
+        q = (zr[1] - zr[0]) / r_list
+        nz = nz_cap
+        if q >= 0.0 and q < nz_cap - 1:
+            nz = int(q) + 1
+        zmin = zr[0]
+        for i in range(first, n_own, threads):
+            c = _cell_of(i, x, nx, ny, nz, cx, cy, zmin, r_list)
+            xy = c % (nx * ny)
+            r = col_base[xy] * nz + (c // (nx * ny)) * col_size[xy] + col_local[xy]
+            cell[i] = r
+            cuda.atomic.add(count, r + 1, 1)
+        grid.sync()
+        ncell = nx * ny * nz
+        if cuda.blockIdx.x == 0:
+            _scan(count, ncell, part, fill, True)
+        grid.sync()
+        for i in range(first, n_own, threads):
+            at = cuda.atomic.add(fill, cell[i], 1)
+            perm[at] = i
+        if first == 0:
+            zr[0] = math.inf
+            zr[1] = -math.inf
+        grid.sync()
+        for c in range(first, ncell, threads):
+            lo_c = count[c]
+            for k in range(lo_c + 1, count[c + 1]):
+                r = perm[k]
+                key = ids[r]
+                p = k
+                while p > lo_c and ids[perm[p - 1]] > key:
+                    perm[p] = perm[p - 1]
+                    p -= 1
+                perm[p] = r
+        grid.sync()
+        _gather3(n_own, perm, x, sx)
+        _gather3(n_own, perm, v, sv)
+        _gather3(n_own, perm, omega, sw)
+        _gather3(n_own, perm, f, sf)
+        _gather3(n_own, perm, torque, st)
+        if wall:
+            _gather3(n_own, perm, wall_ds, swall)
+        for i in range(first, n_own, threads):
+            j = perm[i]
+            sfixed[i] = fixed[j]
+            sids[i] = ids[j]
+            smoved[i] = moved[j]
+        grid.sync()
+    # the gathered rows back into the rows' own arrays (where they stand, or, undone, where they were)
+    _copy3(n_own, sx, x, undo, perm)
+    _copy3(n_own, sv, v, undo, perm)
+    _copy3(n_own, sw, omega, undo, perm)
+    _copy3(n_own, sx, xo, undo, perm)
+    _copy3(n_own, sv, vo, undo, perm)
+    _copy3(n_own, sw, wo, undo, perm)
+    _copy3(n_own, sf, f, undo, perm)
+    _copy3(n_own, st, torque, undo, perm)
+    if wall:
+        _copy3(n_own, swall, wall_ds, undo, perm)
+    for i in range(first, n_own, threads):
+        j = perm[i] if undo else i
+        fixed[j] = sfixed[i]
+        moved[j] = smoved[i]
+    grid.sync()

@@ -30,7 +30,7 @@ from .runtime import cuda, device, device_cuda
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
 from ..law import PLANE_FLOOR, PLANE_ROUGH, Law
-from .lists import RED_ENTRIES, RED_OVERFLOW, RED_SLOTS, rebuild_phases
+from .lists import RED_ENTRIES, RED_OVERFLOW, RED_SLOTS, rebuild_phases, sort_phases
 
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
@@ -613,7 +613,7 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     # rebuild's (``advance_lists`` has it)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, False, room, False, _no_lists(start, nbr, hist, stamp, x_ref), 0)
+           fused, False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
 
 
 @cuda.jit
@@ -625,14 +625,15 @@ def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, s
     room = cuda.shared.array(ROOM, np.float64)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, True, room, False, _no_lists(start, nbr, hist, stamp, x_ref), 0)
+           fused, True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
 
 
 @cuda.jit
 def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                   epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, chunk_rows, fused,
                   xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx,
-                  cy, r_list, r2, budget):
+                  cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved,
+                  perm, col_base, col_size, col_local):
     """``advance`` (a thread a row; ``one`` read from its argument) with up to ``budget`` list rebuilds
     inside the launch (engine.gpu_rebuild = "launch"): a step whose drift moved a row ``half_skin`` [d] or
     more since ``x_ref`` rebuilds the lists as phases of this launch (``lists.rebuild_phases``) and goes
@@ -642,21 +643,28 @@ def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist,
     launch ends, as ``advance``'s, at a step that needs a rebuild past ``budget`` or whose lists do not
     fit their set's capacity (rec[s, RED_OVERFLOW] = 1.0, rec[s, RED_ENTRIES] the entries they need: the
     current lists are untouched). ``ids`` (n_own,) int64; ``zr`` .. ``order`` and ``nx`` .. ``r2`` as
-    ``rebuild_phases``'s ``cells`` and ``grid_shape``. The same results as the host's rebuilds between
-    launches, so the same bits."""
+    ``rebuild_phases``'s ``cells`` and ``grid_shape``. With ``sort_on`` (engine.gpu_sort = "device") every
+    ``every``-th rebuild (counting ``done`` before the launch) orders the rows by cell first
+    (``lists.sort_phases``, its spares ``sx`` .. ``smoved``, ``perm`` and the columns ``col_*``; ``moved`` (n,)
+    int32 each row's row in the host's State, permuted with the rows; the rows put back and the launch
+    ended if the lists then do not fit). The same results as the host's rebuilds between launches, so the
+    same bits."""
     room = cuda.shared.array(ROOM, np.float64)
     part = cuda.shared.array(BLOCK_MAX, np.int64)
     lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part)
+             part, (sort_on, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
            fused, one, room, True, lists, budget)
 
 
 @device
-def _no_lists(start, nbr, hist, stamp, x_ref):
+def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
     """``_steps``'s ``lists`` where no rebuild is compiled in: arrays of the right kinds, never read."""
-    return (start, (start, nbr, hist, stamp), (x_ref[0], nbr, nbr, nbr, nbr), (1, 1, 1, 1.0, 1.0, 1.0, 1.0), start)
+    return (start, (start, nbr, hist, stamp), (x_ref[0], nbr, nbr, nbr, nbr), (1, 1, 1, 1.0, 1.0, 1.0, 1.0), start,
+            (False, 1, 0, nbr, (x_ref, x_ref, x_ref, x_ref, x_ref, x_ref, fixed, start, nbr), nbr,
+             (start, start, start)))
 
 
 # the kernels ``pinned_advance`` made, by their constants
@@ -685,13 +693,16 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
         def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
                          kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
                          chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
-                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget):
+                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
+                         sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
             room = cuda.shared.array(ROOM, np.float64)
             part = cuda.shared.array(BLOCK_MAX, np.int64)
             constant = Law(law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu if FRICTION else 0.0, law.g_x, law.g_y,
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order),
-                     (nx, ny, nz_cap, cx, cy, r_list, r2), part)
+                     (nx, ny, nz_cap, cx, cy, r_list, r2), part,
+                     (sort_on, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                      (col_base, col_size, col_local)))
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
                    False, 0, FUSED, ONE, room, True, lists, budget)
@@ -706,7 +717,7 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref), 0)
+                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
         pinned.__name__ = pinned.__qualname__ = "advance_pinned"
         _PINNED[key] = cuda.jit(pinned)
     return _PINNED[key]
@@ -737,6 +748,8 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
     here = (x, v, omega)
     # the lists in ``lists``'s second set (after an odd number of rebuilds here)
     flip = False
+    # the rebuilds so far in this launch, and before it since the last ordering of the rows (``lists``'s)
+    done = lists[5][2]
     if one:
         # the rows no drift writes (the bed's) in the other buffer as well
         for i in range(first, x.shape[0], cuda.gridsize(1)):
@@ -759,14 +772,31 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
             if why == 2 or (why == 1 and budget == 0):
                 break
             if why == 1:
-                ids, second, cells, shape, part = lists
+                ids, second, cells, shape, part, order = lists
+                sort_on, every, _, moved, spares, perm, columns = order
                 cur = second if flip else (start, nbr, hist, stamp)
                 new = (start, nbr, hist, stamp) if flip else second
-                if not rebuild_phases(n_own, xs, x_ref, ids, fixed, L_x, L_y, hx, hy, cur, new,
-                                      np.uint32((epoch + s - 1) & 0xFFFFFFFF), cells, shape, rec[s], room, part):
+                stale = np.uint32((epoch + s - 1) & 0xFFFFFFFF)
+                if sort_on and done % every == 0:
+                    # this rebuild orders the rows by cell first (``lists.sort_phases``): the lists built from
+                    # the rows in their new order, the ids in theirs (spares[7]) until the old lists are read
+                    other = here if odd else nxt
+                    rows = (xs, vs, ws, f, torque, wall_ds, fixed, ids, moved, other[0], other[1], other[2])
+                    sort_phases(n_own, rows, spares, perm, cells, shape, columns, room, part, False)
+                    if not rebuild_phases(n_own, xs, x_ref, spares[7], fixed, L_x, L_y, hx, hy, cur, new, stale, cells,
+                                          shape, rec[s], room, part, ids, perm, True):
+                        # no room: the rows back where they were, the launch ends at this step
+                        sort_phases(n_own, rows, spares, perm, cells, shape, columns, room, part, True)
+                        break
+                    for i in range(first, n_own, cuda.gridsize(1)):
+                        ids[i] = spares[7][i]
+                    grid.sync()
+                elif not rebuild_phases(n_own, xs, x_ref, ids, fixed, L_x, L_y, hx, hy, cur, new, stale, cells, shape,
+                                        rec[s], room, part, ids, perm, False):
                     break
                 flip = not flip
                 budget -= 1
+                done += 1
         elif not _go_on(rec[s], half_skin, room):
             break
         ls, ln, lh, lt = lists[1] if flip else (start, nbr, hist, stamp)
