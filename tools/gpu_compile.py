@@ -76,7 +76,8 @@ def cases():
     rec8 = np.zeros((4, step.RED_SLOTS))
     advance_lists = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True,
                      0.1, 4, rec8, 4, nbr, 0, True, x, x, x, True, ids, np.zeros(3), cells, cells, cells, cells, start,
-                     nbr, hist, stamp, 3, 3, 8, 1.0, 1.0, 1.2, 1.44, 19)
+                     nbr, hist, stamp, 3, 3, 8, 1.0, 1.0, 1.2, 1.44, 19, True, 20, 0, cells, x, x, x, x, x, x, fixed,
+                     ids, cells, cells, ids, ids, ids)
     dims = np.zeros(2, np.int64)
     grid_in = (x, ids, fixed, cells, cells, cells, 3, 3, dims, *box, 1.44)
     advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,

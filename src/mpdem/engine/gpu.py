@@ -165,7 +165,8 @@ class Engine(EngineBase):
         through the host (rows and history down, ``order.sort_rows``, the lists built, all up), or on the
         GPU (``_rebuild_sorted``: a counting sort by the same cells, the rows permuted, the lists built
         and the history carried by partner id; the permutation copied back, which the host's State takes
-        at once). No effect on results.
+        at once); with ``rebuilds = "launch"`` inside ``run_quiet``'s launches (``kernels.gpu.lists.sort_phases``;
+        the State takes the order after the launch, ``_take_moved``). No effect on results.
 
     Attributes
     ----------
