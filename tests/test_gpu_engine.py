@@ -218,18 +218,19 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
 
 
 # rebuilds without the host a thread a row, at two launch shapes: in place (the lists' length read with the
-# forces' reductions), then inside the launches of many steps (``engine.gpu_rebuild = "launch"``, the rows ordered
-# on the GPU, ``engine.gpu_sort``; the fourth pinned); the second and the fourth start with room for 8 entries, so
-# that their first rebuild without the host overflows
+# forces' reductions), then inside the launches of many steps (``engine.gpu_rebuild = "launch"``; the fourth pinned);
+# the second and the fourth order the rows on the GPU every SORT_EVERY-th rebuild (``engine.gpu_sort``: by launches,
+# then inside the launch) and start with room for 8 entries, so that their first rebuild without the host overflows
 REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
-                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
-                  dict(block=2, blocks=2, rebuilds="launch", sort="device"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8,
+                       sort="device"),
+                  dict(block=2, blocks=2, rebuilds="launch"),
                   dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
                        sort="device", pinned=True)]
                  if runtime.SIMULATOR else
                  [dict(block=128, rebuilds="device"),
-                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8),
-                  dict(block=128, rebuilds="launch", sort="device"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8, sort="device"),
+                  dict(block=128, rebuilds="launch"),
                   dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
                        sort="device", pinned=True)])
 

@@ -91,8 +91,11 @@ def cases():
         "step.advance_one": (step.advance_one, advance),
         # list rebuilds inside the launch (engine.gpu_rebuild = "launch"), a thread a row
         "step.advance_lists": (step.advance_lists, advance_lists),
+        "step.advance_lists_sorted": (step.advance_lists_sorted, advance_lists),
         "step.advance_lists pinned (fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, True), advance_lists),
+            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
+        "step.advance_lists_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
         # then chunks of 16 rows, the fused reductions and the fused drift (engine.gpu_drift)
         "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, False,

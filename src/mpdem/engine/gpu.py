@@ -324,11 +324,12 @@ class Engine(EngineBase):
         compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
         if not self.pinned:
             if self.in_launch:
-                return "advance_lists"
+                return "advance_lists_sorted" if self.sort_on_gpu else "advance_lists"
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
         return ("advance", (self.by_entry, self.chunk_rows, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
-                            bool(law.limit_damping), bool(law.rescale_history), self.in_launch))
+                            bool(law.limit_damping), bool(law.rescale_history),
+                            (2 if self.sort_on_gpu else 1) if self.in_launch else 0))
 
     def _second_rows(self):
         """x, v and omega's second buffer on the GPU (``drift = "fused"``; shaped as x), else x, v, omega

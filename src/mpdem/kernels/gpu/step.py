@@ -643,7 +643,8 @@ def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist,
     launch ends, as ``advance``'s, at a step that needs a rebuild past ``budget`` or whose lists do not
     fit their set's capacity (rec[s, RED_OVERFLOW] = 1.0, rec[s, RED_ENTRIES] the entries they need: the
     current lists are untouched). ``ids`` (n_own,) int64; ``zr`` .. ``order`` and ``nx`` .. ``r2`` as
-    ``rebuild_phases``'s ``cells`` and ``grid_shape``. With ``sort_on`` (engine.gpu_sort = "device") every
+    ``rebuild_phases``'s ``cells`` and ``grid_shape``. ``sort_on`` is not read: ``advance_lists_sorted`` is this
+    kernel with it true and its code, in which (engine.gpu_sort = "device") every
     ``every``-th rebuild (counting ``done`` before the launch) orders the rows by cell first
     (``lists.sort_phases``, its spares ``sx`` .. ``smoved``, ``perm`` and the columns ``col_*``; ``moved`` (n,)
     int32 each row's row in the host's State, permuted with the rows; the rows put back and the launch
@@ -652,7 +653,25 @@ def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist,
     room = cuda.shared.array(ROOM, np.float64)
     part = cuda.shared.array(BLOCK_MAX, np.int64)
     lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part, (sort_on, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+             part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
+           fused, one, room, True, lists, budget)
+
+
+@cuda.jit
+def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
+                         kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
+                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
+                         sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
+    """``advance_lists`` with ``sort_on`` true whatever the argument says (every ``every``-th rebuild orders the
+    rows first; engine.gpu_sort = "device")."""
+    room = cuda.shared.array(ROOM, np.float64)
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
+             part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
@@ -671,7 +690,7 @@ def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
 _PINNED = {}
 
 
-def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history, rebuild=False):
+def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history, rebuild=0):
     """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
     (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
@@ -679,16 +698,17 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
     the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
-    ``rebuild`` it is ``advance_lists`` so compiled (a thread a row: ``by_entry`` false, ``chunk_rows`` 0), with
-    ``advance_lists``'s arguments."""
+    ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (a thread a row: ``by_entry``
+    false, ``chunk_rows`` 0), with ``advance_lists``'s arguments."""
     key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
-           bool(rescale_history), bool(rebuild))
+           bool(rescale_history), int(rebuild))
     if key in _PINNED:
         return _PINNED[key]
     BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
     if REBUILD:
         if BY_ENTRY or CHUNK_ROWS:
             raise ValueError("rebuilds inside the launch take a thread a row")
+        SORTED = REBUILD == 2
 
         def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
                          kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
@@ -701,7 +721,7 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order),
                      (nx, ny, nz_cap, cx, cy, r_list, r2), part,
-                     (sort_on, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                     (SORTED, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
                       (col_base, col_size, col_local)))
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
