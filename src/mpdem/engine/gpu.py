@@ -353,7 +353,6 @@ class Engine(EngineBase):
         for name in self._rows_of() + ("fixed", "id"):
             d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
         d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
-
         d["start"] = cuda.to_device(self.nbr_start[:s.n_own + 1])
         k = max(len(self.nbr_list), 1)
         d["nbr"] = cuda.to_device(self.nbr_list[:k] if len(self.nbr_list) else np.zeros(1, np.int32))
@@ -670,9 +669,11 @@ class Engine(EngineBase):
         return nx, ny, nz_cap, count, fill, cell, order
 
     def _launch_lists(self):
-        """``advance_lists``'s arguments after ``advance``'s (ids .. budget) and the list set its rebuilds
-        alternate with the current lists (``_list_set``): up to the rebuild before the next ``SORT_EVERY``-th
-        (which goes through the host)."""
+        """``advance_lists``'s arguments after ``advance``'s (ids .. col_local) and the list set its rebuilds
+        alternate with the current lists (``_list_set``): rebuilds up to the one before the next
+        ``SORT_EVERY``-th (which goes through the host), or with ``sort_on_gpu`` all of them, every
+        ``SORT_EVERY``-th ordering the rows first (``advance_lists_sorted``: the rows' spares, ``moved``,
+        the permutation's buffer and ``sort_columns``'s arrays; without, the same arrays, not read)."""
         s, d = self.state, self._dev
         n = s.n_own
         nx, ny, nz_cap, count, fill, cell, order = self._cells()
