@@ -287,6 +287,23 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
     assert got.kinetic() == want.kinetic() and got.force_ratio() == want.force_ratio()
 
 
+@pytest.mark.parametrize("nx, ny", [(3, 3), (20, 17), (47, 33)])
+def test_the_gpus_order_of_cells_is_the_hosts(nx, ny):
+    """``gpu.sort_columns`` ranks the cells as ``order.sort_rows`` orders them (columns of about SORT_COLUMN x
+    SORT_COLUMN cells one after the other, z-major inside each), densely: a permutation of the cells."""
+    from mpdem.engine.order import SORT_COLUMN
+    nz = 5
+    base, size, local = gpu.sort_columns(nx, ny)
+    iz, iy, ix = (a.ravel() for a in np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij"))
+    xy = iy * nx + ix
+    rank = base[xy] * nz + iz * size[xy] + local[xy]
+    assert np.array_equal(np.sort(rank), np.arange(nx * ny * nz))
+    cx, cy = max(int(round(nx / SORT_COLUMN)), 1), max(int(round(ny / SORT_COLUMN)), 1)
+    column = (iy * cy // ny) * cx + ix * cx // nx
+    key = ((column * nz + iz) * ny + iy) * nx + ix
+    assert np.array_equal(np.argsort(rank), np.argsort(key))
+
+
 def test_any_grid_gives_the_same_bits():
     """The launch's shape (threads per block, blocks, rows a thread, a thread a row or an entry)
     changes no bit."""
