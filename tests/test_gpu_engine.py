@@ -31,13 +31,18 @@ from mpdem.state import State
 # the last three reduce a fused step's values in one tree a phase (``engine.gpu_reductions``); the second and
 # the fourth sum the stop rule's samples on the GPU (``engine.gpu_samples``); the second and the third launch
 # steps compiled for the run's options (``engine.gpu_pinned``), the third and the fourth drift the next step
-# in the forces' phase, the rows in two buffers (``engine.gpu_drift``).
+# in the forces' phase, the rows in two buffers (``engine.gpu_drift``); the second and the third rebuild the
+# lists on the GPU with no host round trip (``engine.gpu_rebuild``; a thread a row: REBUILD_GRIDS).
 GRIDS = ([dict(block=2, blocks=2),
-          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True),
-          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True),
+          dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True,
+               rebuilds="device"),
+          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True,
+               rebuilds="device"),
           dict(block=2, blocks=3, reductions="fused", samples="device", drift="fused")] if runtime.SIMULATOR
-         else [dict(block=128), dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True),
-               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True),
+         else [dict(block=128),
+               dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True, rebuilds="device"),
+               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True,
+                    rebuilds="device"),
                dict(block=256, reductions="fused", samples="device", drift="fused")])
 
 
@@ -210,6 +215,93 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
                 assert stamp2[e] == stamp[was] and np.array_equal(hist2[e], hist[was])
                 kept += stamp[was] == np.uint32(eng._epoch)
     assert kept > 50, "contacts among the carried entries"
+
+
+# rebuilds without the host a thread a row, at two launch shapes: in place (the lists' length read with the
+# forces' reductions), then inside the launches of many steps (``engine.gpu_rebuild = "launch"``; the fourth pinned);
+# the second and the fourth order the rows on the GPU every SORT_EVERY-th rebuild (``engine.gpu_sort``: by launches,
+# then inside the launch) and start with room for 8 entries, so that their first rebuild without the host overflows
+REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8,
+                       sort="device"),
+                  dict(block=2, blocks=2, rebuilds="launch"),
+                  dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
+                       sort="device", pinned=True)]
+                 if runtime.SIMULATOR else
+                 [dict(block=128, rebuilds="device"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8, sort="device"),
+                  dict(block=128, rebuilds="launch"),
+                  dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
+                       sort="device", pinned=True)])
+
+
+@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1), (0.5, 2), (0.0, 3)])
+def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, grid):
+    """``engine.gpu_rebuild = "device"`` and ``"launch"``: a list rebuild every step or two (a skin of
+    0.002 d; 27 spheres, every 20th rebuild through the host), frictionless and frictional, each
+    ``StepInfo``, the contact counts read between, the digest, the kinetic sums and the force ratio are
+    the CPU engine's. No
+    rebuild reads anything back before the forces that follow it. The second shape's first rebuild in place
+    overflows its room (8 entries), and so does one after a third of the steps (its room set back to 8,
+    the contacts' history not zero): the host sees it with the forces' reductions (in place) or the
+    launch's record (inside a launch, which ends there) and builds again. Inside the launches, most
+    rebuilds are phases of the launch."""
+    phys = physics(mu=mu, gamma_t=20.0, skin=0.002)
+    x, v, omega, fixed, L = tight_lattice(m=3)
+    runs = []
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, REBUILD_GRIDS[grid])):
+        st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
+        eng = engine(st, phys, Domain(None), **kw)
+        eng.start()
+        eager = []
+        if engine is gpu.Engine:
+            settle = eng._settle
+            eng._settle = lambda red=None: (eager.append(red is None and eng._pending is not None), settle(red))[1]
+        infos = []
+        shift = 0
+        for stretch in range(3):
+            if stretch == 1 and engine is gpu.Engine and grid % 2:
+                # room for 8 entries again, once the contacts carry a history: the next rebuild overflows
+                eng._capacity, eng._sets = 8, []
+                if grid == 3:
+                    # and is one that orders the rows first (inside the launch, which puts them back)
+                    shift = -eng.n_rebuilds % gpu.SORT_EVERY
+                    eng.n_rebuilds += shift
+            infos += eng.run_quiet(14)
+            infos.append(eng.info._replace(n_contacts=eng.contacts()))
+        infos.append(eng.step(keep_pairs=True))
+        eng.n_rebuilds -= shift
+        runs.append((eng, st, infos, eager))
+    (want, st_c, a, _), (got, st_g, b, eager) = runs
+    assert got.n_rebuilds == want.n_rebuilds >= 21, "rebuilds in place and through the host"
+    # the first and every SORT_EVERY-th through the host, or (``sort="device"``) the first only
+    assert got.n_rebuilds_by_host == (1 if got.sort_on_gpu else 1 + (got.n_rebuilds - 1) // gpu.SORT_EVERY)
+    assert got.n_overflows == (2 if grid % 2 else 0) and not any(eager)
+    assert got.n_rebuilds_in_launch > (10 if grid >= 2 else -1) and (grid >= 2 or got.n_rebuilds_in_launch == 0)
+    assert len(a) == len(b) == 46
+    for s, (p, q) in enumerate(zip(a, b)):
+        assert p == q, f"record {s}: CPU {p}, GPU {q}"
+    g = checkpoint.gather_state(st_g)
+    assert int(g["count"].sum()) > 50 and (mu == 0.0 or np.any(g["ds"] != 0.0)), "a pile in contact"
+    assert checkpoint.digest(checkpoint.gather_state(st_c)) == checkpoint.digest(g)
+    assert got.kinetic() == want.kinetic() and got.force_ratio() == want.force_ratio()
+
+
+@pytest.mark.parametrize("nx, ny", [(3, 3), (20, 17), (47, 33)])
+def test_the_gpus_order_of_cells_is_the_hosts(nx, ny):
+    """``gpu.sort_columns`` ranks the cells as ``order.sort_rows`` orders them (columns of about SORT_COLUMN x
+    SORT_COLUMN cells one after the other, z-major inside each), densely: a permutation of the cells."""
+    from mpdem.engine.order import SORT_COLUMN
+    nz = 5
+    base, size, local = gpu.sort_columns(nx, ny)
+    iz, iy, ix = (a.ravel() for a in np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij"))
+    xy = iy * nx + ix
+    rank = base[xy] * nz + iz * size[xy] + local[xy]
+    assert np.array_equal(np.sort(rank), np.arange(nx * ny * nz))
+    cx, cy = max(int(round(nx / SORT_COLUMN)), 1), max(int(round(ny / SORT_COLUMN)), 1)
+    column = (iy * cy // ny) * cx + ix * cx // nx
+    key = ((column * nz + iz) * ny + iy) * nx + ix
+    assert np.array_equal(np.argsort(rank), np.argsort(key))
 
 
 def test_any_grid_gives_the_same_bits():

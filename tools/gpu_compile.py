@@ -68,11 +68,18 @@ def cases():
     x, fixed, ids = np.zeros((n, 3)), np.zeros(n, np.uint8), np.zeros(n, np.int64)
     start, nbr = np.zeros(n + 1, np.int64), np.zeros(4, np.int32)
     hist, stamp, pair = np.zeros((4, 3)), np.zeros(4, np.uint32), np.zeros((4, 6))
-    red, rec, cells = np.zeros(6), np.zeros((4, 6)), np.zeros(n, np.int32)
+    red, rec, cells = np.zeros(step.RED_SLOTS), np.zeros((4, 6)), np.zeros(n, np.int32)
     acc = np.zeros((4, 72), np.int64)
     box = (10.0, 10.0, 5.0, 5.0)
     planes, kinds = np.zeros((2, 4)), np.zeros(2, np.int64)
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
+    rec8 = np.zeros((4, step.RED_SLOTS))
+    advance_lists = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True,
+                     0.1, 4, rec8, 4, nbr, 0, True, x, x, x, True, ids, np.zeros(3), cells, cells, cells, cells, start,
+                     nbr, hist, stamp, 3, 3, 8, 1.0, 1.0, 1.2, 1.44, 19, True, 20, 0, cells, x, x, x, x, x, x, fixed,
+                     ids, cells, cells, ids, ids, ids)
+    dims = np.zeros(2, np.int64)
+    grid_in = (x, ids, fixed, cells, cells, cells, 3, 3, dims, *box, 1.44)
     advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,
                rec, True, 4, nbr, 16, True, x, x, x, True)
     return {
@@ -82,6 +89,13 @@ def cases():
                                       5, *box, law, True, red)),
         "step.advance": (step.advance, advance),
         "step.advance_one": (step.advance_one, advance),
+        # list rebuilds inside the launch (engine.gpu_rebuild = "launch"), a thread a row
+        "step.advance_lists": (step.advance_lists, advance_lists),
+        "step.advance_lists_sorted": (step.advance_lists_sorted, advance_lists),
+        "step.advance_lists pinned (fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
+        "step.advance_lists_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
         # then chunks of 16 rows, the fused reductions and the fused drift (engine.gpu_drift)
         "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, False,
@@ -109,6 +123,25 @@ def cases():
         "lists.write_partners": (lists.write_partners, (n, *grid, start, nbr)),
         "lists.carry_history": (lists.carry_history, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
                                                       np.uint32(3))),
+        # the rebuild in place (engine.gpu_rebuild = "device")
+        "lists.grid_depth": (lists.grid_depth, (np.zeros(3), 3, 3, 8, 1.2, dims)),
+        "lists.zero_cells": (lists.zero_cells, (cells, dims)),
+        "lists.bin_rows_in": (lists.bin_rows_in, (n, x, 3, 3, 1.0, 1.0, np.zeros(3), dims, 1.2, cells, cells)),
+        "lists.scan_in": (lists.scan_in, (cells, cells, dims)),
+        "lists.count_partners_in": (lists.count_partners_in, (n, *grid_in, start)),
+        "lists.write_partners_in": (lists.write_partners_in, (n, *grid_in, start, nbr, red)),
+        "lists.carry_history_in": (lists.carry_history_in, (n, ids, start, nbr, hist, stamp, start, nbr, hist, stamp,
+                                                            np.uint32(3))),
+        "lists.entry_rows_in": (lists.entry_rows_in, (n, start, nbr)),
+        # the rows ordered by cell on the GPU (engine.gpu_sort = "device")
+        "lists.sort_cells_of": (lists.sort_cells_of, (n, x, 3, 3, 1.0, 1.0, np.zeros(3), dims, 1.2, ids, ids, ids,
+                                                      cells, cells)),
+        "lists.sort_within_cells": (lists.sort_within_cells, (dims, cells, cells, ids)),
+        "lists.permute_rows (ids)": (lists.permute_rows, (n, cells, ids, ids)),
+        "lists.permute_rows (fixed)": (lists.permute_rows, (n, cells, fixed, fixed)),
+        "lists.permute_rows3": (lists.permute_rows3, (n, cells, x, x)),
+        "lists.carry_history_moved": (lists.carry_history_moved, (n, cells, ids, ids, start, nbr, hist, stamp, start,
+                                                                  nbr, hist, stamp, np.uint32(3))),
         "lists.copy_rows": (lists.copy_rows, (n, x, x)),
         "lists.entry_rows": (lists.entry_rows, (n, start, nbr)),
         "lists.gather_rows": (lists.gather_rows, (ids, x, x, x, np.zeros((3, n, 3)))),

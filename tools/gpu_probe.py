@@ -19,7 +19,8 @@ process goes on from the next (a timing shares the GPU with nothing):
   difference between two shapes of one variant is a race;
 - ``--steps`` steps timed ``--repeats`` times (CUDA events; the median): microseconds a step and nanoseconds
   per atom-step (all atoms, the bed's too, as the bench counts);
-- five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th);
+- five list rebuilds, each timed, marked by whether it went through the host (every ``SORT_EVERY``-th, unless
+  the variant orders the rows on the GPU);
 - a stop-rule sample (``kinetic`` and ``force_ratio`` after an evaluation that kept its pairs), timed;
 - each launched kernel's registers, local (spill) memory, shared memory and the cooperative grid's blocks;
 - at its first shape, TABLE tiled ``--tiles`` (7 x 7: 994k spheres), ``--big-steps`` steps timed ``--repeats``
@@ -47,10 +48,19 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
 VARIANTS = {
     "row": {"engine.gpu_threads": "row"},
-    # every switch that cuts the fixed cost of a step at once, a thread a row and by chunks: launches compiled
-    # for the run's options, the next step's drift in the forces' phase, a phase's reductions in one tree
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                 "engine.gpu_reductions": "fused"},
+    # the same with the list rebuilds as phases of the launches of many steps (no launch, copy or allocation of their
+    # own; their cost is in the steps' time of run_quiet), every 20th ordering the rows by cell on the GPU
+    "row-all-rebuild": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                        "engine.gpu_reductions": "fused", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
+    "row-rebuild-launch": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "launch", "engine.gpu_sort": "device"},
+    # the ordering of the rows left out of the launch (its code costs registers: 150 against 164 pinned), the launch
+    # ending at every 20th rebuild, which goes through the host
+    "row-all-rebuild-hostsort": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                                 "engine.gpu_reductions": "fused", "engine.gpu_rebuild": "launch"},
+    # list rebuilds on the GPU with no host round trip, launched from the host (the table's "rebuild ms")
+    "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},
     "chunk16-all": {"engine.gpu_threads": "chunk16", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                     "engine.gpu_reductions": "fused"},
     "entry": {"engine.gpu_threads": "entry"},
@@ -254,7 +264,8 @@ def measure(a, variant, block, big=True):
     rec["ns_atom_step"] = 1e3 * rec["step_us_median"] / atoms
     rebuilds = []
     for _ in range(REBUILDS):
-        host = eng.n_rebuilds % SORT_EVERY == 0
+        # (every SORT_EVERY-th orders the rows by cell: through the host unless engine.gpu_sort = "device")
+        host = eng.n_rebuilds % SORT_EVERY == 0 and not getattr(eng, "sort_on_gpu", False)
         clock.start()
         eng.rebuild()
         rebuilds.append({"ms": 1e3 * clock.stop(), "through_host": bool(host)})

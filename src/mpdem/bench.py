@@ -139,6 +139,13 @@ def warm_up_kernels(phys, L_x, L_y, device="cpu", **gpu):
     eng.advance(WARMUP_STEPS)
     # a rebuild with contacts in the lists compiles the history's list-to-slot kernels too
     eng.rebuild()
+    if getattr(eng, "sort_on_gpu", False):
+        # and a GPU engine that orders the rows on the GPU every SORT_EVERY-th rebuild (engine.gpu_sort), that
+        # rebuild's kernels: as many rebuilds as it takes to reach one
+        from .engine.gpu import SORT_EVERY
+        while eng.n_rebuilds % SORT_EVERY:
+            eng.rebuild()
+        eng.rebuild()
     eng.advance(1)
     eng.kinetic()
     eng.contacts()

@@ -184,6 +184,20 @@ SCHEMA = (
        "none, limit_damping, rescale_history, the other engine.gpu_* choices) as constants, so that the compiler "
        "drops the code the run never takes; false = one kernel for every option; no effect on results", bool,
        restart=True, physics=False),
+    _k("engine", "gpu_rebuild", "host",
+       "how the GPU engine sizes a list rebuild it makes on the GPU (one rank): 'host' (the host reads the "
+       "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
+       "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "
+       "GPU and read with the next forces, builds them again with more room) or 'launch' (as 'device', and with "
+       "engine.gpu_threads = 'row' the launches of many steps rebuild the lists "
+       "themselves, as phases of the launch); no effect on results", str, ("host", "device", "launch"), restart=True,
+       physics=False),
+    _k("engine", "gpu_sort", "host",
+       "where the GPU engine orders the particles by cell (neighbours near in memory) at every 20th list rebuild on "
+       "one rank: 'host' (rows and contact history copied down, sorted and the lists built there, all copied back) "
+       "or 'device' (a counting sort by the same cells on the GPU, the rows permuted and the history carried by "
+       "partner id there, the permutation copied back); no effect on results", str, ("host", "device"),
+       restart=True, physics=False),
     _k("decomp", "grid", (),
        "the ranks' grid of domains [Px, Py, Pz]: Px x Py columns of equal widths in x and y, each cut into Pz "
        "slabs along z that balance its work (the product is the number of ranks); [] = chosen from the ranks, "

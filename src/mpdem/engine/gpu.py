@@ -30,8 +30,9 @@ from ..kernels.bundles import Lists, Near, Slots, make_box
 from ..kernels.exactsum import NLIMBS, new_accumulator, to_float
 from ..kernels.integrate import kinetic_energy
 from ..kernels.neighbours import build_neighbours, cell_axis
+from ..state import ROW_FIELDS
 from .base import NO_FLAGS, EngineBase, StepInfo
-from .order import sort_rows
+from .order import SORT_COLUMN, sort_rows
 
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
 # launches; a 20k pile runs some thousands of steps a second)
@@ -44,9 +45,34 @@ REDUCTIONS = ("tree", "fused")
 SAMPLES = ("host", "device")
 # engine.gpu_drift
 DRIFTS = ("apart", "fused")
+# engine.gpu_rebuild
+REBUILDS = ("host", "device", "launch")
+# engine.gpu_sort
+SORTS = ("host", "device")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
+
+
+def sort_columns(nx, ny):
+    """The order of ``order.sort_rows`` as ranks of the list build's cells, for a counting sort on the GPU:
+    for the column of cells (ix, iy) at ix + nx iy, (col_base, col_size, col_local), each (nx * ny,) int64:
+    the cells across the columns of about ``SORT_COLUMN`` x ``SORT_COLUMN`` before its own, those across its
+    own, and its place among them (y-major). The cell (ix, iy, iz) of a grid of nz layers then ranks
+    col_base nz + iz col_size + col_local: the columns one after the other, z-major inside each, a
+    permutation of the nx ny nz cells."""
+    cx = max(int(round(nx / SORT_COLUMN)), 1)
+    cy = max(int(round(ny / SORT_COLUMN)), 1)
+    ix = np.arange(nx)
+    iy = np.arange(ny)
+    bx, by = ix * cx // nx, iy * cy // ny
+    wx, wy = np.bincount(bx, minlength=cx), np.bincount(by, minlength=cy)
+    x0, y0 = np.concatenate([[0], np.cumsum(wx)[:-1]]), np.concatenate([[0], np.cumsum(wy)[:-1]])
+    size = np.outer(wy, wx).ravel()                    # by column (by cx + bx)
+    base = np.concatenate([[0], np.cumsum(size)[:-1]])
+    column = (by[:, None] * cx + bx[None, :]).ravel()  # by xy cell (iy nx + ix)
+    local = ((iy - y0[by])[:, None] * wx[bx][None, :] + (ix - x0[bx])[None, :]).ravel()
+    return base[column].astype(np.int64), size[column].astype(np.int64), local.astype(np.int64)
 
 
 def runtime_samples():
@@ -122,6 +148,25 @@ class Engine(EngineBase):
         ``run_quiet``'s launches compiled for this engine's options and its law's model, friction,
         ``limit_damping`` and ``rescale_history`` as constants (``engine.gpu_pinned``,
         ``kernels.gpu.step.pinned_advance``); no effect on results.
+    rebuilds : {"host", "device", "launch"}
+        How a list rebuild on the GPU (one rank, not a ``SORT_EVERY``-th) is sized
+        (``engine.gpu_rebuild``): by the host, which reads the rows' z range and the lists' length back
+        and allocates the lists ("host"), or on the GPU alone, into lists of a fixed capacity whose
+        overflow the host sees when it next reads the step's reductions, and then builds them again
+        with room ("device", ``_rebuild_in_place``); "launch": as "device", and with a thread a row
+        (``threads = "row"``) ``run_quiet``'s launches rebuild the lists themselves, as phases of the
+        launch (``kernels.gpu.step.advance_lists``, or ``pinned_advance``'s with ``pinned``); no effect
+        on results.
+    list_capacity : int
+        With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
+        than the first lists built on the GPU replace); grown on an overflow. No effect on results.
+    sort : {"host", "device"}
+        Where every ``SORT_EVERY``-th rebuild on one rank orders the rows by cell (``engine.gpu_sort``):
+        through the host (rows and history down, ``order.sort_rows``, the lists built, all up), or on the
+        GPU (``_rebuild_sorted``: a counting sort by the same cells, the rows permuted, the lists built
+        and the history carried by partner id; the permutation copied back, which the host's State takes
+        at once); with ``rebuilds = "launch"`` inside ``run_quiet``'s launches (``kernels.gpu.lists.sort_phases``;
+        the State takes the order after the launch, ``_take_moved``). No effect on results.
 
     Attributes
     ----------
@@ -132,7 +177,8 @@ class Engine(EngineBase):
     """
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
-                 reductions="tree", samples="host", drift="apart", pinned=False):
+                 reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0,
+                 sort="host"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -153,6 +199,31 @@ class Engine(EngineBase):
         self.one_barrier = drift == "fused"
         # ``advance`` compiled for the run's options (``kernels.gpu.step.pinned_advance``)
         self.pinned = bool(pinned)
+        if rebuilds not in REBUILDS:
+            raise ValueError(f"rebuilds = {rebuilds!r}: accepted {', '.join(map(repr, REBUILDS))}")
+        # list rebuilds on the GPU with no host round trip, into lists of a fixed capacity (``_rebuild_in_place``)
+        self.in_place = rebuilds in ("device", "launch")
+        # and inside ``run_quiet``'s launches (a thread a row: ``advance_lists``)
+        self.in_launch = rebuilds == "launch" and threads == "row"
+        # the entries those lists have room for (0: not yet sized), and their two sets of arrays, the old
+        # lists and the new (``_list_set``)
+        self._capacity = int(list_capacity)
+        self._sets = []
+        # a rebuild in place whose length and room the host has not yet read (``_settle``), and the lists it
+        # replaced (start, nbr, hist, stamp, entries), which an overflow brings back
+        self._pending = None
+        if sort not in SORTS:
+            raise ValueError(f"sort = {sort!r}: accepted {', '.join(map(repr, SORTS))}")
+        # every SORT_EVERY-th rebuild's ordering of the rows on the GPU (``_rebuild_sorted``), and the spare
+        # arrays of the permutation
+        self.sort_on_gpu = sort == "device"
+        self._spare = {}
+        self._columns = None
+        # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
+        self.n_overflows = 0
+        # rebuilds inside ``run_quiet``'s launches (``advance_lists``), and through the host (the rows ordered)
+        self.n_rebuilds_in_launch = 0
+        self.n_rebuilds_by_host = 0
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
@@ -184,17 +255,22 @@ class Engine(EngineBase):
         self._pairs_kept = False
         self._dev = {}            # the GPU's arrays by name (``_upload``)
         # the step's reductions (``kernels.gpu.step``), and a pinned host copy the step reads
-        self._red = self.cuda.to_device(np.array(self.k.NEUTRAL))
+        self._red = self.cuda.to_device(self._neutral_red())
         # whether ``_red``'s slots of ``forces`` are neutral (only ``kick_drift`` resets them: an evaluation
         # after another with no step between, at ``start`` or a rebuild step of ``run_quiet``, resets them first)
         self._red_fresh = True
-        self._red_host = self.cuda.pinned_array(len(self.k.NEUTRAL))
+        self._red_host = self.cuda.pinned_array(self.k.RED_SLOTS)
         self._launchers = {}
         # the per-step reductions of ``run_quiet``'s launches, and their pinned host copy
-        self._rec = self.cuda.device_array((BATCH, len(self.k.NEUTRAL)))
-        self._rec_host = self.cuda.pinned_array((BATCH, len(self.k.NEUTRAL)))
+        # (with rebuilds in the launches, each row's RED_ENTRIES and RED_OVERFLOW too)
+        cols = self.k.RED_SLOTS if self.in_launch else len(self.k.NEUTRAL)
+        self._rec = self.cuda.device_array((BATCH, cols))
+        self._rec_host = self.cuda.pinned_array((BATCH, cols))
         self._coop_blocks = None
         self._zr = self.cuda.to_device(np.zeros(2))   # the z range of the GPU's list build
+        # the same of the build in place (with the grid's lowest z), and its grid's z layers and cells
+        self._zr_in = self.cuda.to_device(np.array([math.inf, -math.inf, 0.0]))
+        self._dims = self.cuda.to_device(np.zeros(2, np.int64))
         self._sample_acc = {}     # the samples' accumulators on the GPU, by rows of limbs
         self.n_rebuilds = 0
         self.info = StepInfo()
@@ -204,6 +280,12 @@ class Engine(EngineBase):
         self.last_overlap = 0.0
         self._contacts = 0
         state.sync = self.sync_state
+
+    def _neutral_red(self):
+        """``_red``'s starting values: the step's ``NEUTRAL``, then no entries and no overflow."""
+        red = np.zeros(self.k.RED_SLOTS)
+        red[:len(self.k.NEUTRAL)] = self.k.NEUTRAL
+        return red
 
     # -- between host and GPU --
     def _grid(self, rows):
@@ -241,10 +323,13 @@ class Engine(EngineBase):
         """The launcher name of ``run_quiet``'s kernel: "advance", or with ``pinned`` the key of the one
         compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
         if not self.pinned:
+            if self.in_launch:
+                return "advance_lists_sorted" if self.sort_on_gpu else "advance_lists"
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
         return ("advance", (self.by_entry, self.chunk_rows, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
-                            bool(law.limit_damping), bool(law.rescale_history)))
+                            bool(law.limit_damping), bool(law.rescale_history),
+                            (2 if self.sort_on_gpu else 1) if self.in_launch else 0))
 
     def _second_rows(self):
         """x, v and omega's second buffer on the GPU (``drift = "fused"``; shaped as x), else x, v, omega
@@ -305,6 +390,7 @@ class Engine(EngineBase):
 
     def _download_history(self):
         """Each list entry's Delta s and stamp from the GPU (host arrays)."""
+        self._settle()
         k = self._k
         hist = self._dev["hist"][:max(k, 1)].copy_to_host()[:k]
         stamp = self._dev["stamp"][:max(k, 1)].copy_to_host()[:k]
@@ -312,6 +398,7 @@ class Engine(EngineBase):
 
     def _lists(self):
         """The lists as the host's history kernels read them (copied from the GPU if it built them)."""
+        self._settle()
         if not self._host_lists:
             n, k = self.state.n_own, self._k
             self.nbr_start[:n + 1] = self._dev["start"][:n + 1].copy_to_host()
@@ -347,13 +434,22 @@ class Engine(EngineBase):
         host: rows and history down, migration and ghosts (domain), the rows ordered by cell, the
         lists built, all up."""
         t = time.perf_counter()
-        if self.has_lists and not self.domain.parallel and self.n_rebuilds % SORT_EVERY:
-            self._rebuild_on_gpu()
+        # the rebuild in place before this one, if nothing has read its length yet (no evaluation between)
+        self._settle()
+        on_gpu = self.has_lists and not self.domain.parallel
+        if on_gpu and (self.n_rebuilds % SORT_EVERY or self.sort_on_gpu):
+            if not self.n_rebuilds % SORT_EVERY:
+                self._rebuild_sorted()
+            elif self.in_place:
+                self._rebuild_in_place()
+            else:
+                self._rebuild_on_gpu()
             self.n_rebuilds += 1
             self.timers["lists"] += time.perf_counter() - t
             return
         c0 = self.domain.comm_seconds
         s = self.state
+        self.n_rebuilds_by_host += 1
         if self.has_lists:
             self.sync_state()
         sort_rows(s, self.r_list)
@@ -435,6 +531,211 @@ class Engine(EngineBase):
         self._pairs_kept = False
         s.slots_current = False
 
+    def _rebuild_in_place(self):
+        """``_rebuild_on_gpu`` with no round trip through the host and no allocation once sized
+        (``engine.gpu_rebuild = "device"``): the cell grid's z layers from the z range on the GPU
+        (``kernels.gpu.lists.grid_depth``, at most the layers the cells' arrays hold), the lists into
+        the set of fixed-capacity arrays the current lists are not in (``_list_set``), their length and
+        whether it fit into ``_red`` (``write_partners_in``). The host reads those with the next
+        evaluation's reductions (``forces``, or ``_settle`` where something reads the lists first); on
+        an overflow the forces' kernels have done nothing, the old lists come back and the lists are
+        built as ``_rebuild_on_gpu`` builds them, the capacity grown. With a thread an entry or chunks
+        (whose launches are sized by the entries) the length is read at once. x_ref = x."""
+        s, d, L = self.state, self._dev, self.kl
+        n = s.n_own
+        grid, one = self._grid(n), (1, self.block)
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
+        room = nx * ny * nz_cap + 1
+        zr, dims = self._zr_in, self._dims
+        self._run(L.z_range, grid, (n, d["x"], zr))
+        self._run(L.grid_depth, (1, 1), (zr, nx, ny, nz_cap, self.r_list, dims))
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.bin_rows_in, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list, cell,
+                                        count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        new = self._list_set()
+        cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, dims, *make_box(s.L_x, s.L_y),
+                 self.r_list * self.r_list)
+        self._run(L.count_partners_in, grid, (n, *cells, new["start"]))
+        self._run(L.scan, one, (new["start"], n))
+        self._run(L.write_partners_in, grid, (n, *cells, new["start"], new["nbr"], self._red))
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        self._run(L.carry_history_in, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], new["start"],
+                                             new["nbr"], new["hist"], new["stamp"], stale))
+        self._pending = (d["start"], d["nbr"], d["hist"], d["stamp"], self._k)
+        d["start"], d["nbr"], d["hist"], d["stamp"] = new["start"], new["nbr"], new["hist"], new["stamp"]
+        self._k = None
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+        if self.by_entry and not self._settle():
+            self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
+            d["row"] = new["row"]
+
+    def _rebuild_sorted(self):
+        """A rebuild that first orders the rows by cell, on the GPU (``engine.gpu_sort = "device"``; one
+        rank): the cells of ``order.sort_rows`` ranked (``sort_columns``, ``kernels.gpu.lists.sort_cells_of``),
+        a counting sort by them, each cell's rows by id (the same permutation whatever the atomics' order),
+        every row array permuted (``permute_rows``), then the lists built as ``_rebuild_in_place`` builds
+        them, the history carried by partner id from the old lists (``carry_history_moved``). The lists'
+        length is read back at once (a copy of 64 bytes every ``SORT_EVERY``-th rebuild): on an overflow
+        the lists are built again with room, the rows staying in their new order. The permutation is
+        copied back with it (4 bytes a row) and the host's State takes it at once: its rows in the GPU's
+        order (ids and the bed's flags current, the rest as stale as before; the slots are packed anew by
+        ``sync_state``). x_ref = x."""
+        s, d, L = self.state, self._dev, self.kl
+        n = s.n_own
+        grid, one = self._grid(n), (1, self.block)
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
+        room = nx * ny * nz_cap + 1
+        zr, dims = self._zr_in, self._dims
+        if self._columns is None or self._columns[0] != (nx, ny):
+            self._columns = ((nx, ny), tuple(self.cuda.to_device(a) for a in sort_columns(nx, ny)))
+        perm = self._buffer("perm", n, np.int32)
+        self._run(L.z_range, grid, (n, d["x"], zr))
+        self._run(L.grid_depth, (1, 1), (zr, nx, ny, nz_cap, self.r_list, dims))
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.sort_cells_of, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list,
+                                          *self._columns[1], cell, count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, perm))
+        self._run(L.sort_within_cells, self._grid(room), (dims, count, perm, d["id"]))
+        # the rows into their spares in the new order, then the spares current (the old ids kept there)
+        for name in self._rows_of() + ("fixed", "id"):
+            a = d[name]
+            b = self._spare.get(name)
+            if b is None or b.shape != a.shape or b.dtype != a.dtype:
+                b = self._spare[name] = self.cuda.device_array(a.shape, a.dtype)
+            self._run(L.permute_rows3 if a.ndim == 2 else L.permute_rows, grid, (n, perm, a, b))
+            d[name], self._spare[name] = b, a
+        old_ids = self._spare["id"]
+        # the lists of the rows in their new order (the z range is the same: ``dims`` stands)
+        self._run(L.zero_cells, self._grid(room), (count, dims))
+        self._run(L.bin_rows_in, grid, (n, d["x"], nx, ny, s.L_x / nx, s.L_y / ny, zr, dims, self.r_list, cell,
+                                        count))
+        self._run(L.scan_in, one, (count, fill, dims))
+        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, dims, *make_box(s.L_x, s.L_y),
+                 self.r_list * self.r_list)
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        k = self.k
+        while True:
+            new = self._list_set()
+            self._run(L.count_partners_in, grid, (n, *cells, new["start"]))
+            self._run(L.scan, one, (new["start"], n))
+            self._run(L.write_partners_in, grid, (n, *cells, new["start"], new["nbr"], self._red))
+            self._run(L.carry_history_moved, grid, (n, perm, old_ids, d["id"], d["start"], d["nbr"], d["hist"],
+                                                    d["stamp"], new["start"], new["nbr"], new["hist"], new["stamp"],
+                                                    stale))
+            red = self._red.copy_to_host(self._red_host)
+            entries = int(red[k.RED_ENTRIES])
+            if not red[k.RED_OVERFLOW]:
+                break
+            # the flag is written again by the next build; the old lists are where they were
+            self.n_overflows += 1
+            self._capacity = int(1.25 * entries) + 64
+            self._sets = []
+        for name in ("start", "nbr", "hist", "stamp"):
+            d[name] = new[name]
+        self._k = entries
+        order = perm[:n].copy_to_host()
+        for name in ROW_FIELDS:
+            a = getattr(s, name)
+            a[:n] = a[:n][order]
+        s.n_rows = n
+        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+        if self.by_entry:
+            self._run(L.entry_rows_in, grid, (n, d["start"], new["row"]))
+            d["row"] = new["row"]
+
+    def _cells(self):
+        """The cell grid of a rebuild without the host: (nx, ny, nz_cap, count, fill, cell, order), its
+        columns, its most z layers (the host path's bound, z hashed above it) and its arrays, with room for
+        that many cells and the rows; the lists' capacity set if not yet (a quarter more than the lists)."""
+        s = self.state
+        n = s.n_own
+        if not self._capacity:
+            self._capacity = int(1.25 * self._k) + 64
+        nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
+        nz_cap = max(3, 4 * (n // (nx * ny)) + 8)
+        room = nx * ny * nz_cap + 1
+        count, fill = self._buffer("cells", room, np.int32), self._buffer("fill", room, np.int32)
+        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
+        return nx, ny, nz_cap, count, fill, cell, order
+
+    def _launch_lists(self):
+        """``advance_lists``'s arguments after ``advance``'s (ids .. col_local) and the list set its rebuilds
+        alternate with the current lists (``_list_set``): rebuilds up to the one before the next
+        ``SORT_EVERY``-th (which goes through the host), or with ``sort_on_gpu`` all of them, every
+        ``SORT_EVERY``-th ordering the rows first (``advance_lists_sorted``: the rows' spares, ``moved``,
+        the permutation's buffer and ``sort_columns``'s arrays; without, the same arrays, not read)."""
+        s, d = self.state, self._dev
+        n = s.n_own
+        nx, ny, nz_cap, count, fill, cell, order = self._cells()
+        second = self._list_set()
+        r = self.n_rebuilds % SORT_EVERY
+        # with the rows ordered on the GPU, every rebuild inside (every SORT_EVERY-th ordering them first)
+        budget = BATCH if self.sort_on_gpu else (SORT_EVERY - r if r else 0)
+        names = self._rows_of()[:5] + ("wall_ds", "fixed", "id", "moved")
+        if "moved" not in d or d["moved"].shape[0] != d["x"].shape[0]:
+            # each GPU row's row in the host's State (rows ordered inside a launch: ``_take_moved``)
+            d["moved"] = self.cuda.to_device(np.arange(d["x"].shape[0], dtype=np.int32))
+        spares = []
+        for name in names:
+            a, b = d[name], self._spare.get(name)
+            if b is None or b.shape != a.shape or b.dtype != a.dtype:
+                b = self._spare[name] = self.cuda.device_array(a.shape, a.dtype)
+            spares.append(b)
+        if self._columns is None or self._columns[0] != (nx, ny):
+            self._columns = ((nx, ny), tuple(self.cuda.to_device(a) for a in sort_columns(nx, ny)))
+        perm = self._buffer("perm", n, np.int32)
+        return (d["id"], self._zr_in, count, fill, cell, order, second["start"], second["nbr"], second["hist"],
+                second["stamp"], nx, ny, nz_cap, s.L_x / nx, s.L_y / ny, self.r_list, self.r_list * self.r_list,
+                budget, self.sort_on_gpu, SORT_EVERY, r, d["moved"], *spares, perm, *self._columns[1]), second
+
+    def _list_set(self):
+        """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry or
+        chunks) that the current lists are not in; both sets (re)allocated for a new capacity or row
+        count."""
+        n, c, cuda = self.state.n_own, self._capacity, self.cuda
+        if not self._sets or self._sets[0]["nbr"].shape[0] != c or self._sets[0]["start"].shape[0] != n + 1:
+            self._sets = [{"start": cuda.device_array(n + 1, np.int64), "nbr": cuda.device_array(c, np.int32),
+                           "hist": cuda.device_array((c, 3)), "stamp": cuda.device_array(c, np.uint32)}
+                          for _ in range(2)]
+            # one array of the entries' rows: the old lists' are not read again
+            self._sets[0]["row"] = self._sets[1]["row"] = cuda.device_array(c if self.by_entry else 1, np.int32)
+        return self._sets[1] if self._dev["nbr"] is self._sets[0]["nbr"] else self._sets[0]
+
+    def _settle(self, red=None):
+        """Read a rebuild in place's length and room (``_rebuild_in_place``) if none has been yet: from
+        ``red`` (``_red`` as copied to the host after the evaluation that followed it) or copied now.
+        On an overflow the lists it replaced come back, the capacity grows to a quarter more than the
+        lists need, and the lists are built as ``_rebuild_on_gpu`` builds them (the rows where they
+        were: the forces' kernels did nothing). Returns whether it built them again."""
+        if self._pending is None:
+            return False
+        k = self.k
+        if red is None:
+            red = self._red.copy_to_host(self._red_host)
+        old, self._pending = self._pending, None
+        entries = int(red[k.RED_ENTRIES])
+        if not red[k.RED_OVERFLOW]:
+            self._k = entries
+            return False
+        d = self._dev
+        d["start"], d["nbr"], d["hist"], d["stamp"], self._k = old
+        self._red[k.RED_ENTRIES:].copy_to_device(np.zeros(k.RED_SLOTS - k.RED_ENTRIES))
+        self.n_overflows += 1
+        self._capacity = int(1.25 * entries) + 64
+        self._sets = []
+        self._rebuild_on_gpu()
+        return True
+
     def _entry_rows(self, grid):
         """Each list entry's row on the GPU (``row``) when the forces take a thread an entry: from the
         host's lists (``grid`` None, after ``_upload``) or built on the GPU from its (a launch over
@@ -452,9 +753,12 @@ class Engine(EngineBase):
     def _pairs(self, keep):
         """``pair`` with room for every entry where an evaluation writes it (kept pairs, or the forces
         a thread an entry)."""
-        d, k = self._dev, max(self._k, 1)
+        d = self._dev
+        # the lists' capacity while their length is not yet read (``_rebuild_in_place``)
+        k = max(self._capacity if self._k is None else self._k, 1)
         if (keep or self.by_entry) and d["pair"].shape[0] < k:
-            d["pair"] = self.cuda.device_array((int(k * 1.1) + 64, 6))
+            # with rebuilds in place, room for as many entries as their lists (no allocation at their rebuilds)
+            d["pair"] = self.cuda.device_array((max(int(k * 1.1) + 64, self._capacity), 6))
         return d["pair"]
 
     def _buffer(self, name, size, dtype):
@@ -494,7 +798,8 @@ class Engine(EngineBase):
         planes_d, kinds_d = self._device_planes()
         box = make_box(s.L_x, s.L_y)
         if not self._red_fresh:
-            self._red.copy_to_device(np.array(k.NEUTRAL))
+            # the step's slots only: those of a rebuild in place (RED_ENTRIES, RED_OVERFLOW) are read below
+            self._red[:len(k.NEUTRAL)].copy_to_device(np.array(k.NEUTRAL))
         self._red_fresh = False
         if self.chunk_rows:
             chunks = -(-s.n_own // self.chunk_rows)
@@ -515,6 +820,13 @@ class Engine(EngineBase):
         red = self._red.copy_to_host(self._red_host)
         s.slots_current = False
         self.timers["forces"] += time.perf_counter() - t
+        if self._pending is not None and red[k.RED_OVERFLOW]:
+            # the lists built in place did not fit and the kernels did nothing: this evaluation again, once
+            # the lists are built with room (with the stamps of the rebuild's evaluation)
+            self._epoch -= 1
+            self._settle(red)
+            return self.forces(increment, keep_pairs)
+        self._settle(red)
         return float(red[k.RED_OVERLAP]), int(red[k.RED_CONTACTS])
 
     def step(self, flags=NO_FLAGS, defer_kick=False, keep_pairs=False):
@@ -570,30 +882,55 @@ class Engine(EngineBase):
         ghosts are refreshed through the host every step) they are steps one by one."""
         if not self.steps_in_one_call or self.state.n_own == 0:
             return [self.step(flags, defer_kick=True) for _ in range(n)]
+        # a rebuild in place with no evaluation since (``rebuild`` called on its own): its length read
+        self._settle()
         s, p, d, k = self.state, self.phys, self._dev, self.k
         infos = []
         planes_d, kinds_d = self._device_planes()
         while len(infos) < n:
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
-            args = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
+            head = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
-                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec, self.by_entry,
-                    max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
+                    *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
+            tail = (max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
                     self.one_barrier)
+            if self.in_launch:
+                more, second = self._launch_lists()
+                args = head + tail + more
+            else:
+                args = head + (self.by_entry,) + tail
             name = self._advance_name()
             self._launch(name, *args, grid=self._cooperative_grid(name, args))
             rec = self._rec[:m].copy_to_host(self._rec_host[:m])
             self._kick_due = False
             s.slots_current = False
             overlap = self.last_overlap
-            whole = 0
+            whole = rebuilt = 0
             for r in rec:
-                if r[k.RED_BAD] or not math.sqrt(r[k.RED_D2]) < 0.5 * p.skin:
+                if r[k.RED_BAD]:
                     break
+                if not math.sqrt(r[k.RED_D2]) < 0.5 * p.skin:
+                    # a step that rebuilt the lists inside the launch is whole
+                    if not (self.in_launch and r[k.RED_ENTRIES] >= 0.0 and not r[k.RED_OVERFLOW]):
+                        break
+                    rebuilt += 1
+                    self._k = int(r[k.RED_ENTRIES])
                 infos.append(StepInfo(overlap, self.n_contacts, float(r[k.RED_ZMIN]), float(r[k.RED_ZMAX]), flags))
                 overlap = float(r[k.RED_OVERLAP])
                 whole += 1
+            if rebuilt:
+                before = self.n_rebuilds
+                self._rebuilt_in_launch(rebuilt, second)
+                if self.sort_on_gpu and any(r % SORT_EVERY == 0 for r in range(before, before + rebuilt)):
+                    self._take_moved()
+            if whole < m and self.in_launch and rec[whole][k.RED_OVERFLOW]:
+                # the step's lists did not fit: the host's rebuild below (in place) with room for them
+                need = int(rec[whole][k.RED_ENTRIES])
+                self.n_overflows += 1
+                if need > self._capacity:
+                    self._capacity = int(1.25 * need) + 64
+                    self._sets = []
             if whole:
                 self._epoch += whole
                 s.step += whole
@@ -608,6 +945,32 @@ class Engine(EngineBase):
                 # the step the launch ended at has drifted: its rebuild and forces on the host's path
                 infos.append(self._finish_step(rec[whole], self.last_overlap, flags))
         return infos
+
+    def _take_moved(self):
+        """The host State's rows put in the order a launch gave the GPU's (``kernels.gpu.lists.sort_phases``):
+        every per-particle field permuted by ``moved`` (each GPU row's row in the State; 4 bytes a row copied
+        back), which is then the identity again. The slots are stale (the GPU holds the history)."""
+        s, d = self.state, self._dev
+        n = s.n_own
+        order = d["moved"][:n].copy_to_host()
+        for name in ROW_FIELDS:
+            a = getattr(s, name)
+            a[:n] = a[:n][order]
+        s.n_rows = n
+        s.slots_current = False
+        d["moved"][:n].copy_to_device(np.arange(n, dtype=np.int32))
+
+    def _rebuilt_in_launch(self, rebuilt, second):
+        """The lists after ``rebuilt`` rebuilds inside a launch of ``advance_lists``: in ``second`` (the set
+        ``_launch_lists`` gave) after an odd number, where they were after an even one."""
+        d = self._dev
+        if rebuilt % 2:
+            for name in ("start", "nbr", "hist", "stamp"):
+                d[name] = second[name]
+        self.n_rebuilds += rebuilt
+        self.n_rebuilds_in_launch += rebuilt
+        self._host_lists = False
+        self._pairs_kept = False
 
     def _cooperative_grid(self, name, args):
         """The grid of ``advance``: one row (or entry, ``by_entry``) a thread if every block fits on the
@@ -678,8 +1041,8 @@ class Engine(EngineBase):
             acc = self._sums(self.ks.balance_sums, 4, d["f"], d["fixed"], d["start"], d["stamp"], d["pair"],
                              np.uint32(self._epoch & 0xFFFFFFFF))
             return self._ratio(self.domain.sum_int(acc))
-        k = self._k
         self._lists()
+        k = self._k
         self._download_rows(("f",), s.n_own)
         pair = self._dev["pair"].copy_to_host()[:k]
         stamp = self._dev["stamp"].copy_to_host()[:k]
@@ -688,6 +1051,10 @@ class Engine(EngineBase):
                                                              Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1)))
 
     def memory_bytes(self):
-        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch)."""
+        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch, the lists' second set and the
+        permutation's spares)."""
+        # the list sets and the permutation's spares not in use (those in use are ``_dev``'s)
+        spare = [a for st in self._sets for a in st.values()] + list(self._spare.values())
+        spare = {id(a): a for a in spare if not any(a is b for b in self._dev.values())}
         return (sum(a.nbytes for a in self._dev.values()) + sum(a.nbytes for a in self._buffers.values())
-                + self._red.nbytes + self._rec.nbytes)
+                + sum(a.nbytes for a in spare.values()) + self._red.nbytes + self._rec.nbytes)

@@ -30,12 +30,18 @@ from .runtime import cuda, device, device_cuda
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
 from ..law import PLANE_FLOOR, PLANE_ROUGH, Law
+from .lists import RED_ENTRIES, RED_OVERFLOW, RED_SLOTS, rebuild_phases, sort_phases
 
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
 RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
 # their values before any row adds to them; each kernel sets the other's back to these for its next launch
 NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
+# two slots after those of the engine's own ``red`` (the step's kernels launched one by one) and of ``rec``'s
+# rows with rebuilds inside the launch, written by a list rebuild on the GPU with no host round trip
+# (``lists.RED_ENTRIES``, ``lists.RED_OVERFLOW``; engine.gpu_rebuild = "device"): the new lists' entries,
+# and 1.0 when they did not fit the lists' capacity. The forces' kernels then do nothing (``_overflowed``):
+# the host reads both with the forces' reductions and builds the lists again with room for them.
 
 
 @device_cuda
@@ -47,6 +53,14 @@ def _reset_drift_slots(red):
         red[RED_ZMIN] = NEUTRAL[RED_ZMIN]
         red[RED_ZMAX] = NEUTRAL[RED_ZMAX]
         red[RED_BAD] = NEUTRAL[RED_BAD]
+
+
+@device
+def _overflowed(red):
+    """Whether the list rebuild before this evaluation ran out of room (``red[RED_OVERFLOW]``, a
+    ``RED_SLOTS`` record): the forces' kernels launched one by one then return at once, every thread
+    alike (no barrier waits), leaving the rows, the history and ``red`` as they were."""
+    return red[RED_OVERFLOW] != 0.0
 
 
 @device
@@ -350,9 +364,14 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         Each row's Delta s with the rough plane [d] (read and written only with one).
     planes : (P, 4) float64, kinds : (P,) int64
         The planes' normals and offsets [d] and kinds (``law.PLANE_*``).
-    red : the step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
-        owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``.
+    red : (RED_SLOTS,) float64
+        The step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
+        owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``. With
+        ``red[RED_OVERFLOW]`` set (a list rebuild on the GPU out of room) the kernel does nothing;
+        so do ``entry_forces``, ``row_sums`` and ``chunk_forces``.
     """
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes, kinds,
@@ -413,6 +432,8 @@ def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, kee
     largest overlap [d] (RED_OVERLAP) and the contacts (RED_CONTACTS) into ``red``; sets the slots
     of ``kick_drift`` to ``NEUTRAL``. Other arguments as ``forces``'s; any grid.
     """
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _entry_phase(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, np.uint32(epoch & 0xFFFFFFFF),
@@ -440,6 +461,8 @@ def row_sums(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, 
     """The second half of ``forces`` after ``entry_forces``: each owned row's force and torque, a
     thread a row (gravity, its entries' in order, the planes'); the largest plane overlap into
     ``red[RED_OVERLAP]``. Any grid."""
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds,
                np.uint32(epoch & 0xFFFFFFFF), law, increment, red, room, False, (x, v, omega), x, 0.0, 0.0, 0.0, 0.0,
@@ -481,6 +504,8 @@ def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hi
     (as ``entry_forces``), then, after a block barrier, a thread a row sums its entries in list order
     and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
     ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
+    if _overflowed(red):
+        return
     room = cuda.shared.array(BLOCK_MAX, np.float64)
     _reset_drift_slots(red)
     _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
@@ -544,6 +569,20 @@ def _go_on(red, half_skin, room):
     return go
 
 
+@device_cuda
+def _why(red, half_skin, room):
+    """``_go_on`` with the reason when not: 0 go on, 1 a row moved ``half_skin`` [d] or more since x_ref (the
+    lists must be rebuilt), 2 a position is not finite; the same answer in every thread."""
+    t = cuda.threadIdx.x
+    if t == 0:
+        room[0] = cuda.atomic.add(red, RED_BAD, 0.0)
+        room[1] = cuda.atomic.max(red, RED_D2, 0.0)
+    cuda.syncthreads()
+    why = 2 if room[0] != 0.0 else (0 if sqrt(room[1]) < half_skin else 1)
+    cuda.syncthreads()
+    return why
+
+
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
             epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
@@ -570,10 +609,11 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     the same bits.
     """
     room = cuda.shared.array(ROOM, np.float64)
-    # ``one`` as a constant: the fused drift's code is not in this kernel (``advance_one`` has it)
+    # ``one`` as a constant: the fused drift's code is not in this kernel (``advance_one`` has it); nor is a
+    # rebuild's (``advance_lists`` has it)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, False, room)
+           fused, False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
 
 
 @cuda.jit
@@ -585,26 +625,110 @@ def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, s
     room = cuda.shared.array(ROOM, np.float64)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, True, room)
+           fused, True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+
+
+@cuda.jit
+def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                  epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, chunk_rows, fused,
+                  xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx,
+                  cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved,
+                  perm, col_base, col_size, col_local):
+    """``advance`` (a thread a row; ``one`` read from its argument) with up to ``budget`` list rebuilds
+    inside the launch (engine.gpu_rebuild = "launch"): a step whose drift moved a row ``half_skin`` [d] or
+    more since ``x_ref`` rebuilds the lists as phases of this launch (``lists.rebuild_phases``) and goes
+    on, its forces from the new lists; the lists alternate between (start, nbr, hist, stamp) and
+    (start2, nbr2, hist2, stamp2), the second set's from the first rebuild's. ``rec`` is (>= n_steps,
+    RED_SLOTS): each step's rec[s, RED_ENTRIES] is the entries of the lists it built (-1.0: none). The
+    launch ends, as ``advance``'s, at a step that needs a rebuild past ``budget`` or whose lists do not
+    fit their set's capacity (rec[s, RED_OVERFLOW] = 1.0, rec[s, RED_ENTRIES] the entries they need: the
+    current lists are untouched). ``ids`` (n_own,) int64; ``zr`` .. ``order`` and ``nx`` .. ``r2`` as
+    ``rebuild_phases``'s ``cells`` and ``grid_shape``. ``sort_on`` is not read: ``advance_lists_sorted`` is this
+    kernel with it true and its code, in which (engine.gpu_sort = "device") every
+    ``every``-th rebuild (counting ``done`` before the launch) orders the rows by cell first
+    (``lists.sort_phases``, its spares ``sx`` .. ``smoved``, ``perm`` and the columns ``col_*``; ``moved`` (n,)
+    int32 each row's row in the host's State, permuted with the rows; the rows put back and the launch
+    ended if the lists then do not fit). The same results as the host's rebuilds between launches, so the
+    same bits."""
+    room = cuda.shared.array(ROOM, np.float64)
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
+             part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
+           fused, one, room, True, lists, budget)
+
+
+@cuda.jit
+def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
+                         kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
+                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
+                         sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
+    """``advance_lists`` with ``sort_on`` true whatever the argument says (every ``every``-th rebuild orders the
+    rows first; engine.gpu_sort = "device")."""
+    room = cuda.shared.array(ROOM, np.float64)
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
+             part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
+           fused, one, room, True, lists, budget)
+
+
+@device
+def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
+    """``_steps``'s ``lists`` where no rebuild is compiled in: arrays of the right kinds, never read."""
+    return (start, (start, nbr, hist, stamp), (x_ref[0], nbr, nbr, nbr, nbr), (1, 1, 1, 1.0, 1.0, 1.0, 1.0), start,
+            (False, 1, 0, nbr, (x_ref, x_ref, x_ref, x_ref, x_ref, x_ref, fixed, start, nbr), nbr,
+             (start, start, start)))
 
 
 # the kernels ``pinned_advance`` made, by their constants
 _PINNED = {}
 
 
-def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history):
+def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history, rebuild=0):
     """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
     (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
     code, so that the compiler drops the branches the run never takes (and their registers). Its
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
-    the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants."""
+    the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
+    ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (a thread a row: ``by_entry``
+    false, ``chunk_rows`` 0), with ``advance_lists``'s arguments."""
     key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
-           bool(rescale_history))
-    if key not in _PINNED:
-        BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE = key
+           bool(rescale_history), int(rebuild))
+    if key in _PINNED:
+        return _PINNED[key]
+    BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
+    if REBUILD:
+        if BY_ENTRY or CHUNK_ROWS:
+            raise ValueError("rebuilds inside the launch take a thread a row")
+        SORTED = REBUILD == 2
 
+        def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
+                         kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
+                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
+                         sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
+            room = cuda.shared.array(ROOM, np.float64)
+            part = cuda.shared.array(BLOCK_MAX, np.int64)
+            constant = Law(law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu if FRICTION else 0.0, law.g_x, law.g_y,
+                           law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
+            lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order),
+                     (nx, ny, nz_cap, cx, cy, r_list, r2), part,
+                     (SORTED, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                      (col_base, col_size, col_local)))
+            _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+                   epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
+                   False, 0, FUSED, ONE, room, True, lists, budget)
+        pinned_lists.__name__ = pinned_lists.__qualname__ = "advance_lists_pinned"
+        _PINNED[key] = cuda.jit(pinned_lists)
+    else:
         def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
                    fused, xb, vb, wb, one):
@@ -613,7 +737,7 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room)
+                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
         pinned.__name__ = pinned.__qualname__ = "advance_pinned"
         _PINNED[key] = cuda.jit(pinned)
     return _PINNED[key]
@@ -621,21 +745,31 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
 
 @device_cuda
 def _neutral(rec, s, n_steps):
-    """rec[s] = NEUTRAL if s < n_steps, by the grid's first thread."""
+    """rec[s] = NEUTRAL if s < n_steps, by the grid's first thread; in a row of RED_SLOTS, no rebuild."""
     if cuda.grid(1) == 0 and s < n_steps:
         for a in range(6):
             rec[s, a] = NEUTRAL[a]
+        if rec.shape[1] >= RED_SLOTS:
+            rec[s, RED_ENTRIES] = -1.0
+            rec[s, RED_OVERFLOW] = 0.0
 
 
 @device_cuda
 def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, nxt, by_entry, chunk_rows, fused,
-           one, room):
+           one, room, rebuild, lists, budget):
     """``advance``'s steps (every thread of the grid calls it; ``room`` the block's (ROOM,) float64 shared
-    room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s."""
+    room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s. With ``rebuild`` (a
+    constant; ``advance_lists``) up to ``budget`` list rebuilds inside, ``lists`` the tuple (ids, the
+    second set of lists, the cells, the grid's shape, the block's int64 shared room) of ``advance_lists``'s
+    arguments; without, ``lists`` is not read."""
     grid = cuda.cg.this_grid()
     first = cuda.grid(1)
     here = (x, v, omega)
+    # the lists in ``lists``'s second set (after an odd number of rebuilds here)
+    flip = False
+    # the rebuilds so far in this launch, and before it since the last ordering of the rows (``lists``'s)
+    done = lists[5][2]
     if one:
         # the rows no drift writes (the bed's) in the other buffer as well
         for i in range(first, x.shape[0], cuda.gridsize(1)):
@@ -652,29 +786,60 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
                          rec[s], room, fused)
             _neutral(rec, s + 1, n_steps)
             grid.sync()
-        if not _go_on(rec[s], half_skin, room):
+        xs, vs, ws = nxt if odd else here
+        if rebuild:
+            why = _why(rec[s], half_skin, room)
+            if why == 2 or (why == 1 and budget == 0):
+                break
+            if why == 1:
+                ids, second, cells, shape, part, order = lists
+                sort_on, every, _, moved, spares, perm, columns = order
+                cur = second if flip else (start, nbr, hist, stamp)
+                new = (start, nbr, hist, stamp) if flip else second
+                stale = np.uint32((epoch + s - 1) & 0xFFFFFFFF)
+                if sort_on and done % every == 0:
+                    # this rebuild orders the rows by cell first (``lists.sort_phases``): the lists built from
+                    # the rows in their new order, the ids in theirs (spares[7]) until the old lists are read
+                    other = here if odd else nxt
+                    rows = (xs, vs, ws, f, torque, wall_ds, fixed, ids, moved, other[0], other[1], other[2])
+                    sort_phases(n_own, rows, spares, perm, cells, shape, columns, room, part, False)
+                    if not rebuild_phases(n_own, xs, x_ref, spares[7], fixed, L_x, L_y, hx, hy, cur, new, stale, cells,
+                                          shape, rec[s], room, part, ids, perm, True):
+                        # no room: the rows back where they were, the launch ends at this step
+                        sort_phases(n_own, rows, spares, perm, cells, shape, columns, room, part, True)
+                        break
+                    for i in range(first, n_own, cuda.gridsize(1)):
+                        ids[i] = spares[7][i]
+                    grid.sync()
+                elif not rebuild_phases(n_own, xs, x_ref, ids, fixed, L_x, L_y, hx, hy, cur, new, stale, cells, shape,
+                                        rec[s], room, part, ids, perm, False):
+                    break
+                flip = not flip
+                budget -= 1
+                done += 1
+        elif not _go_on(rec[s], half_skin, room):
             break
+        ls, ln, lh, lt = lists[1] if flip else (start, nbr, hist, stamp)
         now = np.uint32((epoch + s + 1) & 0xFFFFFFFF)
         before = np.uint32((epoch + s) & 0xFFFFFFFF)
         # with ``one``: the forces from one buffer, the next step's drift into the other
         then = one and s + 1 < n_steps
         if then:
             _neutral(rec, s + 2, n_steps)
-        xs, vs, ws = nxt if odd else here
         there = here if odd else nxt
         drec = rec[s + 1] if then else rec[s]
         if chunk_rows > 0:
-            _chunk_phase(n_own, chunk_rows, row, xs, vs, ws, f, torque, fixed, start, nbr, hist, stamp, pair, False,
+            _chunk_phase(n_own, chunk_rows, row, xs, vs, ws, f, torque, fixed, ls, ln, lh, lt, pair, False,
                          wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused, then,
                          there, x_ref, drec)
         elif by_entry:
-            _entry_phase(n_entries, row, xs, vs, ws, fixed, nbr, hist, stamp, pair, False, now, before, L_x, L_y,
+            _entry_phase(n_entries, row, xs, vs, ws, fixed, ln, lh, lt, pair, False, now, before, L_x, L_y,
                          hx, hy, law, True, rec[s], room, fused)
             grid.sync()
-            _sum_phase(n_own, xs, vs, ws, f, torque, fixed, start, stamp, pair, wall_ds, planes, kinds, now, law, True,
+            _sum_phase(n_own, xs, vs, ws, f, torque, fixed, ls, lt, pair, wall_ds, planes, kinds, now, law, True,
                        rec[s], room, then, there, x_ref, L_x, L_y, hx, hy, drec, fused)
         else:
-            _force_phase(n_own, xs, vs, ws, f, torque, fixed, start, nbr, hist, stamp, pair, False, wall_ds, planes,
+            _force_phase(n_own, xs, vs, ws, f, torque, fixed, ls, ln, lh, lt, pair, False, wall_ds, planes,
                          kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused, then, there, x_ref, drec)
         grid.sync()
         if then:
