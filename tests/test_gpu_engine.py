@@ -392,7 +392,7 @@ def cpu_pour(tmp_path_factory):
 
 def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     """``mpdem run --device gpu``, a pour with a checkpoint restarted on the CPU, and the same pour
-    on two ranks each with the GPU engine, in slabs and in columns: every one the one-rank CPU run's digest."""
+    on two ranks (two columns) each with the GPU engine: every one the one-rank CPU run's digest."""
     pour(tmp_path / "gpu", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu")
     assert summary_digest(tmp_path / "gpu") == cpu_pour
     # the first half on the GPU (its checkpoint written from the GPU's rows and history), the rest on the CPU
@@ -400,12 +400,11 @@ def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     pour(half, "run.max_steps=100", "contact.mu=0.5", "engine.device=gpu", "output.checkpoint_every=100")
     mpdem("restart", half, "--set", "run.max_steps=200", "--device", "cpu", "--quiet", check=3)
     assert summary_digest(half) == cpu_pour
-    pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", n=2)
+    # two ranks each on its GPU, as two columns (ghosts through the side and periodic faces; the engine
+    # sees only ghost rows, as on slabs)
+    pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[2, 1, 1]", n=2)
+    assert "(grid 2 x 1 x 1)" in (tmp_path / "two" / "log.txt").read_text()
     assert summary_digest(tmp_path / "two") == cpu_pour
-    # two columns (ghosts through the side and periodic faces), each rank on its GPU
-    pour(tmp_path / "cols", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[2, 1, 1]", n=2)
-    assert "(grid 2 x 1 x 1)" in (tmp_path / "cols" / "log.txt").read_text()
-    assert summary_digest(tmp_path / "cols") == cpu_pour
 
 
 def test_no_gpu_ends_a_run_in_one_line(tmp_path):
