@@ -115,3 +115,17 @@ def test_one_rank_chooses_one_domain_and_a_config_grid_is_taken_as_given():
     assert not d.auto and d.grid == (1, 1, 1)
     with pytest.raises(ConfigError, match="2 domains for 1 ranks"):
         Domain.from_config(None, config.load(None, ["run.max_steps=1", "decomp.grid=[1, 2, 1]"]))
+
+
+def test_a_grid_that_is_not_the_ranks_is_refused_before_the_run_directory_and_at_a_restart(tmp_path):
+    from helpers import mpdem
+    tiny = ["--set", "pour.N=20", "--set", "box.L_x=4", "--set", "box.L_y=4", "--quiet"]
+    r = mpdem("run", *tiny, "--set", "run.max_steps=10", "--set", "decomp.grid=[2, 1, 1]", "--out", tmp_path / "r",
+              check=1)
+    assert "decomp.grid = [2, 1, 1]: 2 domains for 1 ranks" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "r").exists()
+    mpdem("run", *tiny, "--set", "run.max_steps=10", "--out", tmp_path / "ok", check=3)
+    log = (tmp_path / "ok" / "log.txt").read_text()
+    r = mpdem("restart", tmp_path / "ok", "--set", "run.max_steps=20", "--set", "decomp.grid=[1, 1, 2]", check=1)
+    assert "decomp.grid = [1, 1, 2]: 2 domains for 1 ranks" in r.stderr and "Traceback" not in r.stderr
+    assert (tmp_path / "ok" / "log.txt").read_text() == log

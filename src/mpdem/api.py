@@ -240,8 +240,11 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     if cfg.engine.device == "gpu":
         from .engine import gpu
         gpu.require()       # no GPU here: one line, before the run directory is made
-    # a run that cannot fit in memory: one line on every rank, before the run directory is made
-    from . import footprint
+    # a grid that is not these ranks', or a run that cannot fit in memory: one line on every rank, before
+    # the run directory is made
+    from . import domains, footprint
+    if cfg.decomp.grid:
+        domains.check(cfg.decomp.grid, net.size)
     memory_line = footprint.check(cfg, net, footprint.initial_count(cfg, initial))
 
     def go(held):
@@ -318,8 +321,11 @@ def restart(out, threads=1, *, quiet=True, walltime=None, walltime_margin=None, 
         # the files are chosen and read under the lock: no other writer can change them meanwhile
         t = rs.open_target(out, net, items)
         rs.check_room(t, net)
-        # a pile that cannot fit on these ranks: one line on every rank, before its arrays are made
-        from . import footprint
+        # a grid that is not these ranks', or a pile that cannot fit on them: one line on every rank, before
+        # its arrays are made
+        from . import domains, footprint
+        if t.cfg.decomp.grid:
+            domains.check(t.cfg.decomp.grid, net.size)
         n = int(t.attrs["n"])
         memory_line = footprint.check(t.cfg, net, n, label=f"{n} spheres of {t.path}")
         say = Logger(os.path.join(t.run_dir, "log.txt"), quiet, net.rank)
