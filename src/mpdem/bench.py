@@ -38,6 +38,7 @@ from .decomp import Domain
 from .engine import gpu_options, make_engine
 from .engine.base import Physics
 from .engine.cpu import Engine
+from .footprint import rss_now
 from .parallel import channel
 from .state import FIELDS, INITIAL, PAIR, PARTICLE, State
 
@@ -99,18 +100,6 @@ def table_config(sets=()):
     if any(config.parse_set(item)[0] == "contact.gamma_t" for item in sets):
         return cfg
     return cfg.replace(**{"contact.gamma_t": cfg.contact.gamma_n / 2})
-
-
-def rss_now():
-    """Resident set size of this process now [bytes] (/proc/self/status VmRSS; 0 if unknown)."""
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 0
 
 
 def rss_peak():

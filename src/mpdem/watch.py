@@ -45,7 +45,7 @@ STOP = (signal.SIGTERM, signal.SIGINT)
 # at most, so a line comes well within half a minute)
 EVERY = 20.0
 # whether the guard thread may end the process: the command line's (``python -m mpdem``) alone, never
-# a Python session's that called ``mpdem.run`` (there a stop waits for a look and raises)
+# a Python program's that called ``mpdem.run`` (there a stop waits for a look and raises)
 ENDS_PROCESS = False
 # seconds a stop signal waits for a look before the guard thread ends the process [s]
 GRACE = 2.0
@@ -115,7 +115,7 @@ class Watch:
     # -- the guard thread: a stop that no look takes within GRACE seconds ends the process --
     def _start_guard(self):
         """The guard thread; told of the signals through a wakeup fd where it may end the process
-        (``ENDS_PROCESS``: a Python session keeps its own wakeup fd, an event loop's)."""
+        (``ENDS_PROCESS``: a Python program keeps its own wakeup fd, an event loop's)."""
         self._stopping, self._pipe = False, None
         if ENDS_PROCESS:
             try:
