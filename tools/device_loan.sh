@@ -50,6 +50,8 @@ unpack() {  # TGZ: each rung directory back under RUNS_ROOT
         echo "device_loan: unpacked $d ($(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$dst/summary.json" 2>/dev/null || echo 'not ended'))"
     done
     rm -rf "$tmp"
+    # a checkpoint keeps the run's engine.device = "gpu": the same bits go on here with --device cpu
+    echo "device_loan: go on here with DEVICE=cpu bash analysis/sweeps/paper/ladder.sh ... (or restart --device cpu)"
 }
 
 hms() { printf '%02d:%02d:%02d' $(($1 / 3600)) $(($1 % 3600 / 60)) $(($1 % 60)); }
