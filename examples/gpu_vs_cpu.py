@@ -60,7 +60,7 @@ def main():
         ap.error("--simulator runs some hundred steps a minute: use it with --tiny")
     size = TINY if args.tiny else FULL
     # under the simulator each GPU thread is a Python thread: the smallest block the engine takes
-    gpu_keys = {"engine.device": "gpu", "engine.gpu_block": 32 if args.simulator else 128}
+    gpu_keys = {"engine.device": "gpu", **({"engine.gpu_block": 32} if args.simulator else {})}
 
     # 1. the GPU run first: without a usable GPU it stops here, before any work, with one line
     t = time.monotonic()

@@ -1,5 +1,6 @@
 """Where a fused GPU step's time goes (docs/performance.md, "GPU"): the bench's pile stepped in launches of
-``kernels.gpu.step.advance``, timed three ways on the same grid.
+``kernels.gpu.step.advance`` (the one kernel for every option, its list rebuilds by the host: the engine's
+switches before 2026-11-28's defaults, set here explicitly), timed three ways on the same grid.
 
     python tools/gpu_anatomy.py TABLE [STEPS] [BLOCK] [THREADS]    (e.g. .devdata/landed20k.txt.gz 1000 128 row)
 
@@ -29,11 +30,13 @@ def main(path, steps=1000, block=128, threads="row"):
     set_up_process()
     cfg = table_config([f"engine.gpu_block={block}", f"engine.gpu_threads={threads}"])
     phys = Physics.from_config(cfg)
-    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, "gpu", gpu_block=block, gpu_threads=threads)
+    # the one `advance` kernel with its rebuilds by the host, whatever the defaults: the launches below are its
+    old = dict(gpu_reductions="tree", gpu_samples="host", gpu_drift="apart", gpu_pinned=False, gpu_rebuild="host")
+    warm_up_kernels(phys, cfg.box.L_x, cfg.box.L_y, "gpu", gpu_block=block, gpu_threads=threads, **old)
     whole, L_x, L_y = load_table(path, cfg)
     dom = Domain.from_config(None, cfg)
     st = dom.scatter(whole, L_x, L_y)
-    eng = make_engine(st, phys, dom, "gpu", block, threads)
+    eng = make_engine(st, phys, dom, "gpu", block, threads, **old)
     eng.start()
     eng.advance(50)
     cuda = eng.cuda

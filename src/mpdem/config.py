@@ -152,7 +152,7 @@ SCHEMA = (
        "what steps the particles: 'cpu' (numba threads) or 'gpu' (one NVIDIA GPU per rank through numba-cuda; "
        "`pip install .[gpu]`); the same bits either way, so a restart may change it", str, ("cpu", "gpu"),
        restart=True, physics=False),
-    _k("engine", "gpu_block", 128,
+    _k("engine", "gpu_block", 256,
        "threads per block of the GPU engine's kernels (a power of two from 32 to 1024); no effect on results",
        int, restart=True, physics=False),
     _k("engine", "gpu_threads", "row",
@@ -166,25 +166,25 @@ SCHEMA = (
        "registers a thread at most for the GPU engine's step kernels (ptxas's -maxrregcount: more resident "
        "blocks, perhaps spills); 0 = the compiler's choice, else 32 to 255; no effect on results",
        int, restart=True, physics=False),
-    _k("engine", "gpu_reductions", "tree",
+    _k("engine", "gpu_reductions", "fused",
        "the GPU engine's fused steps' block reductions: 'tree' (a tree of barriers a value) or 'fused' (a phase's "
        "values in one tree: fewer than half the barriers); no effect on results", str, ("tree", "fused"), restart=True,
        physics=False),
-    _k("engine", "gpu_samples", "host",
+    _k("engine", "gpu_samples", "device",
        "where the GPU engine sums the stop rule's samples (kinetic energy, force ratio): 'host' (the rows and the "
        "entries' forces copied to the host) or 'device' (the same exact fixed-point sums by integer atomics on the "
        "GPU, a few kB copied); no effect on results", str, ("host", "device"), restart=True, physics=False),
-    _k("engine", "gpu_drift", "apart",
+    _k("engine", "gpu_drift", "fused",
        "where the GPU engine's launches of many steps do the next step's half-kicks and drift: 'apart' (a phase of "
        "its own: two grid barriers a step) or 'fused' (by the thread that has just summed the particle's forces, the "
        "rows in two buffers: one grid barrier a step fewer); no effect on results", str, ("apart", "fused"),
        restart=True, physics=False),
-    _k("engine", "gpu_pinned", False,
+    _k("engine", "gpu_pinned", True,
        "compile the GPU engine's launches of many steps for the run's own options (the contact model, friction or "
        "none, limit_damping, rescale_history, the other engine.gpu_* choices) as constants, so that the compiler "
        "drops the code the run never takes; false = one kernel for every option; no effect on results", bool,
        restart=True, physics=False),
-    _k("engine", "gpu_rebuild", "host",
+    _k("engine", "gpu_rebuild", "launch",
        "how the GPU engine sizes a list rebuild it makes on the GPU (one rank): 'host' (the host reads the "
        "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
        "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "

@@ -53,9 +53,9 @@ def require(device):
         gpu_require()
 
 
-def make_engine(state, physics, domain, device="cpu", gpu_block=128, gpu_threads="row", gpu_max_registers=0,
-                gpu_reductions="tree", gpu_samples="host", gpu_drift="apart", gpu_pinned=False,
-                gpu_rebuild="host", gpu_sort="host"):
+def make_engine(state, physics, domain, device="cpu", gpu_block=256, gpu_threads="row", gpu_max_registers=0,
+                gpu_reductions="fused", gpu_samples="device", gpu_drift="fused", gpu_pinned=True,
+                gpu_rebuild="launch", gpu_sort="host"):
     """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; the ``gpu_*`` keywords: the
     GPU engine's threads per block, its threads of the forces, its kernels' register cap, its fused
     steps' reductions, where the stop rule's samples are summed, where its launches of many steps drift,
