@@ -15,7 +15,8 @@
 # Env (call): UNTIL=530 (s), PROBE_BUDGET=260 (s), VARIANTS (gpu_probe's names, likeliest first),
 # SHAPES=128,256, TILES=7x7, BIG_STEPS=50, SCALING_RANKS=1,2,4,8 (on cores 0-14; the rungs on core 15),
 # SCALING_STEPS=500, SCALING_WIDE=none (or the wide case's tiles, 7x7, at the last rank count), LADDER_TOP=2e8; PROBE_BUDGET=0 leaves the probe out, LADDER_DEVICE=cpu LADDER_CORE=1
-# SCALING_CORES=0 try the rest on a machine without a GPU. MPICH and mpi4py come from .whl/ (carried) for the scaling's ranks.
+# SCALING_CORES=0 try the rest on a machine without a GPU, SCALING_RANKS=none leaves the scaling out
+# (tests/test_device_loan.py). MPICH and mpi4py come from .whl/ (carried) for the scaling's ranks.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 RUNS_ROOT=${RUNS_ROOT:-analysis/results/paper/runs}
@@ -24,7 +25,8 @@ rel() { python3 -c "import os,sys; print(os.path.relpath(sys.argv[1], sys.argv[2
 
 pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's table into .devdata/
     rm -rf .ladder; mkdir -p .ladder .devdata
-    [ -f .devdata/landed20k.txt.gz ] || cp ../shared/bench/landed20k.txt.gz .devdata/
+    [ -f .devdata/landed20k.txt.gz ] || cp ../shared/bench/landed20k.txt.gz .devdata/ 2>/dev/null ||
+        echo "device_loan: no ../shared/bench/landed20k.txt.gz: put the bench's table in .devdata/ for the probe" >&2
     for d in "$@"; do
         local ck r
         ck=$(ls "$d"/checkpoints/ckpt-*.h5 2>/dev/null | sort | tail -1)
@@ -35,7 +37,7 @@ pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's ta
         cp -p "$ck" ".ladder/$r/checkpoints/"
         echo "device_loan: packed $r at $(basename "$ck")"
     done
-    du -sh .ladder .devdata .whl 2>/dev/null
+    du -sh .ladder .devdata .whl 2>/dev/null || true
 }
 
 unpack() {  # TGZ: each rung directory back under RUNS_ROOT
@@ -106,6 +108,7 @@ call() {
     [ -d "$OUT/probe" ] && tar czf "$OUT/probe.tgz" -C "$OUT" probe && rm -rf "$OUT/probe"
     # the CPU engine's scaling beside the rungs (cores 0-14), with MPICH from the carried wheels
     (
+        [ "${SCALING_RANKS:-}" = none ] && exit 0
         python3 -m pip install -q --no-index --no-deps --no-compile --prefix /tmp/mp .whl/mpich-*.whl &&
         python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site .whl/mpi4py-*.whl || exit
         export PATH=/tmp/mp/bin:$PATH LD_LIBRARY_PATH=/tmp/mp/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH} \

@@ -1,0 +1,88 @@
+"""tools/device_loan.sh: ladder rungs packed for a lent machine (small files and the newest checkpoint),
+stepped there until the call's time (a converged rung stiffened tenfold into the next), and put back here.
+The GPU's part is the engine's own (`--device`): here the rungs run on the CPU, the probe and the scaling
+left out."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def checkout(tmp_path):
+    """A copy of the script beside the project's sources (its .ladder/ and .devdata/ land in tmp_path)."""
+    (tmp_path / "tools").mkdir()
+    shutil.copy(ROOT / "tools" / "device_loan.sh", tmp_path / "tools")
+    (tmp_path / "src").symlink_to(ROOT / "src")
+    return tmp_path
+
+
+def loan(repo, *args, **env):
+    e = dict(os.environ, PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}", RUNS_ROOT=str(repo / "runs"),
+             **env)
+    return subprocess.run(["bash", str(repo / "tools" / "device_loan.sh"), *args], cwd=repo, env=e,
+                          capture_output=True, text=True, timeout=600)
+
+
+def write(path, text="x"):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def test_pack_takes_a_rungs_small_files_and_its_newest_checkpoint_only(tmp_path):
+    repo = checkout(tmp_path)
+    rung = repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e7"
+    for f in ("config.toml", "log.txt", "thermo.csv", ".lock"):
+        write(rung / f)
+    write(rung / "checkpoints" / "ckpt-00003.h5", "old")
+    write(rung / "checkpoints" / "ckpt-00004.h5", "new")
+    p = loan(repo, "pack", str(rung))
+    assert p.returncode == 0, p.stderr
+    got = {str(q.relative_to(repo / ".ladder")) for q in (repo / ".ladder").rglob("*") if q.is_file()}
+    r = "ladder-x/mu0_s1/kn2e7"
+    assert got == {f"{r}/config.toml", f"{r}/log.txt", f"{r}/thermo.csv", f"{r}/checkpoints/ckpt-00004.h5"}
+    # a rung without a checkpoint is refused, naming it
+    write(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8" / "config.toml")
+    p = loan(repo, "pack", str(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8"))
+    assert p.returncode == 2 and "kn2e8 has no checkpoint" in p.stderr
+
+
+def test_a_call_steps_a_rung_to_its_stop_stiffens_the_next_and_unpack_puts_both_back(tmp_path):
+    repo = checkout(tmp_path)
+    rung = repo / "runs" / "ladder-t" / "mu0_s1" / "kn2e5"
+    # a small frictionless pile stopped by its wall time with checkpoints: a rung left unfinished
+    p = subprocess.run([sys.executable, "-m", "mpdem", "run", "--set", "pour.N=60", "--set", "box.L_x=4",
+                        "--set", "box.L_y=4", "--set", "contact.k_n=2e5", "--set", "output.checkpoint_every=1000",
+                        "--set", "run.max_steps=400000", "--out", str(rung), "--force", "--quiet", "--walltime", "2"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 75, p.stdout + p.stderr
+    assert loan(repo, "pack", str(rung)).returncode == 0
+    out = repo / "out"
+    out.mkdir()
+    p = loan(repo, "call", OUT=str(out), UNTIL="240", PROBE_BUDGET="0", SCALING_RANKS="none", LADDER_DEVICE="cpu",
+             LADDER_CORE="0", LADDER_TOP="2e6")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    log = (out / "loan.log").read_text()
+    assert "kn2e5 converged; stiffened into" in log and "kn2e6" in log
+    parts = sorted(out.glob("ladder.tgz.*"))
+    assert parts and not (out / "probe.tgz").exists() and not (out / "scaling.tgz").exists()
+    whole = tmp_path / "ladder.tgz"
+    whole.write_bytes(b"".join(q.read_bytes() for q in parts))
+    with tarfile.open(whole) as tf:
+        names = tf.getnames()
+    # converged rungs come back without checkpoints, with their final state (the next rung's start)
+    assert ".ladder/ladder-t/mu0_s1/kn2e5/final.h5" in names
+    assert not any("checkpoints/ckpt-" in n for n in names if "/kn2e5/" in n)
+    # unpack replaces the rungs here (the old checkpoints gone) and adds the new one
+    write(rung / "checkpoints" / "ckpt-00099.h5", "stale")
+    p = loan(repo, "unpack", str(whole))
+    assert p.returncode == 0, p.stderr
+    for k in ("kn2e5", "kn2e6"):
+        d = repo / "runs" / "ladder-t" / "mu0_s1" / k
+        assert json.loads((d / "summary.json").read_text())["status"] == "converged"
+        assert not list((d / "checkpoints").glob("ckpt-*.h5"))
+    assert "DEVICE=cpu" in p.stdout
