@@ -208,3 +208,25 @@ def test_a_retired_key_in_an_older_config_loads_and_a_set_of_it_is_refused(tmp_p
     assert "integration.contact_slots" not in cfg.values
     with pytest.raises(config.ConfigError, match="contact_slots: the key is retired"):
         config.load(str(old), ["integration.contact_slots=8"])
+
+
+@pytest.mark.parametrize("value", ["chunk16", "chunk8"])
+def test_a_gpu_thread_layout_no_longer_offered_is_one_clear_error(tmp_path, value):
+    """engine.gpu_threads = "chunkR" is gone: a config file, a --set or a checkpoint's config that names it is
+    refused with the key, the value and the layouts accepted."""
+    from mpdem.driver import resume as restart
+    from mpdem.errors import StateFileError
+    said = f"engine.gpu_threads = {value!r}: accepted values are 'row', 'entry'"
+    p = tmp_path / "c.toml"
+    p.write_text(f'[run]\nmax_steps = 5\n[engine]\ngpu_threads = "{value}"\n')
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        config.load(str(p))
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        cfg(**{"engine.gpu_threads": value})
+    attrs = {"config": cfg().to_toml()}
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        restart.restart_config(attrs, "ck.h5", str(tmp_path), [f"engine.gpu_threads={value}"])
+    old = {"config": cfg().to_toml().replace('gpu_threads = "row"', f'gpu_threads = "{value}"')}
+    assert old["config"] != attrs["config"]
+    with pytest.raises(StateFileError, match=re.escape(f"ck.h5: its config is unusable ({said})")):
+        restart.restart_config(old, "ck.h5", str(tmp_path), [])

@@ -26,8 +26,8 @@ from mpdem.state import State
 
 # launches of a few threads under the simulator (it runs each as a Python thread); the GPU's own
 # grid on a GPU. The kernels take any grid: every row (or entry) is one thread's, whichever. The
-# first is today's default path; the second takes a thread an entry for the forces, the third chunks of rows
-# a block (``engine.gpu_threads``) with its kernels compiled under a register cap (``engine.gpu_max_registers``);
+# first is today's default path; the second and the third take a thread an entry for the forces
+# (``engine.gpu_threads``), the third with its kernels compiled under a register cap (``engine.gpu_max_registers``);
 # the last three reduce a fused step's values in one tree a phase (``engine.gpu_reductions``); the second and
 # the fourth sum the stop rule's samples on the GPU (``engine.gpu_samples``); the second and the third launch
 # steps compiled for the run's options (``engine.gpu_pinned``), the third and the fourth drift the next step
@@ -36,12 +36,12 @@ from mpdem.state import State
 GRIDS = ([dict(block=2, blocks=2),
           dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True,
                rebuilds="device"),
-          dict(block=4, blocks=2, threads="chunk8", max_registers=64, reductions="fused", drift="fused", pinned=True,
+          dict(block=4, blocks=2, threads="entry", max_registers=64, reductions="fused", drift="fused", pinned=True,
                rebuilds="device"),
           dict(block=2, blocks=3, reductions="fused", samples="device", drift="fused")] if runtime.SIMULATOR
          else [dict(block=128),
                dict(block=32, threads="entry", reductions="fused", samples="device", pinned=True, rebuilds="device"),
-               dict(block=64, threads="chunk16", max_registers=64, reductions="fused", drift="fused", pinned=True,
+               dict(block=64, threads="entry", max_registers=64, reductions="fused", drift="fused", pinned=True,
                     rebuilds="device"),
                dict(block=256, reductions="fused", samples="device", drift="fused")])
 
@@ -106,7 +106,8 @@ ONE_LAUNCH = ["mu0", "mu0.5-gamma_t", "hertz-wall-lid"]
 def test_steps_in_one_launch_give_the_steps_bits(case):
     """``run_quiet`` (the steps in cooperative launches, each ending at a step that needs a rebuild,
     which the host finishes) gives the bits and the step records of the CPU engine's steps, a
-    thread a row (frictionless), a thread an entry (friction) and chunks of rows (Hertz, the wall)."""
+    thread a row (frictionless), a thread an entry (friction) and a thread an entry with the next step's drift in
+    the forces' phase (Hertz, the wall)."""
     phys = CASES[case]
     want, st_c = stepped(cpu.Engine, phys, 30)
     x, v, omega, fixed, L = tight_lattice(m=5)

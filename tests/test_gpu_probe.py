@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import gpu_probe  # noqa: E402
 
-DRY = ("row", "chunk16-all")
+DRY = ("row", "entry-all")
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def small_table(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dry_run(small_table, tmp_path_factory):
     out = tmp_path_factory.mktemp("probe") / "out"
-    # two variants (a thread a row; chunks with every switch of the fixed cost) carry the probe's
+    # two variants (a thread a row; a thread an entry with every switch of the fixed cost) carry the probe's
     # every path; the variants' own bits are test_gpu_engine.py's
     env = {**os.environ, "PY": sys.executable, "SIZE": "small", "VARIANTS": ",".join(DRY)}
     p = subprocess.run(["bash", str(ROOT / "tools" / "gpu_probe.sh"), str(small_table), str(out)], env=env,
@@ -97,7 +97,7 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
     recorded as failed with its output and why; the next child starts after it; one stopped past the budget
     says so. Every key gets one record, in order."""
     path = str(tmp_path / "v.jsonl")
-    keys = [("row", 128), ("row", 256), ("entry", 128), ("entry", 256), ("chunk16", 128), ("chunk16", 256)]
+    keys = [("row", 128), ("row", 256), ("entry", 128), ("entry", 256), ("row-all", 128), ("row-all", 256)]
     calls = []
 
     def child(variants, shapes, deadline, longest, timeout):
@@ -109,7 +109,7 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
                     continue
                 if (v, b) == ("entry", 128):
                     return 1, "Traceback\nCudaAPIError: an illegal memory access"
-                if (v, b) == ("chunk16", 128):
+                if (v, b) == ("row-all", 128):
                     return None, "still at it"
                 gpu_probe.append_record(path, {"variant": v, "block": b, "wall_s": 1.0})
         return 0, ""
@@ -120,8 +120,8 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
     assert recs[4]["failed"] == "ran past the budget and was stopped\nstill at it"
     assert all("failed" not in r for i, r in enumerate(recs) if i not in (2, 4))
     # the second child starts at the variant after the one that died, the third after the one stopped
-    assert calls == [(["row", "entry", "chunk16"], [128, 256]), (["entry", "chunk16"], [128, 256]),
-                     (["chunk16"], [256])]
+    assert calls == [(["row", "entry", "row-all"], [128, 256]), (["entry", "row-all"], [128, 256]),
+                     (["row-all"], [256])]
 
 
 @pytest.mark.parametrize("args, what", [

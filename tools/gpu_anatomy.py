@@ -58,7 +58,7 @@ def main(path, steps=1000, block=128, threads="row"):
         args = (rows, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"], d["nbr"],
                 d["hist"], d["stamp"], d["pair"], d["wall_ds"], planes_d, kinds_d, eng._epoch,
                 *make_box(st.L_x, st.L_y), eng.law, True, half_skin, steps, eng._rec, eng.by_entry,
-                eng._k if rows else 0, d.get("row", d["nbr"]), eng.chunk_rows, eng.fused, *eng._second_rows(),
+                eng._k if rows else 0, d.get("row", d["nbr"]), eng.fused, *eng._second_rows(),
                 eng.one_barrier)
         name = eng._advance_name()
         grid = eng._cooperative_grid(name, (st.n_own,) + args[1:])

@@ -75,13 +75,13 @@ def cases():
     grid = (x, ids, fixed, cells, cells, cells, 3, 3, 3, *box, 1.44)
     rec8 = np.zeros((4, step.RED_SLOTS))
     advance_lists = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True,
-                     0.1, 4, rec8, 4, nbr, 0, True, x, x, x, True, ids, np.zeros(3), cells, cells, cells, cells, start,
+                     0.1, 4, rec8, 4, nbr, True, x, x, x, True, ids, np.zeros(3), cells, cells, cells, cells, start,
                      nbr, hist, stamp, 3, 3, 8, 1.0, 1.0, 1.2, 1.44, 19, True, 20, 0, cells, x, x, x, x, x, x, fixed,
                      ids, cells, cells, ids, ids, ids)
     dims = np.zeros(2, np.int64)
     grid_in = (x, ids, fixed, cells, cells, cells, 3, 3, dims, *box, 1.44)
     advance = (n, x, x, x, x, x, fixed, x, start, nbr, hist, stamp, pair, x, planes, kinds, 5, *box, law, True, 0.1, 4,
-               rec, True, 4, nbr, 16, True, x, x, x, True)
+               rec, True, 4, nbr, True, x, x, x, True)
     return {
         "step.kick_drift": (step.kick_drift, (n, x, x, x, x, x, fixed, x, 1e-4, *box, True, red)),
         "step.kick": (step.kick, (n, x, x, x, x, fixed, 1e-4)),
@@ -93,19 +93,17 @@ def cases():
         "step.advance_lists": (step.advance_lists, advance_lists),
         "step.advance_lists_sorted": (step.advance_lists_sorted, advance_lists),
         "step.advance_lists pinned (fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
+            step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
         "step.advance_lists_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, 0, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
+            step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
-        # then chunks of 16 rows, the fused reductions and the fused drift (engine.gpu_drift)
-        "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, False,
+        # then a thread an entry, the fused reductions and the fused drift (engine.gpu_drift)
+        "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, False, False, MODEL_HOOKE, False,
                                                                          False, False), advance),
-        "step.advance pinned (row, Hooke, mu > 0)": (step.pinned_advance(False, 0, False, False, MODEL_HOOKE, True,
+        "step.advance pinned (row, Hooke, mu > 0)": (step.pinned_advance(False, False, False, MODEL_HOOKE, True,
                                                                          False, False), advance),
-        "step.advance pinned (chunk16, fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, 16, True, True, MODEL_HOOKE, True, False, False), advance),
-        "step.chunk_forces": (step.chunk_forces, (n, 16, nbr, x, x, x, x, x, fixed, start, nbr, hist, stamp, pair,
-                                                  True, x, planes, kinds, 5, *box, law, True, red)),
+        "step.advance pinned (entry, fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(True, True, True, MODEL_HOOKE, True, False, False), advance),
         "step.entry_forces": (step.entry_forces, (4, nbr, x, x, x, fixed, nbr, hist, stamp, pair, True, 5, *box, law,
                                                   True, red)),
         "step.row_sums": (step.row_sums, (n, x, x, x, x, x, fixed, start, stamp, pair, x, planes, kinds, 5, law, True,

@@ -61,20 +61,11 @@ VARIANTS = {
                                  "engine.gpu_reductions": "fused", "engine.gpu_rebuild": "launch"},
     # list rebuilds on the GPU with no host round trip, launched from the host (the table's "rebuild ms")
     "row-rebuild": {"engine.gpu_threads": "row", "engine.gpu_rebuild": "device"},
-    "chunk16-all": {"engine.gpu_threads": "chunk16", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
-                    "engine.gpu_reductions": "fused"},
     "entry": {"engine.gpu_threads": "entry"},
-    "chunk16": {"engine.gpu_threads": "chunk16"},
     # each of the three alone
     "row-pinned": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true"},
     "row-drift": {"engine.gpu_threads": "row", "engine.gpu_drift": "fused"},
     "row-fused": {"engine.gpu_threads": "row", "engine.gpu_reductions": "fused"},
-    "chunk32": {"engine.gpu_threads": "chunk32"},
-    # a register cap lets more blocks of the cooperative grid be resident, at the price of spills
-    # (make test-gpu-compile prints the fused step's spills under 64, 80 and 96)
-    "chunk16-r80": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 80},
-    "chunk16-r64": {"engine.gpu_threads": "chunk16", "engine.gpu_max_registers": 64},
-    "chunk16-fused": {"engine.gpu_threads": "chunk16", "engine.gpu_reductions": "fused"},
     "entry-all": {"engine.gpu_threads": "entry", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                   "engine.gpu_reductions": "fused"},
     # the stop rule's sums on the GPU (its cost is the table's "sample ms", not the steps')

@@ -7,7 +7,7 @@
 # BUDGET seconds for the variants, some 1-2 more minutes around them; for a bare machine with a GPU and no
 # network (python3 with numpy, numba, numba-cuda, scipy, h5py). Exit 0 when every digest is the CPU's.
 #   bash tools/gpu_probe.sh TABLE [OUT]      TABLE: the bench's landed20k.txt.gz; OUT default ./gpu_probe_out
-#   VARIANTS=row,row-all,chunk16-all,...  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
+#   VARIANTS=row,row-all,entry-all,...  SHAPES=128,256  STEPS=1000  REPEATS=3  TILES=7x7  BIG_STEPS=100
 #   CHECK_STEPS=200  BUDGET=420 (seconds: a variant that would start past them is skipped, and says so)
 #   (the defaults)
 #   SIZE=small  a dry run on a small table (under NUMBA_ENABLE_CUDASIM=1 without a GPU: `make test` runs it)

@@ -158,10 +158,8 @@ SCHEMA = (
     _k("engine", "gpu_threads", "row",
        "how the GPU engine's contact forces take its threads: 'row' (a thread a particle computes and sums its "
        "neighbour list's contacts) or 'entry' (a thread a list entry computes one contact, then a thread a "
-       "particle sums its own in list order: more threads, the forces through GPU memory) or 'chunkR' (R = 8, 16, "
-       "32, 64: a block owns chunks of R particles, its threads compute the chunk's contacts, then after a block "
-       "barrier a thread a particle sums its own in list order: no grid barrier between); no effect on results",
-       str, ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64"), restart=True, physics=False),
+       "particle sums its own in list order: more threads, the forces through GPU memory); no effect on results",
+       str, ("row", "entry"), restart=True, physics=False),
     _k("engine", "gpu_max_registers", 0,
        "registers a thread at most for the GPU engine's step kernels (ptxas's -maxrregcount: more resident "
        "blocks, perhaps spills); 0 = the compiler's choice, else 32 to 255; no effect on results",

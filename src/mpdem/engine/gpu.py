@@ -38,7 +38,7 @@ from .order import SORT_COLUMN, sort_rows
 # launches; a 20k pile runs some thousands of steps a second)
 BATCH = 1000
 # engine.gpu_threads: how the forces take the GPU's threads (``Engine``)
-THREADS = ("row", "entry", "chunk8", "chunk16", "chunk32", "chunk64")
+THREADS = ("row", "entry")
 # engine.gpu_reductions
 REDUCTIONS = ("tree", "fused")
 # engine.gpu_samples
@@ -124,12 +124,11 @@ class Engine(EngineBase):
     blocks : int or None
         Blocks a launch at most (each thread then takes several rows); None for one row a thread.
         The tests under numba's simulator use a few threads: it runs each as a Python thread.
-    threads : {"row", "entry", "chunk8", "chunk16", "chunk32", "chunk64"}
+    threads : {"row", "entry"}
         How the contact forces take the threads (``engine.gpu_threads``): a thread a row computes and
         sums its list's contacts (``kernels.gpu.step.forces``), or a thread an entry computes one
-        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``),
-        or a block owns chunks of R rows (``chunkR``), its threads computing the chunk's entries, then,
-        after a block barrier, a thread a row summing them (``chunk_forces``); no effect on results.
+        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``);
+        no effect on results.
     max_registers : int
         The step's kernels compiled with at most this many registers a thread (``engine.gpu_max_registers``;
         0: the compiler's choice); no effect on results.
@@ -226,9 +225,8 @@ class Engine(EngineBase):
         self.n_rebuilds_by_host = 0
         if threads not in THREADS:
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
-        # rows a chunk (0: no chunks); chunks, like a thread an entry, keep every entry's force and need its row
-        self.chunk_rows = int(threads[len("chunk"):]) if threads.startswith("chunk") else 0
-        self.by_entry = threads != "row"
+        # a thread an entry keeps every entry's force and needs its row
+        self.by_entry = threads == "entry"
         self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
@@ -327,7 +325,7 @@ class Engine(EngineBase):
                 return "advance_lists_sorted" if self.sort_on_gpu else "advance_lists"
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
-        return ("advance", (self.by_entry, self.chunk_rows, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
+        return ("advance", (self.by_entry, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
                             bool(law.limit_damping), bool(law.rescale_history),
                             (2 if self.sort_on_gpu else 1) if self.in_launch else 0))
 
@@ -539,8 +537,8 @@ class Engine(EngineBase):
         whether it fit into ``_red`` (``write_partners_in``). The host reads those with the next
         evaluation's reductions (``forces``, or ``_settle`` where something reads the lists first); on
         an overflow the forces' kernels have done nothing, the old lists come back and the lists are
-        built as ``_rebuild_on_gpu`` builds them, the capacity grown. With a thread an entry or chunks
-        (whose launches are sized by the entries) the length is read at once. x_ref = x."""
+        built as ``_rebuild_on_gpu`` builds them, the capacity grown. With a thread an entry (whose
+        launches are sized by the entries) the length is read at once. x_ref = x."""
         s, d, L = self.state, self._dev, self.kl
         n = s.n_own
         grid, one = self._grid(n), (1, self.block)
@@ -699,8 +697,8 @@ class Engine(EngineBase):
                 budget, self.sort_on_gpu, SORT_EVERY, r, d["moved"], *spares, perm, *self._columns[1]), second
 
     def _list_set(self):
-        """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry or
-        chunks) that the current lists are not in; both sets (re)allocated for a new capacity or row
+        """The set of fixed-capacity list arrays (start, nbr, hist, stamp; row with a thread an entry)
+        that the current lists are not in; both sets (re)allocated for a new capacity or row
         count."""
         n, c, cuda = self.state.n_own, self._capacity, self.cuda
         if not self._sets or self._sets[0]["nbr"].shape[0] != c or self._sets[0]["start"].shape[0] != n + 1:
@@ -801,13 +799,7 @@ class Engine(EngineBase):
             # the step's slots only: those of a rebuild in place (RED_ENTRIES, RED_OVERFLOW) are read below
             self._red[:len(k.NEUTRAL)].copy_to_device(np.array(k.NEUTRAL))
         self._red_fresh = False
-        if self.chunk_rows:
-            chunks = -(-s.n_own // self.chunk_rows)
-            self._launch("chunk_forces", s.n_own, self.chunk_rows, d["row"], d["x"], d["v"], d["omega"], d["f"],
-                         d["torque"], d["fixed"], d["start"], d["nbr"], d["hist"], d["stamp"], pair, keep_pairs,
-                         d["wall_ds"], planes_d, kinds_d, self._epoch, *box, self.law, increment, self._red,
-                         grid=self._grid(chunks * self.block))
-        elif self.by_entry:
+        if self.by_entry:
             self._launch("entry_forces", max(self._k, 1), d["row"], d["x"], d["v"], d["omega"], d["fixed"], d["nbr"],
                          d["hist"], d["stamp"], pair, keep_pairs, self._epoch, *box, self.law, increment, self._red)
             self._launch("row_sums", s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["start"],
@@ -893,8 +885,7 @@ class Engine(EngineBase):
             head = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
-            tail = (max(self._k, 1), d.get("row", d["nbr"]), self.chunk_rows, self.fused, *self._second_rows(),
-                    self.one_barrier)
+            tail = (max(self._k, 1), d.get("row", d["nbr"]), self.fused, *self._second_rows(), self.one_barrier)
             if self.in_launch:
                 more, second = self._launch_lists()
                 args = head + tail + more
@@ -988,10 +979,7 @@ class Engine(EngineBase):
                     # one block a multiprocessor is resident whatever the kernel's resources
                     self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
         n = self.state.n_own
-        if self.chunk_rows:
-            blocks, block = self._grid(-(-n // self.chunk_rows) * self.block)
-        else:
-            blocks, block = self._grid(max(n, self._k) if self.by_entry else n)
+        blocks, block = self._grid(max(n, self._k) if self.by_entry else n)
         return min(blocks, self._coop_blocks), block
 
     def complete(self):

@@ -2,9 +2,7 @@
 
 One thread a row (``forces``), or a thread an entry then a thread a row
 (``entry_forces`` and ``row_sums``: more threads for the GPU, the entries'
-forces through its memory), or blocks that own chunks of rows (``chunk_forces``:
-the block's threads over the chunk's entries, a block barrier, then a thread a
-row; no grid barrier between). Each row's entries are those of its full
+forces through its memory). Each row's entries are those of its full
 neighbour list, in partner-id order, summed in that order: the pair's law from i's
 side is the exact negative of the law from j's side (``kernels/law.py``:
 mirror-exact separations, symmetric sums), so the row's sum is the CPU
@@ -368,7 +366,7 @@ def forces(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         The step's reductions: the largest overlap [d] (RED_OVERLAP) and the contacts of the
         owned mobile rows (RED_CONTACTS); the slots of ``kick_drift`` are set to ``NEUTRAL``. With
         ``red[RED_OVERFLOW]`` set (a list rebuild on the GPU out of room) the kernel does nothing;
-        so do ``entry_forces``, ``row_sums`` and ``chunk_forces``.
+        so do ``entry_forces`` and ``row_sums``.
     """
     if _overflowed(red):
         return
@@ -496,63 +494,6 @@ def _sum_phase(n_own, x, v, omega, f, torque, fixed, start, stamp, pair, wall_ds
         _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
 
 
-@cuda.jit
-def chunk_forces(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                 kinds, epoch, L_x, L_y, hx, hy, law, increment, red):
-    """``forces`` by chunks of ``rows`` rows: block b takes chunks b, b + blocks, ... (chunk c: rows
-    c rows .. (c + 1) rows - 1); its threads compute the chunk's entries a thread an entry into ``pair``
-    (as ``entry_forces``), then, after a block barrier, a thread a row sums its entries in list order
-    and the planes (as ``row_sums``): the bits of ``forces``. ``row`` (K,) int32: each entry's row;
-    ``pair`` has room for every entry. Reductions and the other arguments as ``forces``'s; any grid."""
-    if _overflowed(red):
-        return
-    room = cuda.shared.array(BLOCK_MAX, np.float64)
-    _reset_drift_slots(red)
-    _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                 kinds, np.uint32(epoch & 0xFFFFFFFF), np.uint32((epoch - 1) & 0xFFFFFFFF), L_x, L_y, hx, hy, law,
-                 increment, red, room, False, False, (x, v, omega), x, red)
-
-
-@device_cuda
-def _chunk_phase(n_own, rows, row, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, keep, wall_ds, planes,
-                 kinds, now, before, L_x, L_y, hx, hy, law, increment, red, room, fused, then, nxt, x_ref, drec):
-    """This block's chunks of ``chunk_forces`` and their reductions into ``red`` (every thread of the block
-    calls it: the chunks' loop is the same for the whole block, so is its barrier); ``then`` .. ``drec``
-    as ``_force_phase``'s."""
-    t = cuda.threadIdx.x
-    nt = cuda.blockDim.x
-    deepest = 0.0
-    contacts = 0
-    d2 = 0.0
-    z_lo = math.inf
-    z_hi = -math.inf
-    bad = 0
-    for c in range(cuda.blockIdx.x, (n_own + rows - 1) // rows, cuda.gridDim.x):
-        r0 = c * rows
-        r1 = min(r0 + rows, n_own)
-        for e in range(start[r0] + t, start[r1], nt):
-            k, delta = _entry(row[e], e, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx,
-                              hy, law, increment)
-            contacts += k
-            deepest = max(deepest, delta)
-        # the chunk's entries in pair and stamp, seen by the threads that sum its rows
-        cuda.syncthreads()
-        for i in range(r0 + t, r1, nt):
-            if fixed[i]:
-                for a in range(3):
-                    f[i, a] = 0.0
-                    torque[i, a] = 0.0
-                continue
-            deepest = max(deepest, _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kinds,
-                                            now, law, increment))
-            if then:
-                d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, nxt, f, torque, x_ref, law.dt, L_x, L_y, hx, hy, True,
-                                                 d2, z_lo, z_hi, bad)
-    _contact_reduce(red, deepest, contacts, room, fused)
-    if then:
-        _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
-
-
 @device_cuda
 def _go_on(red, half_skin, room):
     """Whether every row of ``red``'s step moved less than ``half_skin`` [d] since ``x_ref`` with a
@@ -585,8 +526,8 @@ def _why(red, half_skin, room):
 
 @cuda.jit
 def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
-            fused, xb, vb, wb, one):
+            epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, fused,
+            xb, vb, wb, one):
     """Up to ``n_steps`` whole steps in one launch (a cooperative grid: every block resident, the
     phases parted by grid-wide barriers), as ``kick_drift`` then ``forces`` once a step.
 
@@ -598,40 +539,38 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     whole, step s has drifted, and its ``rec[s]`` says why (the caller finishes it). ``rec`` is
     (>= n_steps, 6) float64; its rows are set to ``NEUTRAL`` here. With ``by_entry`` the forces are
     ``entry_forces`` then ``row_sums`` (``pair`` has room for every one of the ``n_entries``
-    entries, ``row`` their rows), a grid barrier between; with ``chunk_rows`` > 0 they are
-    ``chunk_forces``'s chunks of that many rows (``row`` and ``pair`` as with ``by_entry``), no grid
-    barrier between. With ``fused`` each phase's reductions take one tree (``reduce.drift_into``,
-    ``reduce.contact_into``) instead of one a value. With ``one`` (``advance_one``, ``pinned_advance``;
-    ``advance`` itself ignores it and compiles without its code) the next step's half-kicks and drift
-    are done by the thread that has just summed a row's forces (one grid barrier a step fewer): the
-    rows then alternate between x, v, omega and xb, vb, wb (arrays shaped as x), the step's forces
-    reading one while the drift writes the other, and end in x, v, omega. The same results, so
-    the same bits.
+    entries, ``row`` their rows), a grid barrier between. With ``fused`` each phase's reductions take
+    one tree (``reduce.drift_into``, ``reduce.contact_into``) instead of one a value. With ``one``
+    (``advance_one``, ``pinned_advance``; ``advance`` itself ignores it and compiles without its code)
+    the next step's half-kicks and drift are done by the thread that has just summed a row's forces
+    (one grid barrier a step fewer): the rows then alternate between x, v, omega and xb, vb, wb (arrays
+    shaped as x), the step's forces reading one while the drift writes the other, and end in x, v,
+    omega. The same results, so the same bits.
     """
     room = cuda.shared.array(ROOM, np.float64)
     # ``one`` as a constant: the fused drift's code is not in this kernel (``advance_one`` has it); nor is a
     # rebuild's (``advance_lists`` has it)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, fused,
+           False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
 
 
 @cuda.jit
 def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-                epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
-                fused, xb, vb, wb, one):
+                epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, fused,
+                xb, vb, wb, one):
     """``advance`` with ``one`` true whatever the argument says (the next step's drift fused into the forces'
     phase; engine.gpu_drift = "fused")."""
     room = cuda.shared.array(ROOM, np.float64)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, chunk_rows,
-           fused, True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, fused,
+           True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
 
 
 @cuda.jit
 def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-                  epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, chunk_rows, fused,
-                  xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx,
+                  epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, fused, xb, vb,
+                  wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx,
                   cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved,
                   perm, col_base, col_size, col_local):
     """``advance`` (a thread a row; ``one`` read from its argument) with up to ``budget`` list rebuilds
@@ -656,14 +595,14 @@ def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist,
              part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
-           fused, one, room, True, lists, budget)
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
+           room, True, lists, budget)
 
 
 @cuda.jit
 def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
                          kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
-                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
                          stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
                          sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
     """``advance_lists`` with ``sort_on`` true whatever the argument says (every ``every``-th rebuild orders the
@@ -674,8 +613,8 @@ def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr
              part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, chunk_rows,
-           fused, one, room, True, lists, budget)
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
+           room, True, lists, budget)
 
 
 @device
@@ -690,29 +629,29 @@ def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
 _PINNED = {}
 
 
-def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damping, rescale_history, rebuild=0):
+def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale_history, rebuild=0):
     """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
-    (``by_entry``, ``chunk_rows``), the reductions (``fused``), the drift (``one``) and the law's
+    (``by_entry``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
     code, so that the compiler drops the branches the run never takes (and their registers). Its
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
     the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
     ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (a thread a row: ``by_entry``
-    false, ``chunk_rows`` 0), with ``advance_lists``'s arguments."""
-    key = (bool(by_entry), int(chunk_rows), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
+    false), with ``advance_lists``'s arguments."""
+    key = (bool(by_entry), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
            bool(rescale_history), int(rebuild))
     if key in _PINNED:
         return _PINNED[key]
-    BY_ENTRY, CHUNK_ROWS, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
+    BY_ENTRY, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
     if REBUILD:
-        if BY_ENTRY or CHUNK_ROWS:
+        if BY_ENTRY:
             raise ValueError("rebuilds inside the launch take a thread a row")
         SORTED = REBUILD == 2
 
         def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
                          kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
-                         chunk_rows, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
+                         fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
                          stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
                          sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
             room = cuda.shared.array(ROOM, np.float64)
@@ -725,19 +664,19 @@ def pinned_advance(by_entry, chunk_rows, fused, one, model, friction, limit_damp
                       (col_base, col_size, col_local)))
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   False, 0, FUSED, ONE, room, True, lists, budget)
+                   False, FUSED, ONE, room, True, lists, budget)
         pinned_lists.__name__ = pinned_lists.__qualname__ = "advance_lists_pinned"
         _PINNED[key] = cuda.jit(pinned_lists)
     else:
         def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-                   epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, chunk_rows,
-                   fused, xb, vb, wb, one):
+                   epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, by_entry, n_entries, row, fused, xb,
+                   vb, wb, one):
             room = cuda.shared.array(ROOM, np.float64)
             constant = Law(law.k_n, law.k_t, law.gamma_n, law.gamma_t, law.mu if FRICTION else 0.0, law.g_x, law.g_y,
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   BY_ENTRY, CHUNK_ROWS, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+                   BY_ENTRY, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
         pinned.__name__ = pinned.__qualname__ = "advance_pinned"
         _PINNED[key] = cuda.jit(pinned)
     return _PINNED[key]
@@ -756,8 +695,8 @@ def _neutral(rec, s, n_steps):
 
 @device_cuda
 def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, nxt, by_entry, chunk_rows, fused,
-           one, room, rebuild, lists, budget):
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, nxt, by_entry, fused, one,
+           room, rebuild, lists, budget):
     """``advance``'s steps (every thread of the grid calls it; ``room`` the block's (ROOM,) float64 shared
     room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s. With ``rebuild`` (a
     constant; ``advance_lists``) up to ``budget`` list rebuilds inside, ``lists`` the tuple (ids, the
@@ -828,11 +767,7 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
             _neutral(rec, s + 2, n_steps)
         there = here if odd else nxt
         drec = rec[s + 1] if then else rec[s]
-        if chunk_rows > 0:
-            _chunk_phase(n_own, chunk_rows, row, xs, vs, ws, f, torque, fixed, ls, ln, lh, lt, pair, False,
-                         wall_ds, planes, kinds, now, before, L_x, L_y, hx, hy, law, True, rec[s], room, fused, then,
-                         there, x_ref, drec)
-        elif by_entry:
+        if by_entry:
             _entry_phase(n_entries, row, xs, vs, ws, fixed, ln, lh, lt, pair, False, now, before, L_x, L_y,
                          hx, hy, law, True, rec[s], room, fused)
             grid.sync()
