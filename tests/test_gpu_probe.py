@@ -57,8 +57,8 @@ def test_the_dry_run_measures_every_variant_and_checks_each_digest_against_the_c
         assert len(r["rebuilds"]) == gpu_probe.REBUILDS and all(b["ms"] > 0 for b in r["rebuilds"])
         assert r["sample_ms"] > 0
         assert r["big"]["atoms"] == 125 and r["big"]["ns_atom_step"] > 0
-        assert [f"{k}={v}" for k, v in gpu_probe.VARIANTS[r["variant"]].items()] == r["settings"][-len(
-            gpu_probe.VARIANTS[r["variant"]]):]
+        own = gpu_probe.variant_sets(r["variant"])
+        assert r["settings"][-len(own):] == own
     assert result["all_same"] and result["races"] == []
     assert result["anatomy"]["rc"] == 0 and any("run_quiet" in ln for ln in result["anatomy"]["lines"])
     # the table is written, and printed last
@@ -126,7 +126,7 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
 
 @pytest.mark.parametrize("args, what", [
     (["--tiles", "7"], "--tiles 7: accepted AxB"),
-    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of row, row-all"),
+    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of default, row, row-all"),
     (["--shapes", "100"], "--shapes 100: accepted comma-separated powers of two"),
     (["--steps", "0"], "--steps 0: accepted a whole number >= 1"),
 ])
@@ -137,3 +137,18 @@ def test_bad_arguments_are_one_clear_error(small_table, tmp_path, args, what, ca
     with pytest.raises(SystemExit):
         gpu_probe.main(["all", str(tmp_path / "none.txt"), str(tmp_path)])
     assert "TABLE" in capsys.readouterr().err and not (tmp_path / "probe.json").exists()
+
+
+def test_a_variants_name_means_the_same_switches_whatever_the_configs_defaults():
+    """Every switch a variant sets is in BASE, so a variant's settings name each one (the defaults moved on
+    2026-11-28: "row" must stay the old engine); "default" alone takes the config's."""
+    from mpdem.bench import table_config
+    set_anywhere = {k for v in gpu_probe.VARIANTS.values() for k in v}
+    assert set_anywhere <= set(gpu_probe.BASE)
+    assert gpu_probe.variant_sets("default") == []
+    cfg = table_config(gpu_probe.variant_sets("row"))
+    assert (cfg.engine.gpu_pinned, cfg.engine.gpu_drift, cfg.engine.gpu_rebuild, cfg.engine.gpu_samples) == (
+        False, "apart", "host", "host")
+    # a variant's own switches come after BASE's and win
+    cfg = table_config(gpu_probe.variant_sets("row-all-rebuild-hostsort"))
+    assert (cfg.engine.gpu_pinned, cfg.engine.gpu_rebuild, cfg.engine.gpu_sort) == (True, "launch", "host")

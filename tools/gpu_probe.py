@@ -45,8 +45,15 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "src"))
 
-# name: the engine.gpu_* switches of the variant (today's engine first: the baseline of the timings)
+# Every variant runs with BASE's switches, then its own over them, whatever the config's defaults are, so that
+# a name means the same code in every probe: BASE is the engine before the defaults of 2026-11-28, "row" it alone.
+BASE = {"engine.gpu_threads": "row", "engine.gpu_pinned": "false", "engine.gpu_drift": "apart",
+        "engine.gpu_reductions": "tree", "engine.gpu_rebuild": "host", "engine.gpu_sort": "host",
+        "engine.gpu_samples": "host"}
+# name: the engine.gpu_* switches of the variant over BASE ("default": the config's defaults, BASE not applied;
+# the defaults since 2026-11-28 are row-all-rebuild-hostsort's with the samples on the GPU)
 VARIANTS = {
+    "default": {},
     "row": {"engine.gpu_threads": "row"},
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                 "engine.gpu_reductions": "fused"},
@@ -71,6 +78,14 @@ VARIANTS = {
     # the stop rule's sums on the GPU (its cost is the table's "sample ms", not the steps')
     "row-samples": {"engine.gpu_threads": "row", "engine.gpu_samples": "device"},
 }
+
+
+def variant_sets(variant):
+    """The --set items of ``variant``: BASE's (but for "default"), then its own, which override them."""
+    base = {} if variant == "default" else BASE
+    return [f"{k}={v}" for k, v in base.items()] + [f"{k}={v}" for k, v in VARIANTS[variant].items()]
+
+
 # the two block shapes each variant runs at (threads per block)
 SHAPES = (128, 256)
 REBUILDS = 5
@@ -221,7 +236,7 @@ def measure(a, variant, block, big=True):
     device = "cpu" if variant == "cpu" else "gpu"
     sets = [*a.set, f"engine.gpu_block={block}"]
     if device == "gpu":
-        sets += [f"{k}={v}" for k, v in VARIANTS[variant].items()]
+        sets += variant_sets(variant)
     cfg = table_config(sets)
     phys = Physics.from_config(cfg)
     block = cfg.engine.gpu_block
