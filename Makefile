@@ -20,7 +20,17 @@ run: setup
 	$(PY) -m mpdem analyze runs/example
 
 # Every test: what CI runs. test-fast leaves out the long runs marked validation (docs/testing.md).
-test: setup lint test-pytest test-mpi test-gpu-compile test-slurm docs
+# setup, lint, test-pytest, test-mpi, test-gpu-compile, test-slurm, docs in that order; .venv-cuda and
+# .venv-docs (downloads and unpacking, little CPU: some 100 s from nothing) are made meanwhile, beside the
+# set-up and the tests, their output in build/setup-venvs.log, shown once the MPI tests are done
+test:
+	@mkdir -p build; \
+	{ bash tools/setup_cuda.sh && bash tools/setup_docs.sh; } > build/setup-venvs.log 2>&1 & venvs=$$!; \
+	$(MAKE) --no-print-directory setup lint test-pytest test-mpi; rc=$$?; \
+	wait $$venvs; v=$$?; cat build/setup-venvs.log; \
+	[ $$rc = 0 ] || exit $$rc; \
+	[ $$v = 0 ] || { echo "make test: .venv-cuda or .venv-docs not made (build/setup-venvs.log)" >&2; exit $$v; }; \
+	$(MAKE) --no-print-directory test-gpu-compile test-slurm docs
 
 test-fast: setup lint test-serial test-mpi
 
