@@ -32,7 +32,7 @@ from mpdem.state import State
 # the fourth sum the stop rule's samples on the GPU (``engine.gpu_samples``); the second and the third launch
 # steps compiled for the run's options (``engine.gpu_pinned``), the third and the fourth drift the next step
 # in the forces' phase, the rows in two buffers (``engine.gpu_drift``); the second and the third rebuild the
-# lists on the GPU with no host round trip (``engine.gpu_rebuild``; a thread a row: REBUILD_GRIDS).
+# lists on the GPU with no host round trip (``engine.gpu_rebuild``; inside the launches: REBUILD_GRIDS).
 GRIDS = ([dict(block=2, blocks=2),
           dict(block=4, blocks=3, threads="entry", reductions="fused", samples="device", pinned=True,
                rebuilds="device"),
@@ -218,39 +218,49 @@ def test_lists_built_on_the_gpu_are_the_cpu_build():
     assert kept > 50, "contacts among the carried entries"
 
 
-# rebuilds without the host a thread a row, at two launch shapes: in place (the lists' length read with the
-# forces' reductions), then inside the launches of many steps (``engine.gpu_rebuild = "launch"``; the fourth pinned);
-# the second and the fourth order the rows on the GPU every SORT_EVERY-th rebuild (``engine.gpu_sort``: by launches,
-# then inside the launch) and start with room for 8 entries, so that their first rebuild without the host overflows
+# rebuilds without the host at two launch shapes: in place (the lists' length read with the forces' reductions),
+# then inside the launches of many steps (``engine.gpu_rebuild = "launch"``; the fourth pinned), a thread a row, then
+# inside the launches a thread an entry (the fifth and the sixth, pinned: the entries' rows and forces follow the
+# lists the launch builds); the second, the fourth and the sixth order the rows on the GPU every SORT_EVERY-th rebuild
+# (``engine.gpu_sort``: by launches, then inside the launch) and start with room for 8 entries, so that their first
+# rebuild without the host overflows
 REBUILD_GRIDS = ([dict(block=2, blocks=2, rebuilds="device"),
                   dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="device", list_capacity=8,
                        sort="device"),
                   dict(block=2, blocks=2, rebuilds="launch"),
                   dict(block=2, blocks=3, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
-                       sort="device", pinned=True)]
+                       sort="device", pinned=True),
+                  dict(block=2, blocks=2, threads="entry", rebuilds="launch"),
+                  dict(block=2, blocks=3, threads="entry", reductions="fused", drift="fused", rebuilds="launch",
+                       list_capacity=8, sort="device", pinned=True)]
                  if runtime.SIMULATOR else
                  [dict(block=128, rebuilds="device"),
                   dict(block=256, reductions="fused", drift="fused", rebuilds="device", list_capacity=8, sort="device"),
                   dict(block=128, rebuilds="launch"),
                   dict(block=256, reductions="fused", drift="fused", rebuilds="launch", list_capacity=8,
-                       sort="device", pinned=True)])
+                       sort="device", pinned=True),
+                  dict(block=128, threads="entry", rebuilds="launch"),
+                  dict(block=256, threads="entry", reductions="fused", drift="fused", rebuilds="launch",
+                       list_capacity=8, sort="device", pinned=True)])
 
 
-@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1), (0.5, 2), (0.0, 3)])
+@pytest.mark.parametrize("mu, grid", [(0.0, 0), (0.5, 1), (0.5, 2), (0.0, 3), (0.0, 4), (0.5, 5)])
 def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, grid):
     """``engine.gpu_rebuild = "device"`` and ``"launch"``: a list rebuild every step or two (a skin of
     0.002 d; 27 spheres, every 20th rebuild through the host), frictionless and frictional, each
     ``StepInfo``, the contact counts read between, the digest, the kinetic sums and the force ratio are
     the CPU engine's. No
-    rebuild reads anything back before the forces that follow it. The second shape's first rebuild in place
-    overflows its room (8 entries), and so does one after a third of the steps (its room set back to 8,
+    rebuild a thread a row reads anything back before the forces that follow it. The second shape's first
+    rebuild in place overflows its room (8 entries), and so does one after a third of the steps (its room set back to 8,
     the contacts' history not zero): the host sees it with the forces' reductions (in place) or the
     launch's record (inside a launch, which ends there) and builds again. Inside the launches, most
-    rebuilds are phases of the launch."""
+    rebuilds are phases of the launch, a thread a row or a thread an entry."""
+    kw_gpu = REBUILD_GRIDS[grid]
+    in_launch, sorted_in_launch = kw_gpu["rebuilds"] == "launch", kw_gpu.get("sort") == "device"
     phys = physics(mu=mu, gamma_t=20.0, skin=0.002)
     x, v, omega, fixed, L = tight_lattice(m=3)
     runs = []
-    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, REBUILD_GRIDS[grid])):
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, kw_gpu)):
         st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
         eng = engine(st, phys, Domain(None), **kw)
         eng.start()
@@ -264,7 +274,7 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
             if stretch == 1 and engine is gpu.Engine and grid % 2:
                 # room for 8 entries again, once the contacts carry a history: the next rebuild overflows
                 eng._capacity, eng._sets = 8, []
-                if grid == 3:
+                if in_launch and sorted_in_launch:
                     # and is one that orders the rows first (inside the launch, which puts them back)
                     shift = -eng.n_rebuilds % gpu.SORT_EVERY
                     eng.n_rebuilds += shift
@@ -277,8 +287,10 @@ def test_rebuilds_in_place_give_every_step_record_and_the_bits_of_the_cpu(mu, gr
     assert got.n_rebuilds == want.n_rebuilds >= 21, "rebuilds in place and through the host"
     # the first and every SORT_EVERY-th through the host, or (``sort="device"``) the first only
     assert got.n_rebuilds_by_host == (1 if got.sort_on_gpu else 1 + (got.n_rebuilds - 1) // gpu.SORT_EVERY)
-    assert got.n_overflows == (2 if grid % 2 else 0) and not any(eager)
-    assert got.n_rebuilds_in_launch > (10 if grid >= 2 else -1) and (grid >= 2 or got.n_rebuilds_in_launch == 0)
+    # (a thread an entry reads the length of a rebuild in place at once: its launches are sized by it)
+    assert got.n_overflows == (2 if grid % 2 else 0) and (got.by_entry or not any(eager))
+    assert got.n_rebuilds_in_launch > (10 if in_launch else -1) and (in_launch or got.n_rebuilds_in_launch == 0)
+    assert got.by_entry == (kw_gpu.get("threads") == "entry")
     assert len(a) == len(b) == 46
     for s, (p, q) in enumerate(zip(a, b)):
         assert p == q, f"record {s}: CPU {p}, GPU {q}"

@@ -126,7 +126,8 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
 
 @pytest.mark.parametrize("args, what", [
     (["--tiles", "7"], "--tiles 7: accepted AxB"),
-    (["--variants", "row,fast"], "--variants row,fast: accepted a comma-separated choice of default, row, row-all"),
+    (["--variants", "row,fast"],
+     "--variants row,fast: accepted a comma-separated choice of default, entry-all-rebuild-hostsort, row, row-all"),
     (["--shapes", "100"], "--shapes 100: accepted comma-separated powers of two"),
     (["--steps", "0"], "--steps 0: accepted a whole number >= 1"),
 ])
@@ -152,3 +153,8 @@ def test_a_variants_name_means_the_same_switches_whatever_the_configs_defaults()
     # a variant's own switches come after BASE's and win
     cfg = table_config(gpu_probe.variant_sets("row-all-rebuild-hostsort"))
     assert (cfg.engine.gpu_pinned, cfg.engine.gpu_rebuild, cfg.engine.gpu_sort) == (True, "launch", "host")
+    # the next GPU measures the forces a thread an entry with the rebuilds inside the launches first
+    assert list(gpu_probe.VARIANTS)[:2] == ["default", "entry-all-rebuild-hostsort"]
+    cfg = table_config(gpu_probe.variant_sets("entry-all-rebuild-hostsort"))
+    assert (cfg.engine.gpu_threads, cfg.engine.gpu_pinned, cfg.engine.gpu_rebuild, cfg.engine.gpu_sort) == (
+        "entry", True, "launch", "host")

@@ -96,6 +96,13 @@ def cases():
             step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
         "step.advance_lists_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
             step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
+        # the same a thread an entry (engine.gpu_threads = "entry")
+        "step.advance_lists_entry": (step.advance_lists_entry, advance_lists),
+        "step.advance_lists_entry_sorted": (step.advance_lists_entry_sorted, advance_lists),
+        "step.advance_lists_entry pinned (fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(True, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
+        "step.advance_lists_entry_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
+            step.pinned_advance(True, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
         # then a thread an entry, the fused reductions and the fused drift (engine.gpu_drift)
         "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, False, False, MODEL_HOOKE, False,

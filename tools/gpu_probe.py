@@ -54,6 +54,11 @@ BASE = {"engine.gpu_threads": "row", "engine.gpu_pinned": "false", "engine.gpu_d
 # the defaults since 2026-11-28 are row-all-rebuild-hostsort's with the samples on the GPU)
 VARIANTS = {
     "default": {},
+    # the defaults' switches with the forces a thread an entry (entry-all's) and the list rebuilds inside the launches:
+    # measured first (right after the defaults) on the next GPU
+    "entry-all-rebuild-hostsort": {"engine.gpu_threads": "entry", "engine.gpu_pinned": "true",
+                                   "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
+                                   "engine.gpu_rebuild": "launch"},
     "row": {"engine.gpu_threads": "row"},
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                 "engine.gpu_reductions": "fused"},

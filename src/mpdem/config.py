@@ -186,9 +186,9 @@ SCHEMA = (
        "how the GPU engine sizes a list rebuild it makes on the GPU (one rank): 'host' (the host reads the "
        "particles' height range and the lists' length back and allocates the lists: two round trips) or 'device' "
        "(the cell grid and the lists into preallocated room on the GPU, no round trip; an overflow, flagged on the "
-       "GPU and read with the next forces, builds them again with more room) or 'launch' (as 'device', and with "
-       "engine.gpu_threads = 'row' the launches of many steps rebuild the lists "
-       "themselves, as phases of the launch); no effect on results", str, ("host", "device", "launch"), restart=True,
+       "GPU and read with the next forces, builds them again with more room) or 'launch' (as 'device', and the "
+       "launches of many steps rebuild the lists themselves, as phases of the launch, with either "
+       "engine.gpu_threads); no effect on results", str, ("host", "device", "launch"), restart=True,
        physics=False),
     _k("engine", "gpu_sort", "host",
        "where the GPU engine orders the particles by cell (neighbours near in memory) at every 20th list rebuild on "

@@ -152,10 +152,9 @@ class Engine(EngineBase):
         (``engine.gpu_rebuild``): by the host, which reads the rows' z range and the lists' length back
         and allocates the lists ("host"), or on the GPU alone, into lists of a fixed capacity whose
         overflow the host sees when it next reads the step's reductions, and then builds them again
-        with room ("device", ``_rebuild_in_place``); "launch": as "device", and with a thread a row
-        (``threads = "row"``) ``run_quiet``'s launches rebuild the lists themselves, as phases of the
-        launch (``kernels.gpu.step.advance_lists``, or ``pinned_advance``'s with ``pinned``); no effect
-        on results.
+        with room ("device", ``_rebuild_in_place``); "launch": as "device", and ``run_quiet``'s launches
+        rebuild the lists themselves, as phases of the launch (``kernels.gpu.step.advance_lists``, a thread
+        an entry ``advance_lists_entry``, or ``pinned_advance``'s with ``pinned``); no effect on results.
     list_capacity : int
         With ``rebuilds = "device"``, the entries the lists have room for at first (0: a quarter more
         than the first lists built on the GPU replace); grown on an overflow. No effect on results.
@@ -202,8 +201,8 @@ class Engine(EngineBase):
             raise ValueError(f"rebuilds = {rebuilds!r}: accepted {', '.join(map(repr, REBUILDS))}")
         # list rebuilds on the GPU with no host round trip, into lists of a fixed capacity (``_rebuild_in_place``)
         self.in_place = rebuilds in ("device", "launch")
-        # and inside ``run_quiet``'s launches (a thread a row: ``advance_lists``)
-        self.in_launch = rebuilds == "launch" and threads == "row"
+        # and inside ``run_quiet``'s launches (``advance_lists``, ``advance_lists_entry``)
+        self.in_launch = rebuilds == "launch"
         # the entries those lists have room for (0: not yet sized), and their two sets of arrays, the old
         # lists and the new (``_list_set``)
         self._capacity = int(list_capacity)
@@ -322,7 +321,8 @@ class Engine(EngineBase):
         compiled for this engine's options and its law's (``kernels.gpu.step.pinned_advance``)."""
         if not self.pinned:
             if self.in_launch:
-                return "advance_lists_sorted" if self.sort_on_gpu else "advance_lists"
+                return ("advance_lists" + ("_entry" if self.by_entry else "")
+                        + ("_sorted" if self.sort_on_gpu else ""))
             return "advance_one" if self.one_barrier else "advance"
         law = self.law
         return ("advance", (self.by_entry, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
@@ -671,11 +671,19 @@ class Engine(EngineBase):
         alternate with the current lists (``_list_set``): rebuilds up to the one before the next
         ``SORT_EVERY``-th (which goes through the host), or with ``sort_on_gpu`` all of them, every
         ``SORT_EVERY``-th ordering the rows first (``advance_lists_sorted``: the rows' spares, ``moved``,
-        the permutation's buffer and ``sort_columns``'s arrays; without, the same arrays, not read)."""
+        the permutation's buffer and ``sort_columns``'s arrays; without, the same arrays, not read). With a thread
+        an entry the entries' rows (``row``) get room for the capacity first: a rebuild inside the launch writes
+        the new lists' rows there."""
         s, d = self.state, self._dev
         n = s.n_own
         nx, ny, nz_cap, count, fill, cell, order = self._cells()
         second = self._list_set()
+        if self.by_entry and d["row"].shape[0] < self._capacity:
+            # the entries' rows with room for the lists a rebuild inside the launch writes there (the host's or a
+            # rebuild's by ``_rebuild_on_gpu`` have room for their own)
+            row = self.cuda.device_array(max(self._capacity, self._k), np.int32)
+            self._run(self.kl.entry_rows, self._grid(n), (n, d["start"], row))
+            d["row"] = row
         r = self.n_rebuilds % SORT_EVERY
         # with the rows ordered on the GPU, every rebuild inside (every SORT_EVERY-th ordering them first)
         budget = BATCH if self.sort_on_gpu else (SORT_EVERY - r if r else 0)
@@ -754,6 +762,9 @@ class Engine(EngineBase):
         d = self._dev
         # the lists' capacity while their length is not yet read (``_rebuild_in_place``)
         k = max(self._capacity if self._k is None else self._k, 1)
+        if self.in_launch and self.by_entry:
+            # and at least the capacity where a launch may rebuild them (``advance_lists_entry``)
+            k = max(k, self._capacity)
         if (keep or self.by_entry) and d["pair"].shape[0] < k:
             # with rebuilds in place, room for as many entries as their lists (no allocation at their rebuilds)
             d["pair"] = self.cuda.device_array((max(int(k * 1.1) + 64, self._capacity), 6))
@@ -882,12 +893,14 @@ class Engine(EngineBase):
         while len(infos) < n:
             m = min(n - len(infos), BATCH)
             t = time.perf_counter()
+            if self.in_launch:
+                # first: it sizes the lists' capacity, for which ``_pairs`` makes room with a thread an entry
+                more, second = self._launch_lists()
             head = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
             tail = (max(self._k, 1), d.get("row", d["nbr"]), self.fused, *self._second_rows(), self.one_barrier)
             if self.in_launch:
-                more, second = self._launch_lists()
                 args = head + tail + more
             else:
                 args = head + (self.by_entry,) + tail
@@ -953,7 +966,8 @@ class Engine(EngineBase):
 
     def _rebuilt_in_launch(self, rebuilt, second):
         """The lists after ``rebuilt`` rebuilds inside a launch of ``advance_lists``: in ``second`` (the set
-        ``_launch_lists`` gave) after an odd number, where they were after an even one."""
+        ``_launch_lists`` gave) after an odd number, where they were after an even one (with a thread an entry,
+        their rows in ``row`` either way)."""
         d = self._dev
         if rebuilt % 2:
             for name in ("start", "nbr", "hist", "stamp"):

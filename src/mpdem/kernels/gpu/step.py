@@ -617,6 +617,45 @@ def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr
            room, True, lists, budget)
 
 
+@cuda.jit
+def advance_lists_entry(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
+                        kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, fused,
+                        xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny,
+                        nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall,
+                        sfixed, sids, smoved, perm, col_base, col_size, col_local):
+    """``advance_lists`` with the forces a thread an entry (engine.gpu_threads = "entry"): ``n_entries`` the
+    current lists' entries and ``row`` their rows, with room for the lists' capacity (len(nbr2)) as well as
+    for them; a rebuild inside the launch writes the new lists' rows into ``row`` and goes on with their
+    entries (``pair`` has room for the capacity too)."""
+    room = cuda.shared.array(ROOM, np.float64)
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
+             part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
+           room, True, lists, budget)
+
+
+@cuda.jit
+def advance_lists_entry_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds,
+                               planes, kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec,
+                               n_entries, row, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2,
+                               nbr2, hist2, stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done,
+                               moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size,
+                               col_local):
+    """``advance_lists_entry`` with ``sort_on`` true whatever the argument says (``advance_lists_sorted`` a thread
+    an entry)."""
+    room = cuda.shared.array(ROOM, np.float64)
+    part = cuda.shared.array(BLOCK_MAX, np.int64)
+    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
+             part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                    (col_base, col_size, col_local)))
+    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
+           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
+           room, True, lists, budget)
+
+
 @device
 def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
     """``_steps``'s ``lists`` where no rebuild is compiled in: arrays of the right kinds, never read."""
@@ -637,16 +676,14 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
     arguments are ``advance``'s; those it was made for are read from the constants, the law's
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
     the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
-    ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (a thread a row: ``by_entry``
-    false), with ``advance_lists``'s arguments."""
+    ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (with ``by_entry``:
+    ``advance_lists_entry``, ``advance_lists_entry_sorted``), with ``advance_lists``'s arguments."""
     key = (bool(by_entry), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
            bool(rescale_history), int(rebuild))
     if key in _PINNED:
         return _PINNED[key]
     BY_ENTRY, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
     if REBUILD:
-        if BY_ENTRY:
-            raise ValueError("rebuilds inside the launch take a thread a row")
         SORTED = REBUILD == 2
 
         def pinned_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
@@ -664,8 +701,9 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
                       (col_base, col_size, col_local)))
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   False, FUSED, ONE, room, True, lists, budget)
-        pinned_lists.__name__ = pinned_lists.__qualname__ = "advance_lists_pinned"
+                   BY_ENTRY, FUSED, ONE, room, True, lists, budget)
+        pinned_lists.__name__ = pinned_lists.__qualname__ = ("advance_lists_entry_pinned" if BY_ENTRY
+                                                             else "advance_lists_pinned")
         _PINNED[key] = cuda.jit(pinned_lists)
     else:
         def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
@@ -701,7 +739,8 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
     room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s. With ``rebuild`` (a
     constant; ``advance_lists``) up to ``budget`` list rebuilds inside, ``lists`` the tuple (ids, the
     second set of lists, the cells, the grid's shape, the block's int64 shared room) of ``advance_lists``'s
-    arguments; without, ``lists`` is not read."""
+    arguments (with ``by_entry`` each rebuild also writes the new entries' rows into ``row``, whose room is the
+    lists' capacity, and takes their count for ``n_entries``); without, ``lists`` is not read."""
     grid = cuda.cg.this_grid()
     first = cuda.grid(1)
     here = (x, v, omega)
@@ -756,6 +795,15 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
                 flip = not flip
                 budget -= 1
                 done += 1
+                if by_entry:
+                    # a thread an entry: each new entry's row, into ``row`` (room for the lists' capacity, one array
+                    # for both sets: the old lists' rows are not read again), and the new lists' entries
+                    ns = new[0]
+                    for i in range(first, n_own, cuda.gridsize(1)):
+                        for e in range(ns[i], ns[i + 1]):
+                            row[e] = i
+                    n_entries = ns[n_own]
+                    grid.sync()
         elif not _go_on(rec[s], half_skin, room):
             break
         ls, ln, lh, lt = lists[1] if flip else (start, nbr, hist, stamp)
