@@ -1,4 +1,5 @@
 """The Python API (docs/python.md): the functions the command line is built on."""
+import json
 import os
 import re
 from pathlib import Path
@@ -56,6 +57,14 @@ def test_run_read_analyze_and_restart_as_the_command_line_does(tmp_path):
     # at the cap: nothing to do; a higher cap goes on to the straight run's state
     again = mpdem.restart(str(tmp_path / "api"))
     assert again.status == "max_steps" and again.digest == r.digest and again.steps == 30000
+    # a run that ended before its summary was written: the restart with nothing to do writes it from final.h5
+    written = json.loads((tmp_path / "api" / "summary.json").read_text())
+    os.remove(tmp_path / "api" / "summary.json")
+    again = mpdem.restart(str(tmp_path / "api"))
+    back = json.loads((tmp_path / "api" / "summary.json").read_text())
+    assert again.digest == back["digest"] == r.digest and "recovered" in back
+    assert {k: back[k] for k in ("steps", "time", "status", "converged", "E_k_per_particle", "segments")} == {
+        k: written[k] for k in ("steps", "time", "status", "converged", "E_k_per_particle", "segments")}
     more = mpdem.restart(str(tmp_path / "api"), **{"run.max_steps": 40000})
     straight = mpdem.run(mpdem.load_config(**dict(SMALL, **{"run.max_steps": 40000})), str(tmp_path / "straight"))
     assert more.steps == straight.steps == 40000 and more.digest == straight.digest

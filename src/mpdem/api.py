@@ -353,8 +353,13 @@ def _finished(t, status, net):
                 return json.load(fh)
         except (OSError, ValueError):
             return None
-    s = net.on_root(read) or {}
     name = "converged" if status == EXIT_OK else "max_steps"
+    s = net.on_root(read)
+    if s is None and t.attrs.get("kind") == "final":
+        # the run ended between its final state and its summary: written now, from the state
+        from .driver import summary
+        s = net.on_root(lambda: summary.recover(t.run_dir, t.path, name))
+    s = s or {}
     return RunRecord(name, int(s.get("steps", t.attrs["step"])), s.get("digest"), t.path, t.run_dir, s)
 
 

@@ -6,6 +6,7 @@ instead), then rank 0 gives ``write`` an ``End``: what the run came to.
 """
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 
@@ -128,4 +129,27 @@ def write(end, arrays, cfg, out, final, log):
         log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
             f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
             f"--set run.max_steps=...`")
+    return summary
+
+
+def recover(out, final, status):
+    """Write ``out``/summary.json for a run that ended (``final``: its final state file) but whose
+    summary was never written (the process ended between the two files): what the state file says,
+    marked ``recovered``. E_k_per_particle is the stop rule's last sample (what ``write`` reports);
+    the last segment's timing, communication share and force ratio are not known (None). The digest is
+    the final state's, as ``write`` takes it. Returns the summary (rank 0, one process).
+    """
+    arrays, attrs = checkpoint.read_state(final)
+    rs = json.loads(attrs.get("run_state") or "{}")
+    history = rs.get("history", {})
+    samples = rs.get("stop", {}).get("stop_samples") or []
+    summary = {"steps": int(attrs["step"]), "time": float(attrs["time"]), "converged": status == "converged",
+               "status": status, "E_k_per_particle": samples[-1] if samples else None, "force_ratio": None,
+               "wall_seconds": history.get("wall_seconds"), "segments": history.get("segments"),
+               "ns_per_particle_step": None, "ranks": int(attrs["ranks"]), "comm_share": None,
+               "migrated": history.get("migrated"), "rebalances": history.get("rebalances"),
+               "digest": checkpoint.digest(arrays),
+               "recovered": f"written by a restart from {os.path.basename(final)}: the run ended before its summary "
+                            f"was written"}
+    rundir.write_json(os.path.join(out, "summary.json"), summary)
     return summary
