@@ -125,6 +125,22 @@ def test_steps_in_one_launch_give_the_steps_bits(case):
     assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
 
 
+def test_steps_in_one_launch_keep_no_pairs_as_on_the_cpu():
+    """``force_ratio`` after ``run_quiet`` (whose evaluations keep no pair forces) is (nan, -1) on both
+    engines, as after any step that did not keep them; the GPU's gave the pairs of its last launch."""
+    phys = physics(mu=0.5)
+    for engine, grid in ((cpu.Engine, {}), (gpu.Engine, GRIDS[0]), (gpu.Engine, GRIDS[1])):
+        x, v, omega, fixed, L = tight_lattice(m=5)
+        eng = engine(State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L), phys, Domain(None), **grid)
+        eng.start()
+        eng.advance(3)
+        eng.step(keep_pairs=True)
+        assert np.isfinite(eng.force_ratio()[0])
+        eng.run_quiet(3)
+        ratio, loose = eng.force_ratio()
+        assert np.isnan(ratio) and loose == -1, (engine.__module__, grid)
+
+
 @pytest.mark.parametrize("grid", [0, 2])
 def test_every_step_record_of_one_launch_is_the_cpu_engines(grid):
     """Each StepInfo of ``run_quiet`` (its overlap, contact count and height range), and the overlap

@@ -887,6 +887,9 @@ class Engine(EngineBase):
             return [self.step(flags, defer_kick=True) for _ in range(n)]
         # a rebuild in place with no evaluation since (``rebuild`` called on its own): its length read
         self._settle()
+        if n > 0:
+            # the launches' evaluations keep no pairs (the CPU engine's ``force_ratio`` is then nan too)
+            self._pairs_kept = False
         s, p, d, k = self.state, self.phys, self._dev, self.k
         infos = []
         planes_d, kinds_d = self._device_planes()
