@@ -18,7 +18,8 @@ release = version = __version__
 extensions = ["sphinx.ext.autodoc", "sphinx.ext.napoleon", "myst_parser"]
 source_suffix = {".md": "markdown"}
 root_doc = "index"
-exclude_patterns = ["_build"]
+# measurements/: dated records of one machine (their raw files beside them), read from the pages, not pages
+exclude_patterns = ["_build", "measurements/**"]
 
 # numpy-style docstrings (Parameters, Returns, Raises, Attributes sections)
 napoleon_google_docstring = False
