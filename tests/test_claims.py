@@ -143,7 +143,7 @@ def test_a_ladder_rung_reads_running_while_its_directory_has_no_converged_run(tm
     ctx = src.Context([], {"ladder": []}, [], str(tmp_path), [str(tmp_path / "ladder-size")])
     assert src.Rung(0.0, "z", 2e7).resolve(ctx).status == "running"
     far = src.Rung(0.0, "z", 2e9).resolve(ctx)
-    assert far.status == "not measured" and "mu0_s1/kn2e7" in far.why
+    assert far.status == "not measured" and "mu0_s1/kn2e7" in far.why and "no converged rung at 2e9" in far.why
     assert src.Rung(0.5, "z", 2e6).resolve(ctx).status == "not measured"
     fit_res = {"ladder": [{"family": {"mu": 0.0}, "rungs": [{"set": "S27", "k_n": 2e6, "n_runs": 1, "z": 6.048,
                                                              "z_sem": None}]}]}

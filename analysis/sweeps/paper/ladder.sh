@@ -13,14 +13,17 @@
 # A committed run keeps its packing.npz, not its final.h5: at MU = 0 the ladder starts from that packing at rest
 # (no tangential force needs a history); a frictional pile needs its final.h5 (pour it again: the same bits).
 # DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
-# before that much wall time (exit 75: run the script again to go on).
+# before that much wall time (exit 75: run the script again to go on). STOP_ENERGY=translational stops each rung
+# it starts or restarts on the translational energy (docs/config.md `stop.energy`): for a frictional pile whose
+# total energy a sphere spinning about its contacts holds above E_stop (docs/model.md 5.4).
 # Each converged rung is analysed (mpdem analyze --packing). The committed rungs of analysis/results/paper keep
 # their summary.json, config.toml, analysis/ and packing.npz;
 # final.h5 (needed by the next rung) stays in the run directory, not in git.
 set -uo pipefail
 mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
 PY=${PY:-.venv/bin/python}
-opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"})
+opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"}
+      ${STOP_ENERGY:+--set stop.energy="$STOP_ENERGY"})
 mkdir -p "$out"
 status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
 analyse() {  # dir: its analysis and packing.npz (what git keeps of a rung), once

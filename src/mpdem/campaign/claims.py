@@ -179,17 +179,18 @@ CLAIMS = [
           also=[Diff(Rung(0.0, "alpha", "top"), S("S12", "alpha"), "ladder top rung − 2e5"),
                 Diff(Ext(DEV, "S31", "alpha", "N 2000"), Ext(DEV, "S15", "alpha", "N 2000"), "N 2000, 2e8 − 2e5"),
                 Diff(S("S07", "alpha"), S("S03", "alpha"), "N 2000, μ 0.5, 2e7 − 2e5")],
-          note="paper size: two k_n at μ = 0; with friction N = 2000 only"),
+          note="paper size: two poured k_n at μ = 0 (the ladder's top rung beside: one seed); with friction "
+               "N = 2000 only"),
     Claim("19", "eq. 7, μ = 0: z_∞", "6.01 ± 0.02", "compare", 6.01, 0.02,
           ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S12")],
           also=[ExtFit(DEV, "eq7", "z_inf", "S15", label="N 2000 eq. 7 free"), Fit("overlap", "z_c", "S02")],
-          note="until the paper-size ladder has 4 k_n: z_c of z − z_c = A (δ/d)^(1/2) over the depth bands "
-               "(exponent assumed), bootstrap over runs"),
+          note="eq. 7 with α_n free over the paper-size ladder (its base set and converged rungs) once it has "
+               "4 k_n; before that z_c of z − z_c = A (δ/d)^(1/2) over the depth bands (exponent assumed)"),
     Claim("20", "eq. 7, μ = 0: α_n", "0.498 ± 0.002", "compare", 0.498, 0.002,
           ours=[Fit("ladder", "alpha_n", mu=0.0), Fit("eq7", "alpha_n", "S12")],
           also=[ExtFit(DEV, "eq7", "alpha_n", "S15", label="N 2000 eq. 7 free")],
-          note="eq. 7 with α_n free at paper size: the poured piles have 2 k_n, the ladder's rungs join as they "
-               "converge"),
+          note="eq. 7 with α_n free at paper size over the ladder's base set (all its seeds) and its converged "
+               "rungs (the seeds that have climbed them)"),
     Claim("21", "eq. 8: α_n = 1 − α, μ = 0 (α_n − (1 − α))", "0.498 against 0.48 ± 0.03", "compare", 0.0, 0.03,
           tolerance="the paper's own α_n and 1 − α differ by 0.018, within its α error 0.03",
           ours=[Diff(Fit("ladder", "alpha_n", mu=0.0), OneMinus(S("S12", "alpha")))],

@@ -208,7 +208,8 @@ class Rung:
             else:
                 pending = ctx.ladder_pending(self.mu, self.k_n)
             have = ", ".join(ctx.ladder_dirs(self.mu)) or "none"
-            return missing(where, f"no converged rung; ladder directories: {have}", "running" if pending else
+            at = "" if self.k_n == "top" else f" at {fmt_kn(self.k_n)}"
+            return missing(where, f"no converged rung{at}; ladder directories: {have}", "running" if pending else
                             "not measured")
         r = max(rungs, key=lambda r: r["k_n"])
         v, err, n = r.get(self.q, NAN), r.get(f"{self.q}_sem", NAN), r["n_runs"]
