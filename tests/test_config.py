@@ -216,7 +216,8 @@ def test_a_gpu_thread_layout_no_longer_offered_is_one_clear_error(tmp_path, valu
     refused with the key, the value and the layouts accepted."""
     from mpdem.driver import resume as restart
     from mpdem.errors import StateFileError
-    said = f"engine.gpu_threads = {value!r}: accepted values are 'row', 'entry'"
+    said = (f"engine.gpu_threads = {value!r}: accepted values are 'row', 'entry', 'lanes2', 'lanes4', 'lanes8', "
+            "'lanes16'")
     p = tmp_path / "c.toml"
     p.write_text(f'[run]\nmax_steps = 5\n[engine]\ngpu_threads = "{value}"\n')
     with pytest.raises(ConfigError, match=re.escape(said)):
@@ -230,3 +231,11 @@ def test_a_gpu_thread_layout_no_longer_offered_is_one_clear_error(tmp_path, valu
     assert old["config"] != attrs["config"]
     with pytest.raises(StateFileError, match=re.escape(f"ck.h5: its config is unusable ({said})")):
         restart.restart_config(old, "ck.h5", str(tmp_path), [])
+
+
+def test_lanes_a_row_need_the_pinned_launches():
+    """engine.gpu_threads = "lanesL" with engine.gpu_pinned = false is one clear error naming both."""
+    assert cfg(**{"engine.gpu_threads": "lanes4"}).engine.gpu_threads == "lanes4"
+    with pytest.raises(ConfigError, match=re.escape("engine.gpu_threads = 'lanes4': accepted 'row' or 'entry' with "
+                                                    "engine.gpu_pinned = false")):
+        cfg(**{"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "false"})

@@ -481,3 +481,63 @@ def test_a_position_that_is_not_finite_stops_the_steps_without_list_work():
         assert all(np.isnan(i.z_min) for i in infos) and eng.n_rebuilds == builds
         got.append([(i.z_max, i.max_overlap) for i in infos])
     assert got[0] == got[1]
+
+
+# L lanes of a warp a row in the launches (``engine.gpu_threads = "lanesL"``, pinned): two rows' groups a block at
+# least, so that groups of one warp diverge (rows of different lengths); the first and the third rebuild inside the
+# launches (the third with room for 8 entries at first, so that a rebuild overflows), the second between them
+# through the host, with Hertz, the wall and a lid
+LANE_GRIDS = ([dict(block=4, threads="lanes2", pinned=True, reductions="fused", drift="fused", rebuilds="launch"),
+               dict(block=8, threads="lanes4", pinned=True),
+               dict(block=16, threads="lanes8", pinned=True, reductions="fused", drift="fused", rebuilds="launch",
+                    sort="device", list_capacity=8)]
+              if runtime.SIMULATOR else
+              [dict(block=128, threads="lanes2", pinned=True, reductions="fused", drift="fused", rebuilds="launch"),
+               dict(block=256, threads="lanes4", pinned=True),
+               dict(block=256, threads="lanes8", pinned=True, reductions="fused", drift="fused", rebuilds="launch",
+                    sort="device", list_capacity=8)])
+
+
+@pytest.mark.parametrize("grid, phys", [
+    (0, physics(mu=0.5, gamma_t=20.0, skin=0.002)),
+    (1, physics(mu=0.5, model="hertz", gamma_t=10.0, wall=True, planes=(Plane.lid(2.99),), skin=0.002)),
+    (2, physics(mu=0.0, skin=0.002))])
+def test_lanes_a_row_give_every_step_record_and_the_bits_of_the_cpu(grid, phys):
+    """``engine.gpu_threads = "lanesL"``: each ``StepInfo`` of ``run_quiet`` across list rebuilds (a skin of
+    0.002 d; 27 spheres), the contact counts read between, the digest, the kinetic sums and the force ratio
+    are the CPU engine's, with friction (the torques through the shuffles too) and without, Hooke and Hertz,
+    the wall and a lid, rebuilds inside the launches or between them."""
+    kw_gpu = LANE_GRIDS[grid]
+    x, v, omega, fixed, L = tight_lattice(m=3)
+    runs = []
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, kw_gpu)):
+        st = State(np.arange(len(x)), x.copy(), 40 * v, 40 * omega, fixed.copy(), L, L)
+        eng = engine(st, phys, Domain(None), **kw)
+        eng.start()
+        infos = []
+        for _ in range(3):
+            infos += eng.run_quiet(8)
+            infos.append(eng.info._replace(n_contacts=eng.contacts()))
+        infos.append(eng.step(keep_pairs=True))
+        runs.append((eng, st, infos))
+    (want, st_c, a), (got, st_g, b) = runs
+    assert got.lanes == int(kw_gpu["threads"][5:]) and got.n_rebuilds == want.n_rebuilds >= 8
+    assert (got.n_rebuilds_in_launch > 4) == (kw_gpu.get("rebuilds") == "launch")
+    assert got.n_overflows > 0 or "list_capacity" not in kw_gpu
+    for s, (p, q) in enumerate(zip(a, b)):
+        assert p == q, f"record {s}: CPU {p}, GPU {q}"
+    assert len(a) == len(b) == 28
+    g = checkpoint.gather_state(st_g)
+    assert int(g["count"].sum()) > 50 and (phys.law.mu == 0.0 or np.any(g["ds"] != 0.0)), "a pile in contact"
+    assert checkpoint.digest(checkpoint.gather_state(st_c)) == checkpoint.digest(g)
+    assert got.kinetic() == want.kinetic() and got.force_ratio() == want.force_ratio()
+
+
+def test_lanes_need_the_pinned_launches_and_whole_groups_a_block():
+    """"lanesL" without ``pinned``, or in a block of fewer than L threads, is one clear error before any work."""
+    x, v, omega, fixed, L = tight_lattice(m=3)
+    st = State(np.arange(len(x)), x, v, omega, fixed, L, L)
+    with pytest.raises(ValueError, match="needs pinned = True"):
+        gpu.Engine(st, physics(), Domain(None), threads="lanes4")
+    with pytest.raises(ValueError, match="8 threads or more"):
+        gpu.Engine(st, physics(), Domain(None), threads="lanes8", pinned=True, block=4, blocks=1)

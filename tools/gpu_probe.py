@@ -49,7 +49,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "src"))
 # a name means the same code in every probe: BASE is the engine before the defaults of 2026-11-28, "row" it alone.
 BASE = {"engine.gpu_threads": "row", "engine.gpu_pinned": "false", "engine.gpu_drift": "apart",
         "engine.gpu_reductions": "tree", "engine.gpu_rebuild": "host", "engine.gpu_sort": "host",
-        "engine.gpu_samples": "host"}
+        "engine.gpu_samples": "host", "engine.gpu_max_registers": "0"}
 # name: the engine.gpu_* switches of the variant over BASE ("default": the config's defaults, BASE not applied;
 # the defaults since 2026-11-28 are row-all-rebuild-hostsort's with the samples on the GPU)
 VARIANTS = {
@@ -59,6 +59,25 @@ VARIANTS = {
     "entry-all-rebuild-hostsort": {"engine.gpu_threads": "entry", "engine.gpu_pinned": "true",
                                    "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
                                    "engine.gpu_rebuild": "launch"},
+    # the defaults' switches with L lanes of a warp a row in the launches (a row's entries L at a time, summed in
+    # list order through warp shuffles; built 2026-11-28, proven under the simulator, not yet timed)
+    "lanes4-all-rebuild-hostsort": {"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "true",
+                                    "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
+                                    "engine.gpu_rebuild": "launch"},
+    "lanes8-all-rebuild-hostsort": {"engine.gpu_threads": "lanes8", "engine.gpu_pinned": "true",
+                                    "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
+                                    "engine.gpu_rebuild": "launch"},
+    "lanes2-all-rebuild-hostsort": {"engine.gpu_threads": "lanes2", "engine.gpu_pinned": "true",
+                                    "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
+                                    "engine.gpu_rebuild": "launch"},
+    # the same at 128 registers a thread (ptxas, sm_90: 4 blocks of 128 a multiprocessor instead of 3, 100 B of
+    # spill stores and 252 of loads a thread), and the defaults so capped
+    "lanes4-all-rebuild-hostsort-r128": {"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "true",
+                                         "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
+                                         "engine.gpu_rebuild": "launch", "engine.gpu_max_registers": "128"},
+    "default-r128": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                     "engine.gpu_reductions": "fused", "engine.gpu_rebuild": "launch", "engine.gpu_samples": "device",
+                     "engine.gpu_max_registers": "128"},
     "row": {"engine.gpu_threads": "row"},
     "row-all": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
                 "engine.gpu_reductions": "fused"},

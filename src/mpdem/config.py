@@ -158,8 +158,11 @@ SCHEMA = (
     _k("engine", "gpu_threads", "row",
        "how the GPU engine's contact forces take its threads: 'row' (a thread a particle computes and sums its "
        "neighbour list's contacts) or 'entry' (a thread a list entry computes one contact, then a thread a "
-       "particle sums its own in list order: more threads, the forces through GPU memory); no effect on results",
-       str, ("row", "entry"), restart=True, physics=False),
+       "particle sums its own in list order: more threads, the forces through GPU memory) or 'lanes2', 'lanes4', "
+       "'lanes8', 'lanes16' (in the launches of many steps, with engine.gpu_pinned: that many threads of a warp a "
+       "particle compute its contacts a round at a time and sum them in list order through warp shuffles); no "
+       "effect on results", str, ("row", "entry", "lanes2", "lanes4", "lanes8", "lanes16"), restart=True,
+       physics=False),
     _k("engine", "gpu_max_registers", 0,
        "registers a thread at most for the GPU engine's step kernels (ptxas's -maxrregcount: more resident "
        "blocks, perhaps spills); 0 = the compiler's choice, else 32 to 255; no effect on results",
@@ -583,6 +586,8 @@ def resolve(raw):
 
     block = vals["engine.gpu_block"]
     need("engine.gpu_block", 32 <= block <= 1024 and block & (block - 1) == 0, "a power of two from 32 to 1024")
+    need("engine.gpu_threads", not (vals["engine.gpu_threads"].startswith("lanes") and not vals["engine.gpu_pinned"]),
+         "'row' or 'entry' with engine.gpu_pinned = false (the lanes are compiled only into the pinned launches)")
     regs = vals["engine.gpu_max_registers"]
     need("engine.gpu_max_registers", regs == 0 or 32 <= regs <= 255, "0 (the compiler's choice) or 32 to 255")
     k_n = vals["contact.k_n"]

@@ -38,7 +38,7 @@ from .order import SORT_COLUMN, sort_rows
 # launches; a 20k pile runs some thousands of steps a second)
 BATCH = 1000
 # engine.gpu_threads: how the forces take the GPU's threads (``Engine``)
-THREADS = ("row", "entry")
+THREADS = ("row", "entry", "lanes2", "lanes4", "lanes8", "lanes16")
 # engine.gpu_reductions
 REDUCTIONS = ("tree", "fused")
 # engine.gpu_samples
@@ -124,11 +124,12 @@ class Engine(EngineBase):
     blocks : int or None
         Blocks a launch at most (each thread then takes several rows); None for one row a thread.
         The tests under numba's simulator use a few threads: it runs each as a Python thread.
-    threads : {"row", "entry"}
+    threads : {"row", "entry", "lanes2", "lanes4", "lanes8", "lanes16"}
         How the contact forces take the threads (``engine.gpu_threads``): a thread a row computes and
         sums its list's contacts (``kernels.gpu.step.forces``), or a thread an entry computes one
-        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``);
-        no effect on results.
+        contact and then a thread a row sums its own in list order (``entry_forces``, ``row_sums``),
+        or L lanes of a warp a row in ``run_quiet``'s launches ("lanesL", with ``pinned``:
+        ``kernels.gpu.step._lane_phase``; the steps outside them a thread a row); no effect on results.
     max_registers : int
         The step's kernels compiled with at most this many registers a thread (``engine.gpu_max_registers``;
         0: the compiler's choice); no effect on results.
@@ -226,12 +227,20 @@ class Engine(EngineBase):
             raise ValueError(f"threads = {threads!r}: accepted {', '.join(map(repr, THREADS))}")
         # a thread an entry keeps every entry's force and needs its row
         self.by_entry = threads == "entry"
+        # the lanes of a warp a row in the launches (0: as ``by_entry`` says)
+        self.lanes = int(threads[5:]) if threads.startswith("lanes") else 0
+        if self.lanes and not self.pinned:
+            raise ValueError(f"threads = {threads!r} needs pinned = True (engine.gpu_pinned: the lanes are compiled "
+                             "only into the launches made for a run's options)")
         self.cuda, self._run, self._simulator = runtime.cuda, runtime.launch, runtime.SIMULATOR
         if not (1 <= block <= self.k.BLOCK_MAX and block & (block - 1) == 0):
             raise ValueError(f"block = {block}: accepted a power of two up to {self.k.BLOCK_MAX}")
         if self._simulator and blocks is None:
             # numba's simulator runs every thread as a Python thread: a few threads, each many rows
-            block, blocks = 2, 2
+            block, blocks = max(2, self.lanes), 2
+        if block < self.lanes:
+            raise ValueError(f"block = {block} with threads = {threads!r}: a block holds whole rows of "
+                             f"{self.lanes} lanes, so {self.lanes} threads or more")
         # at most this many blocks a launch (None: one row a thread); the kernels take any grid
         self.blocks = blocks
         self.state, self.phys, self.domain = state, physics, domain
@@ -327,7 +336,7 @@ class Engine(EngineBase):
         law = self.law
         return ("advance", (self.by_entry, self.fused, self.one_barrier, int(law.model), law.mu > 0.0,
                             bool(law.limit_damping), bool(law.rescale_history),
-                            (2 if self.sort_on_gpu else 1) if self.in_launch else 0))
+                            (2 if self.sort_on_gpu else 1) if self.in_launch else 0, self.lanes))
 
     def _second_rows(self):
         """x, v and omega's second buffer on the GPU (``drift = "fused"``; shaped as x), else x, v, omega
@@ -996,7 +1005,7 @@ class Engine(EngineBase):
                     # one block a multiprocessor is resident whatever the kernel's resources
                     self._coop_blocks = int(self.cuda.get_current_device().MULTIPROCESSOR_COUNT)
         n = self.state.n_own
-        blocks, block = self._grid(max(n, self._k) if self.by_entry else n)
+        blocks, block = self._grid(max(n, self._k) if self.by_entry else n * max(self.lanes, 1))
         return min(blocks, self._coop_blocks), block
 
     def complete(self):

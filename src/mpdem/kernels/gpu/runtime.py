@@ -15,6 +15,46 @@ from numba import config  # noqa: E402
 from numba import cuda  # noqa: E402
 
 SIMULATOR = bool(config.ENABLE_CUDASIM)
+
+
+if SIMULATOR:
+    import threading
+    import weakref
+
+    # the exchanges of each simulated block's warps, by (warp, mask); a block's threads share its manager
+    _EXCHANGES = weakref.WeakKeyDictionary()
+    _EXCHANGES_LOCK = threading.Lock()
+
+    class _Exchange:
+        """The lanes of ``mask`` in one simulated warp: a barrier of as many threads and two sets of slots,
+        used in turn (a lane can write the next exchange's slot only after every lane has passed this one's
+        barrier, so after every lane has read the other set)."""
+
+        def __init__(self, parties):
+            self.barrier = threading.Barrier(parties)
+            self.slots = ([None] * 32, [None] * 32)
+            self.turn = [0] * 32
+
+    def shfl(mask, value, src_lane):
+        """``cuda.shfl_sync`` under the simulator, which has none: ``value`` of lane ``src_lane`` of this
+        thread's warp, every lane of ``mask`` calling it (a barrier of those lanes)."""
+        t = threading.current_thread()
+        warp, lane = divmod(t.thread_id, 32)
+        key = (tuple(t.blockIdx), warp, int(mask) & 0xFFFFFFFF)
+        with _EXCHANGES_LOCK:
+            block = _EXCHANGES.setdefault(t._manager, {})
+            ex = block.get(key)
+            if ex is None:
+                ex = block[key] = _Exchange(bin(key[2]).count("1"))
+        p = ex.turn[lane]
+        ex.turn[lane] = 1 - p
+        ex.slots[p][lane] = value
+        ex.barrier.wait()
+        return ex.slots[p][int(src_lane)]
+else:
+    shfl = cuda.shfl_sync
+
+
 def launch(kernel, grid, args):
     """``kernel[grid](*args)``.
 

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .reduce import BLOCK_MAX, ROOM, contact_into, drift_into, max_into, min_into, sum_into
-from .runtime import cuda, device, device_cuda
+from .runtime import cuda, device, device_cuda, shfl
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
 from ..law import PLANE_FLOOR, PLANE_ROUGH, Law
@@ -419,6 +419,93 @@ def _contact_reduce(red, deepest, contacts, room, fused):
         sum_into(red, RED_CONTACTS, contacts, room)
 
 
+@device
+def _shfl_contact(mask, src, c, cfx, cfy, cfz, ctx, cty, ctz, friction):
+    """Lane ``src``'s entry of the group ``mask`` (one row's lanes, every one calling): (1 if in contact else 0,
+    its force [m g] (3) and torque [m g d] (3)); the torque's zeros without ``friction``."""
+    ck = shfl(mask, c, src)
+    if ck == 0:
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    fx = shfl(mask, cfx, src)
+    fy = shfl(mask, cfy, src)
+    fz = shfl(mask, cfz, src)
+    if not friction:
+        return 1, fx, fy, fz, 0.0, 0.0, 0.0
+    return 1, fx, fy, fz, shfl(mask, ctx, src), shfl(mask, cty, src), shfl(mask, ctz, src)
+
+
+@device_cuda
+def _lane_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, wall_ds, planes, kinds, now, before,
+                L_x, L_y, hx, hy, law, increment, red, room, fused, then, nxt, x_ref, drec, lanes):
+    """``_force_phase`` with ``lanes`` threads a row (engine.gpu_threads = "lanes2" .. "lanes8"; a power of two
+    up to 32 that divides the block): the row's lanes compute its entries ``lanes`` at a time, lane k the
+    round's k-th, and every lane adds the round's contacts to the row's sums in list order, taking each
+    from its lane by a warp shuffle: the order of ``_force_row``'s sums, so its bits. Lane 0 then adds the
+    planes, stores the row and drifts it (``then``). A row's lanes are one group of a warp (the block a
+    multiple of ``lanes``), which share the row's loop bounds and so reach every shuffle together.
+    Every thread of the block calls it; the arguments as ``_force_phase``'s (no ``pair``: the launches keep
+    no entry's force)."""
+    first = cuda.grid(1)
+    lane = first % lanes
+    # the lanes of this thread's group within its warp
+    mask = ((1 << lanes) - 1) << (cuda.laneid - lane)
+    base = cuda.laneid - lane
+    friction = law.mu > 0.0
+    deepest = 0.0
+    contacts = 0
+    d2 = 0.0
+    z_lo = math.inf
+    z_hi = -math.inf
+    bad = 0
+    for i in range(first // lanes, n_own, cuda.gridsize(1) // lanes):
+        if fixed[i]:
+            if lane == 0:
+                for a in range(3):
+                    f[i, a] = 0.0
+                    torque[i, a] = 0.0
+            continue
+        xi = x[i, 0]
+        yi = x[i, 1]
+        zi = x[i, 2]
+        fx = law.g_x
+        fy = law.g_y
+        fz = law.g_z
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        end = start[i + 1]
+        for e0 in range(start[i], end, lanes):
+            e = e0 + lane
+            c = 0
+            cfx = cfy = cfz = ctx = cty = ctz = 0.0
+            if e < end:
+                c, delta, cfx, cfy, cfz, ctx, cty, ctz = _contact(i, e, xi, yi, zi, x, v, omega, fixed, nbr, hist,
+                                                                  stamp, now, before, L_x, L_y, hx, hy, law, increment)
+                if c:
+                    contacts += 1
+                    deepest = max(deepest, delta)
+            for k in range(min(lanes, end - e0)):
+                ck, kfx, kfy, kfz, ktx, kty, ktz = _shfl_contact(mask, base + k, c, cfx, cfy, cfz, ctx, cty, ctz,
+                                                                 friction)
+                if ck:
+                    if friction:
+                        tx = add(tx, ktx)
+                        ty = add(ty, kty)
+                        tz = add(tz, ktz)
+                    fx = add(fx, kfx)
+                    fy = add(fy, kfy)
+                    fz = add(fz, kfz)
+        if lane == 0:
+            deepest = max(deepest, _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, 0.0,
+                                               fx, fy, fz, tx, ty, tz))
+            if then:
+                d2, z_lo, z_hi, bad = _drift_row(i, x, v, omega, nxt, f, torque, x_ref, law.dt, L_x, L_y, hx, hy,
+                                                 True, d2, z_lo, z_hi, bad)
+    _contact_reduce(red, deepest, contacts, room, fused)
+    if then:
+        _drift_reduce(drec, d2, z_lo, z_hi, bad, room, fused)
+
+
 @cuda.jit
 def entry_forces(n_entries, row, x, v, omega, fixed, nbr, hist, stamp, pair, keep, epoch, L_x, L_y, hx, hy, law,
                  increment, red):
@@ -552,7 +639,7 @@ def advance(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp
     # rebuild's (``advance_lists`` has it)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, fused,
-           False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+           False, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0, 0)
 
 
 @cuda.jit
@@ -564,7 +651,7 @@ def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, s
     room = cuda.shared.array(ROOM, np.float64)
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), by_entry, fused,
-           True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
+           True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0, 0)
 
 
 @cuda.jit
@@ -596,7 +683,7 @@ def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist,
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
-           room, True, lists, budget)
+           room, True, lists, budget, 0)
 
 
 @cuda.jit
@@ -614,7 +701,7 @@ def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
-           room, True, lists, budget)
+           room, True, lists, budget, 0)
 
 
 @cuda.jit
@@ -634,7 +721,7 @@ def advance_lists_entry(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr,
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
-           room, True, lists, budget)
+           room, True, lists, budget, 0)
 
 
 @cuda.jit
@@ -653,7 +740,7 @@ def advance_lists_entry_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, star
                     (col_base, col_size, col_local)))
     _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
-           room, True, lists, budget)
+           room, True, lists, budget, 0)
 
 
 @device
@@ -668,7 +755,7 @@ def _no_lists(start, nbr, hist, stamp, x_ref, fixed):
 _PINNED = {}
 
 
-def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale_history, rebuild=0):
+def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale_history, rebuild=0, lanes=0):
     """``advance`` compiled for one run's options (``engine.gpu_pinned``; docs/gpu.md): the forces' layout
     (``by_entry``), the reductions (``fused``), the drift (``one``) and the law's
     model, whether it has friction, ``limit_damping`` and ``rescale_history`` as constants of the
@@ -677,12 +764,17 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
     numbers (k_n .. dt, ds_scale) from ``law``. Only for a law with those options (``Engine`` makes
     the key from its own law); the same arithmetic, so the same bits. One kernel a set of constants. With
     ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (with ``by_entry``:
-    ``advance_lists_entry``, ``advance_lists_entry_sorted``), with ``advance_lists``'s arguments."""
+    ``advance_lists_entry``, ``advance_lists_entry_sorted``), with ``advance_lists``'s arguments. ``lanes`` (2 to
+    32, a power of two; 0 none): the forces with that many threads a row (``_lane_phase``; engine.gpu_threads =
+    "lanesL"), ``by_entry`` false; the grid then ``lanes`` threads a row."""
     key = (bool(by_entry), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
-           bool(rescale_history), int(rebuild))
+           bool(rescale_history), int(rebuild), int(lanes))
     if key in _PINNED:
         return _PINNED[key]
-    BY_ENTRY, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD = key
+    BY_ENTRY, FUSED, ONE, MODEL, FRICTION, LIMIT, RESCALE, REBUILD, LANES = key
+    if LANES and (BY_ENTRY or LANES & (LANES - 1) or not 2 <= LANES <= 32):
+        raise ValueError(f"lanes = {LANES} (by_entry {BY_ENTRY}): accepted 0, or a power of two from 2 to 32 "
+                         "without by_entry")
     if REBUILD:
         SORTED = REBUILD == 2
 
@@ -701,9 +793,10 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
                       (col_base, col_size, col_local)))
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   BY_ENTRY, FUSED, ONE, room, True, lists, budget)
-        pinned_lists.__name__ = pinned_lists.__qualname__ = ("advance_lists_entry_pinned" if BY_ENTRY
-                                                             else "advance_lists_pinned")
+                   BY_ENTRY, FUSED, ONE, room, True, lists, budget, LANES)
+        pinned_lists.__name__ = pinned_lists.__qualname__ = ("advance_lists_entry_pinned" if BY_ENTRY else
+                                                             f"advance_lists_lanes{LANES}_pinned" if LANES else
+                                                             "advance_lists_pinned")
         _PINNED[key] = cuda.jit(pinned_lists)
     else:
         def pinned(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
@@ -714,8 +807,8 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
                            law.g_z, law.dt, MODEL, LIMIT, RESCALE, law.ds_scale)
             _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
                    epoch, L_x, L_y, hx, hy, constant, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb),
-                   BY_ENTRY, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0)
-        pinned.__name__ = pinned.__qualname__ = "advance_pinned"
+                   BY_ENTRY, FUSED, ONE, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0, LANES)
+        pinned.__name__ = pinned.__qualname__ = f"advance_lanes{LANES}_pinned" if LANES else "advance_pinned"
         _PINNED[key] = cuda.jit(pinned)
     return _PINNED[key]
 
@@ -734,13 +827,15 @@ def _neutral(rec, s, n_steps):
 @device_cuda
 def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
            L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, nxt, by_entry, fused, one,
-           room, rebuild, lists, budget):
+           room, rebuild, lists, budget, lanes):
     """``advance``'s steps (every thread of the grid calls it; ``room`` the block's (ROOM,) float64 shared
     room, ``nxt`` the tuple (xb, vb, wb)): the other arguments as ``advance``'s. With ``rebuild`` (a
     constant; ``advance_lists``) up to ``budget`` list rebuilds inside, ``lists`` the tuple (ids, the
     second set of lists, the cells, the grid's shape, the block's int64 shared room) of ``advance_lists``'s
     arguments (with ``by_entry`` each rebuild also writes the new entries' rows into ``row``, whose room is the
-    lists' capacity, and takes their count for ``n_entries``); without, ``lists`` is not read."""
+    lists' capacity, and takes their count for ``n_entries``); without, ``lists`` is not read. ``lanes`` (a
+    constant; 0 but in ``pinned_advance``'s kernels): the forces with that many threads a row
+    (``_lane_phase``), else as ``by_entry`` says."""
     grid = cuda.cg.this_grid()
     first = cuda.grid(1)
     here = (x, v, omega)
@@ -815,7 +910,10 @@ def _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp,
             _neutral(rec, s + 2, n_steps)
         there = here if odd else nxt
         drec = rec[s + 1] if then else rec[s]
-        if by_entry:
+        if lanes:
+            _lane_phase(n_own, xs, vs, ws, f, torque, fixed, ls, ln, lh, lt, wall_ds, planes, kinds, now, before, L_x,
+                        L_y, hx, hy, law, True, rec[s], room, fused, then, there, x_ref, drec, lanes)
+        elif by_entry:
             _entry_phase(n_entries, row, xs, vs, ws, fixed, ln, lh, lt, pair, False, now, before, L_x, L_y,
                          hx, hy, law, True, rec[s], room, fused)
             grid.sync()
