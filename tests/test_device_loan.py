@@ -86,3 +86,19 @@ def test_a_call_steps_a_rung_to_its_stop_stiffens_the_next_and_unpack_puts_both_
         assert json.loads((d / "summary.json").read_text())["status"] == "converged"
         assert not list((d / "checkpoints").glob("ckpt-*.h5"))
     assert "DEVICE=cpu" in p.stdout
+
+
+def test_a_call_times_a_pour_from_nothing_and_says_how_it_ended(tmp_path):
+    """POUR=S: a pour of POUR_CONFIG with POUR_SETS from nothing, its end (here the step cap of a few spheres on
+    the CPU), steps and digest in loan.log; no rungs, probe or scaling."""
+    repo = checkout(tmp_path)
+    small = tmp_path / "small.toml"
+    small.write_text("[box]\nL_x = 4.0\nL_y = 4.0\n[pour]\nN = 12\n")
+    out = repo / "out"
+    out.mkdir()
+    p = loan(repo, "call", OUT=str(out), PROBE_BUDGET="0", SCALING_RANKS="none", POUR="240", POUR_CONFIG=str(small),
+             POUR_SETS="run.max_steps=300", POUR_DEVICE="cpu")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    log = (out / "loan.log").read_text()
+    line = next(ln for ln in log.splitlines() if ln.startswith("pour: exit status"))
+    assert "max_steps at step 300" in line and "digest" in line, log[-2000:]

@@ -15,7 +15,11 @@
 # Env (call): UNTIL=530 (s), PROBE_BUDGET=260 (s), VARIANTS (gpu_probe's names, likeliest first),
 # SHAPES=128,256, TILES=7x7, BIG_STEPS=50, SCALING_RANKS=1,2,4,8 (on cores 0-14; the rungs on core 15),
 # SCALING_STEPS=500, SCALING_WIDE=none (or the wide case's tiles, 7x7, at the last rank count), LADDER_TOP=2e8; PROBE_BUDGET=0 leaves the probe out, LADDER_DEVICE=cpu LADDER_CORE=1
-# SCALING_CORES=0 try the rest on a machine without a GPU, SCALING_RANKS=none leaves the scaling out
+# SCALING_CORES=0 try the rest on a machine without a GPU, SCALING_RANKS=none leaves the scaling out;
+# POUR=S (s, default 0: none) times a pour from nothing to its stop rule on the GPU after the probe, at most S s
+# (POUR_CONFIG, default analysis/sweeps/paper/size.toml: the paper's size; POUR_SETS="key=value ...", default
+# "run.max_steps=2e7";
+# POUR_DEVICE=gpu), its steps, status and wall time in loan.log
 # (tests/test_device_loan.py). MPICH and mpi4py come from .whl/ (carried) for the scaling's ranks.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -95,17 +99,31 @@ ladder() {  # each carried rung, then the next ones, until the deadline (seconds
     tar czf - --exclude=.lock .ladder | split -b 15M - "$OUT/ladder.tgz."
 }
 
+pour() {  # S: a pour from nothing to its stop rule, at most S seconds, timed (the GPU to itself)
+    local sets=() kv t=$SECONDS
+    for kv in ${POUR_SETS:-run.max_steps=2e7}; do sets+=(--set "$kv"); done
+    rm -rf /tmp/pour
+    echo "pour: $(date -u +%T) ${POUR_CONFIG:-analysis/sweeps/paper/size.toml} ${sets[*]} on ${POUR_DEVICE:-gpu}, at most $1 s"
+    timeout -s TERM "$1" python3 -m mpdem run "${POUR_CONFIG:-analysis/sweeps/paper/size.toml}" --device "${POUR_DEVICE:-gpu}" \
+        --out /tmp/pour --force --quiet "${sets[@]}"
+    echo "pour: exit status $? after $((SECONDS - t)) s; $(python3 -c "import json,sys; s = json.load(open(sys.argv[1])); print(f\"{s['status']} at step {s['steps']}, {s['wall_seconds']:.1f} s of stepping, digest {s['digest'][:16]}\")" /tmp/pour/summary.json 2>/dev/null || echo 'no summary: stopped before its end')"
+    tail -n 3 /tmp/pour/log.txt 2>/dev/null
+}
+
 call() {
     : "${OUT:?OUT: the folder that comes back}"
     local until=${UNTIL:-530} t0=$SECONDS
     exec > >(tee -a "$OUT/loan.log") 2>&1
-    export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1
+    # the sources by their physical path: numba's cache of compiled kernels is found by it (a checkout that links
+    # src elsewhere would compile every kernel again)
+    export PYTHONPATH=$(cd src && pwd -P) PYTHONUNBUFFERED=1
     echo "device_loan $(date -u +%FT%TZ) at $(git rev-parse --short HEAD 2>/dev/null || echo '?'); $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null); $(nproc) cores"
     [ "${PROBE_BUDGET:-260}" = 0 ] || python3 tools/gpu_probe.py all .devdata/landed20k.txt.gz "$OUT/probe" --no-anatomy \
         --budget "${PROBE_BUDGET:-260}" --tiles "${TILES:-7x7}" --big-steps "${BIG_STEPS:-50}" \
         ${VARIANTS:+--variants "$VARIANTS"} --shapes "${SHAPES:-128,256}"
     echo "probe: exit status $? after $((SECONDS - t0)) s"
     [ -d "$OUT/probe" ] && tar czf "$OUT/probe.tgz" -C "$OUT" probe && rm -rf "$OUT/probe"
+    [ "${POUR:-0}" = 0 ] || pour "$POUR"
     # the CPU engine's scaling beside the rungs (cores 0-14), with MPICH from the carried wheels
     (
         [ "${SCALING_RANKS:-}" = none ] && exit 0
