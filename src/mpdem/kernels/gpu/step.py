@@ -654,93 +654,57 @@ def advance_one(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, s
            True, room, False, _no_lists(start, nbr, hist, stamp, x_ref, fixed), 0, 0)
 
 
-@cuda.jit
-def advance_lists(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
-                  epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, fused, xb, vb,
-                  wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx,
-                  cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved,
-                  perm, col_base, col_size, col_local):
-    """``advance`` (a thread a row; ``one`` read from its argument) with up to ``budget`` list rebuilds
-    inside the launch (engine.gpu_rebuild = "launch"): a step whose drift moved a row ``half_skin`` [d] or
-    more since ``x_ref`` rebuilds the lists as phases of this launch (``lists.rebuild_phases``) and goes
-    on, its forces from the new lists; the lists alternate between (start, nbr, hist, stamp) and
-    (start2, nbr2, hist2, stamp2), the second set's from the first rebuild's. ``rec`` is (>= n_steps,
-    RED_SLOTS): each step's rec[s, RED_ENTRIES] is the entries of the lists it built (-1.0: none). The
-    launch ends, as ``advance``'s, at a step that needs a rebuild past ``budget`` or whose lists do not
-    fit their set's capacity (rec[s, RED_OVERFLOW] = 1.0, rec[s, RED_ENTRIES] the entries they need: the
-    current lists are untouched). ``ids`` (n_own,) int64; ``zr`` .. ``order`` and ``nx`` .. ``r2`` as
-    ``rebuild_phases``'s ``cells`` and ``grid_shape``. ``sort_on`` is not read: ``advance_lists_sorted`` is this
-    kernel with it true and its code, in which (engine.gpu_sort = "device") every
-    ``every``-th rebuild (counting ``done`` before the launch) orders the rows by cell first
-    (``lists.sort_phases``, its spares ``sx`` .. ``smoved``, ``perm`` and the columns ``col_*``; ``moved`` (n,)
-    int32 each row's row in the host's State, permuted with the rows; the rows put back and the launch
-    ended if the lists then do not fit). The same results as the host's rebuilds between launches, so the
-    same bits."""
-    room = cuda.shared.array(ROOM, np.float64)
-    part = cuda.shared.array(BLOCK_MAX, np.int64)
-    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
-                    (col_base, col_size, col_local)))
-    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
-           room, True, lists, budget, 0)
+def _lists_kernel(sort_on, by_entry, name, doc):
+    """``advance`` (``one`` read from its argument) with up to ``budget`` list rebuilds inside the launch
+    (engine.gpu_rebuild = "launch"), a thread a row or (``by_entry``) a thread an entry; the kernel ``name``.
+
+    A step whose drift moved a row ``half_skin`` [d] or more since ``x_ref`` rebuilds the lists as phases of
+    the launch (``lists.rebuild_phases``) and goes on, its forces from the new lists; the lists alternate
+    between (start, nbr, hist, stamp) and (start2, nbr2, hist2, stamp2), the second set's from the first
+    rebuild's. ``rec`` is (>= n_steps, RED_SLOTS): each step's rec[s, RED_ENTRIES] is the entries of the
+    lists it built (-1.0: none). The launch ends, as ``advance``'s, at a step that needs a rebuild past
+    ``budget`` or whose lists do not fit their set's capacity (rec[s, RED_OVERFLOW] = 1.0, rec[s,
+    RED_ENTRIES] the entries they need: the current lists are untouched). ``ids`` (n_own,) int64; ``zr`` ..
+    ``order`` and ``nx`` .. ``r2`` as ``rebuild_phases``'s ``cells`` and ``grid_shape``. The argument
+    ``sort_on`` is not read: with the factory's ``sort_on`` (engine.gpu_sort = "device") every ``every``-th
+    rebuild (counting ``done`` before the launch) orders the rows by cell first (``lists.sort_phases``, its
+    spares ``sx`` .. ``smoved``, ``perm`` and the columns ``col_*``; ``moved`` (n,) int32 each row's row in
+    the host's State, permuted with the rows; the rows put back and the launch ended if the lists then do not
+    fit), and without it that code is not compiled in. With ``by_entry`` (engine.gpu_threads = "entry")
+    ``n_entries`` is the current lists' entries and ``row`` their rows, with room for the lists' capacity
+    (len(nbr2)) as well as for them; a rebuild inside the launch writes the new lists' rows into ``row`` and
+    goes on with their entries (``pair`` has room for the capacity too). The same results as the host's
+    rebuilds between launches, so the same bits."""
+    SORT_ON, BY_ENTRY = bool(sort_on), bool(by_entry)
+
+    def kernel(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+               epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, fused, xb, vb, wb, one,
+               ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny, nz_cap, cx, cy, r_list, r2,
+               budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved, perm, col_base,
+               col_size, col_local):
+        room = cuda.shared.array(ROOM, np.float64)
+        part = cuda.shared.array(BLOCK_MAX, np.int64)
+        lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order),
+                 (nx, ny, nz_cap, cx, cy, r_list, r2), part,
+                 (SORT_ON, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
+                  (col_base, col_size, col_local)))
+        _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds,
+               epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), BY_ENTRY,
+               fused, one, room, True, lists, budget, 0)
+    kernel.__name__ = kernel.__qualname__ = name
+    kernel.__doc__ = doc
+    return cuda.jit(kernel)
 
 
-@cuda.jit
-def advance_lists_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
-                         kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row,
-                         fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2,
-                         stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw,
-                         sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size, col_local):
-    """``advance_lists`` with ``sort_on`` true whatever the argument says (every ``every``-th rebuild orders the
-    rows first; engine.gpu_sort = "device")."""
-    room = cuda.shared.array(ROOM, np.float64)
-    part = cuda.shared.array(BLOCK_MAX, np.int64)
-    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
-                    (col_base, col_size, col_local)))
-    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), False, fused, one,
-           room, True, lists, budget, 0)
-
-
-@cuda.jit
-def advance_lists_entry(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes,
-                        kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, fused,
-                        xb, vb, wb, one, ids, zr, count, fill, cell, order, start2, nbr2, hist2, stamp2, nx, ny,
-                        nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done, moved, sx, sv, sw, sf, st, swall,
-                        sfixed, sids, smoved, perm, col_base, col_size, col_local):
-    """``advance_lists`` with the forces a thread an entry (engine.gpu_threads = "entry"): ``n_entries`` the
-    current lists' entries and ``row`` their rows, with room for the lists' capacity (len(nbr2)) as well as
-    for them; a rebuild inside the launch writes the new lists' rows into ``row`` and goes on with their
-    entries (``pair`` has room for the capacity too)."""
-    room = cuda.shared.array(ROOM, np.float64)
-    part = cuda.shared.array(BLOCK_MAX, np.int64)
-    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part, (False, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
-                    (col_base, col_size, col_local)))
-    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
-           room, True, lists, budget, 0)
-
-
-@cuda.jit
-def advance_lists_entry_sorted(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds,
-                               planes, kinds, epoch, L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec,
-                               n_entries, row, fused, xb, vb, wb, one, ids, zr, count, fill, cell, order, start2,
-                               nbr2, hist2, stamp2, nx, ny, nz_cap, cx, cy, r_list, r2, budget, sort_on, every, done,
-                               moved, sx, sv, sw, sf, st, swall, sfixed, sids, smoved, perm, col_base, col_size,
-                               col_local):
-    """``advance_lists_entry`` with ``sort_on`` true whatever the argument says (``advance_lists_sorted`` a thread
-    an entry)."""
-    room = cuda.shared.array(ROOM, np.float64)
-    part = cuda.shared.array(BLOCK_MAX, np.int64)
-    lists = (ids, (start2, nbr2, hist2, stamp2), (zr, count, fill, cell, order), (nx, ny, nz_cap, cx, cy, r_list, r2),
-             part, (True, every, done, moved, (sx, sv, sw, sf, st, swall, sfixed, sids, smoved), perm,
-                    (col_base, col_size, col_local)))
-    _steps(n_own, x, v, omega, f, torque, fixed, x_ref, start, nbr, hist, stamp, pair, wall_ds, planes, kinds, epoch,
-           L_x, L_y, hx, hy, law, pending, half_skin, n_steps, rec, n_entries, row, (xb, vb, wb), True, fused, one,
-           room, True, lists, budget, 0)
+# the four of ``_lists_kernel`` (engine.gpu_rebuild = "launch", not pinned)
+advance_lists = _lists_kernel(False, False, "advance_lists", "``_lists_kernel``'s: a thread a row, no ordering "
+                              "of the rows inside the launch.")
+advance_lists_sorted = _lists_kernel(True, False, "advance_lists_sorted", "``_lists_kernel``'s: a thread a row, "
+                                     "every ``every``-th rebuild ordering the rows (engine.gpu_sort = \"device\").")
+advance_lists_entry = _lists_kernel(False, True, "advance_lists_entry", "``_lists_kernel``'s: a thread an entry "
+                                    "(engine.gpu_threads = \"entry\").")
+advance_lists_entry_sorted = _lists_kernel(True, True, "advance_lists_entry_sorted", "``_lists_kernel``'s: a thread "
+                                           "an entry, every ``every``-th rebuild ordering the rows.")
 
 
 @device
