@@ -223,6 +223,17 @@ def _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz):
 
 
 @device
+def _added(friction, fx, fy, fz, tx, ty, tz, cfx, cfy, cfz, ctx, cty, ctz):
+    """A row's sums of force [m g] (fx .. fz) and torque [m g d] (tx .. tz) with one more contact's (cfx ..
+    ctz) added, each explicitly rounded (the torque's only with ``friction``): the CPU's adds, in its order."""
+    if friction:
+        tx = add(tx, ctx)
+        ty = add(ty, cty)
+        tz = add(tz, ctz)
+    return add(fx, cfx), add(fy, cfy), add(fz, cfz), tx, ty, tz
+
+
+@device
 def _entry(i, e, x, v, omega, fixed, nbr, hist, stamp, pair, keep, now, before, L_x, L_y, hx, hy, law, increment):
     """Entry e of row i a thread an entry: its contact's force and torque into pair[e] (zeros out of
     contact with ``keep``); returns (1 if in contact else 0, its overlap [d], 0 out of contact). A bed
@@ -265,13 +276,7 @@ def _force_row(i, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, pair, 
         contacts += 1
         if delta > deepest:
             deepest = delta
-        if friction:
-            tx = add(tx, ctx)
-            ty = add(ty, cty)
-            tz = add(tz, ctz)
-        fx = add(fx, cfx)
-        fy = add(fy, cfy)
-        fz = add(fz, cfz)
+        fx, fy, fz, tx, ty, tz = _added(friction, fx, fy, fz, tx, ty, tz, cfx, cfy, cfz, ctx, cty, ctz)
         if keep:
             _keep(pair, e, cfx, cfy, cfz, ctx, cty, ctz)
     return _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, deepest,
@@ -330,13 +335,8 @@ def _sum_row(i, x, v, omega, f, torque, start, stamp, pair, wall_ds, planes, kin
     for e in range(start[i], start[i + 1]):
         if stamp[e] != now:
             continue
-        if friction:
-            tx = add(tx, pair[e, 3])
-            ty = add(ty, pair[e, 4])
-            tz = add(tz, pair[e, 5])
-        fx = add(fx, pair[e, 0])
-        fy = add(fy, pair[e, 1])
-        fz = add(fz, pair[e, 2])
+        fx, fy, fz, tx, ty, tz = _added(friction, fx, fy, fz, tx, ty, tz, pair[e, 0], pair[e, 1], pair[e, 2],
+                                        pair[e, 3], pair[e, 4], pair[e, 5])
     return _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, 0.0, fx, fy, fz, tx, ty, tz)
 
 
@@ -488,13 +488,7 @@ def _lane_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, w
                 ck, kfx, kfy, kfz, ktx, kty, ktz = _shfl_contact(mask, base + k, c, cfx, cfy, cfz, ctx, cty, ctz,
                                                                  friction)
                 if ck:
-                    if friction:
-                        tx = add(tx, ktx)
-                        ty = add(ty, kty)
-                        tz = add(tz, ktz)
-                    fx = add(fx, kfx)
-                    fy = add(fy, kfy)
-                    fz = add(fz, kfz)
+                    fx, fy, fz, tx, ty, tz = _added(friction, fx, fy, fz, tx, ty, tz, kfx, kfy, kfz, ktx, kty, ktz)
         if lane == 0:
             deepest = max(deepest, _finish_row(i, x, v, omega, f, torque, wall_ds, planes, kinds, law, increment, 0.0,
                                                fx, fy, fz, tx, ty, tz))
