@@ -21,9 +21,11 @@ if SIMULATOR:
     import threading
     import weakref
 
-    # the exchanges of each simulated block's warps, by (warp, mask); a block's threads share its manager
+    # the exchanges of each simulated launch's warps (its threads share a manager), by (block, warp, mask)
     _EXCHANGES = weakref.WeakKeyDictionary()
     _EXCHANGES_LOCK = threading.Lock()
+    # seconds a simulated lane waits for the others of its shuffle
+    SHFL_TIMEOUT = 300.0
 
     class _Exchange:
         """The lanes of ``mask`` in one simulated warp: a barrier of as many threads and two sets of slots,
@@ -49,7 +51,8 @@ if SIMULATOR:
         p = ex.turn[lane]
         ex.turn[lane] = 1 - p
         ex.slots[p][lane] = value
-        ex.barrier.wait()
+        # a lane that died (a failing kernel) breaks the barrier after a while instead of hanging the others
+        ex.barrier.wait(timeout=SHFL_TIMEOUT)
         return ex.slots[p][int(src_lane)]
 else:
     shfl = cuda.shfl_sync
