@@ -437,7 +437,7 @@ def _shfl_contact(mask, src, c, cfx, cfy, cfz, ctx, cty, ctz, friction):
 @device_cuda
 def _lane_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, wall_ds, planes, kinds, now, before,
                 L_x, L_y, hx, hy, law, increment, red, room, fused, then, nxt, x_ref, drec, lanes):
-    """``_force_phase`` with ``lanes`` threads a row (engine.gpu_threads = "lanes2" .. "lanes8"; a power of two
+    """``_force_phase`` with ``lanes`` threads a row (engine.gpu_threads = "lanes2" .. "lanes16"; a power of two
     up to 32 that divides the block): the row's lanes compute its entries ``lanes`` at a time, lane k the
     round's k-th, and every lane adds the round's contacts to the row's sums in list order, taking each
     from its lane by a warp shuffle: the order of ``_force_row``'s sums, so its bits. Lane 0 then adds the
