@@ -239,3 +239,11 @@ def test_lanes_a_row_need_the_pinned_launches():
     with pytest.raises(ConfigError, match=re.escape("engine.gpu_threads = 'lanes4': accepted 'row' or 'entry' with "
                                                     "engine.gpu_pinned = false")):
         cfg(**{"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "false"})
+
+
+def test_warp_reductions_need_the_pinned_launches():
+    """engine.gpu_reductions = "warp" with engine.gpu_pinned = false is one clear error naming both."""
+    assert cfg(**{"engine.gpu_reductions": "warp"}).engine.gpu_reductions == "warp"
+    with pytest.raises(ConfigError, match=re.escape("engine.gpu_reductions = 'warp': accepted 'tree' or 'fused' with "
+                                                    "engine.gpu_pinned = false")):
+        cfg(**{"engine.gpu_reductions": "warp", "engine.gpu_pinned": "false"})

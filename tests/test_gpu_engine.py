@@ -486,22 +486,26 @@ def test_a_position_that_is_not_finite_stops_the_steps_without_list_work():
 # L lanes of a warp a row in the launches (``engine.gpu_threads = "lanesL"``, pinned): two rows' groups a block at
 # least, so that groups of one warp diverge (rows of different lengths); the first and the third rebuild inside the
 # launches (the third with room for 8 entries at first, so that a rebuild overflows), the second between them
-# through the host, with Hertz, the wall and a lid
+# through the host, with Hertz, the wall and a lid; the second, the third and the fourth (a thread a row) reduce the
+# steps' values by warp shuffles (``engine.gpu_reductions = "warp"``)
 LANE_GRIDS = ([dict(block=4, threads="lanes2", pinned=True, reductions="fused", drift="fused", rebuilds="launch"),
-               dict(block=8, threads="lanes4", pinned=True),
-               dict(block=16, threads="lanes8", pinned=True, reductions="fused", drift="fused", rebuilds="launch",
-                    sort="device", list_capacity=8)]
+               dict(block=8, threads="lanes4", pinned=True, reductions="warp"),
+               dict(block=16, threads="lanes8", pinned=True, reductions="warp", drift="fused", rebuilds="launch",
+                    sort="device", list_capacity=8),
+               dict(block=8, threads="row", pinned=True, reductions="warp", drift="fused", rebuilds="launch")]
               if runtime.SIMULATOR else
               [dict(block=128, threads="lanes2", pinned=True, reductions="fused", drift="fused", rebuilds="launch"),
-               dict(block=256, threads="lanes4", pinned=True),
-               dict(block=256, threads="lanes8", pinned=True, reductions="fused", drift="fused", rebuilds="launch",
-                    sort="device", list_capacity=8)])
+               dict(block=256, threads="lanes4", pinned=True, reductions="warp"),
+               dict(block=256, threads="lanes8", pinned=True, reductions="warp", drift="fused", rebuilds="launch",
+                    sort="device", list_capacity=8),
+               dict(block=128, threads="row", pinned=True, reductions="warp", drift="fused", rebuilds="launch")])
 
 
 @pytest.mark.parametrize("grid, phys", [
     (0, physics(mu=0.5, gamma_t=20.0, skin=0.002)),
     (1, physics(mu=0.5, model="hertz", gamma_t=10.0, wall=True, planes=(Plane.lid(2.99),), skin=0.002)),
-    (2, physics(mu=0.0, skin=0.002))])
+    (2, physics(mu=0.0, skin=0.002)),
+    (3, physics(mu=0.5, gamma_t=20.0, skin=0.002))])
 def test_lanes_a_row_give_every_step_record_and_the_bits_of_the_cpu(grid, phys):
     """``engine.gpu_threads = "lanesL"``: each ``StepInfo`` of ``run_quiet`` across list rebuilds (a skin of
     0.002 d; 27 spheres), the contact counts read between, the digest, the kinetic sums and the force ratio
@@ -521,7 +525,9 @@ def test_lanes_a_row_give_every_step_record_and_the_bits_of_the_cpu(grid, phys):
         infos.append(eng.step(keep_pairs=True))
         runs.append((eng, st, infos))
     (want, st_c, a), (got, st_g, b) = runs
-    assert got.lanes == int(kw_gpu["threads"][5:]) and got.n_rebuilds == want.n_rebuilds >= 8
+    threads = kw_gpu["threads"]
+    assert got.lanes == (int(threads[5:]) if threads.startswith("lanes") else 0)
+    assert got.n_rebuilds == want.n_rebuilds >= 8
     assert (got.n_rebuilds_in_launch > 4) == (kw_gpu.get("rebuilds") == "launch")
     assert got.n_overflows > 0 or "list_capacity" not in kw_gpu
     for s, (p, q) in enumerate(zip(a, b)):
@@ -541,3 +547,35 @@ def test_lanes_need_the_pinned_launches_and_whole_groups_a_block():
         gpu.Engine(st, physics(), Domain(None), threads="lanes4")
     with pytest.raises(ValueError, match="8 threads or more"):
         gpu.Engine(st, physics(), Domain(None), threads="lanes8", pinned=True, block=4, blocks=1)
+
+
+# a module global, which the simulator swaps for its own in the kernels below
+cuda = runtime.cuda
+
+
+@pytest.mark.parametrize("block", [8, 64])
+def test_the_warps_reductions_are_the_trees(block):
+    """``reduce.drift_into_warp`` and ``contact_into_warp`` (engine.gpu_reductions = "warp") leave in their slots
+    the extremes and the count of every thread's values, as the trees do: one warp of 8 threads, and two of
+    32 (the block's warps then reduced by thread 0)."""
+    from mpdem.kernels.gpu import reduce
+
+    @cuda.jit
+    def both(vals, counts, tree, warp):
+        room = cuda.shared.array(reduce.ROOM, np.float64)
+        t = cuda.threadIdx.x
+        reduce.drift_into(tree, 0, vals[t, 0], 1, vals[t, 1], 2, vals[t, 2], room)
+        reduce.contact_into(tree, 3, vals[t, 0], 4, counts[t], room)
+        reduce.drift_into_warp(warp, 0, vals[t, 0], 1, vals[t, 1], 2, vals[t, 2], room)
+        reduce.contact_into_warp(warp, 3, vals[t, 0], 4, counts[t], room)
+
+    rng = np.random.default_rng(block)
+    vals = rng.normal(size=(block, 3))
+    vals[block // 2 + 1, 1] = 7.5          # the largest in the second warp, or late in the first
+    counts = rng.integers(0, 9, size=block)
+    start = np.array([0.0, -np.inf, np.inf, 0.0, 0.0])
+    tree, warp = cuda.to_device(start.copy()), cuda.to_device(start.copy())
+    both[1, block](cuda.to_device(vals), cuda.to_device(counts), tree, warp)
+    want = [max(0.0, vals[:, 0].max()), vals[:, 1].max(), vals[:, 2].min(), max(0.0, vals[:, 0].max()),
+            float(counts.sum())]
+    assert list(warp.copy_to_host()) == list(tree.copy_to_host()) == want

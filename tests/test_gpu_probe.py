@@ -128,8 +128,8 @@ def test_a_process_that_dies_leaves_its_variant_failed_and_a_new_one_goes_on(tmp
     (["--tiles", "7"], "--tiles 7: accepted AxB"),
     (["--variants", "row,fast"],
      "--variants row,fast: accepted a comma-separated choice of default, entry-all-rebuild-hostsort, "
-     "lanes4-all-rebuild-hostsort, lanes8-all-rebuild-hostsort, lanes2-all-rebuild-hostsort, "
-     "lanes4-all-rebuild-hostsort-r128, default-r128, row, row-all"),
+     "lanes4-all-rebuild-hostsort, lanes4-warp-rebuild-hostsort, default-warp, lanes8-all-rebuild-hostsort, "
+     "lanes2-all-rebuild-hostsort, lanes4-all-rebuild-hostsort-r128, default-r128, row, row-all"),
     (["--shapes", "100"], "--shapes 100: accepted comma-separated powers of two"),
     (["--steps", "0"], "--steps 0: accepted a whole number >= 1"),
 ])
@@ -161,6 +161,8 @@ def test_a_variants_name_means_the_same_switches_whatever_the_configs_defaults()
     assert (cfg.engine.gpu_threads, cfg.engine.gpu_pinned, cfg.engine.gpu_rebuild, cfg.engine.gpu_sort) == (
         "entry", True, "launch", "host")
     # then lanes of a warp a row, which need the pinned launches
-    assert list(gpu_probe.VARIANTS)[2:5] == [f"lanes{n}-all-rebuild-hostsort" for n in (4, 8, 2)]
+    assert list(gpu_probe.VARIANTS)[2:7] == ["lanes4-all-rebuild-hostsort", "lanes4-warp-rebuild-hostsort",
+                                             "default-warp", "lanes8-all-rebuild-hostsort",
+                                             "lanes2-all-rebuild-hostsort"]
     cfg = table_config(gpu_probe.variant_sets("lanes8-all-rebuild-hostsort"))
     assert (cfg.engine.gpu_threads, cfg.engine.gpu_pinned, cfg.engine.gpu_rebuild) == ("lanes8", True, "launch")

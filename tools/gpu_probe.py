@@ -64,6 +64,13 @@ VARIANTS = {
     "lanes4-all-rebuild-hostsort": {"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "true",
                                     "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
                                     "engine.gpu_rebuild": "launch"},
+    # the same with the steps' reductions by warp shuffles (two block barriers a phase instead of a tree's nine at 256
+    # threads), and the defaults so reduced
+    "lanes4-warp-rebuild-hostsort": {"engine.gpu_threads": "lanes4", "engine.gpu_pinned": "true",
+                                     "engine.gpu_drift": "fused", "engine.gpu_reductions": "warp",
+                                     "engine.gpu_rebuild": "launch"},
+    "default-warp": {"engine.gpu_threads": "row", "engine.gpu_pinned": "true", "engine.gpu_drift": "fused",
+                     "engine.gpu_reductions": "warp", "engine.gpu_rebuild": "launch", "engine.gpu_samples": "device"},
     "lanes8-all-rebuild-hostsort": {"engine.gpu_threads": "lanes8", "engine.gpu_pinned": "true",
                                     "engine.gpu_drift": "fused", "engine.gpu_reductions": "fused",
                                     "engine.gpu_rebuild": "launch"},

@@ -169,8 +169,9 @@ SCHEMA = (
        int, restart=True, physics=False),
     _k("engine", "gpu_reductions", "fused",
        "the GPU engine's fused steps' block reductions: 'tree' (a tree of barriers a value) or 'fused' (a phase's "
-       "values in one tree: fewer than half the barriers); no effect on results", str, ("tree", "fused"), restart=True,
-       physics=False),
+       "values in one tree: fewer than half the barriers) or 'warp' (in the launches of many steps, with "
+       "engine.gpu_pinned: a phase's values by warp shuffles, two block barriers); no effect on results", str,
+       ("tree", "fused", "warp"), restart=True, physics=False),
     _k("engine", "gpu_samples", "device",
        "where the GPU engine sums the stop rule's samples (kinetic energy, force ratio): 'host' (the rows and the "
        "entries' forces copied to the host) or 'device' (the same exact fixed-point sums by integer atomics on the "
@@ -588,6 +589,9 @@ def resolve(raw):
     need("engine.gpu_block", 32 <= block <= 1024 and block & (block - 1) == 0, "a power of two from 32 to 1024")
     need("engine.gpu_threads", not (vals["engine.gpu_threads"].startswith("lanes") and not vals["engine.gpu_pinned"]),
          "'row' or 'entry' with engine.gpu_pinned = false (the lanes are compiled only into the pinned launches)")
+    need("engine.gpu_reductions", not (vals["engine.gpu_reductions"] == "warp" and not vals["engine.gpu_pinned"]),
+         "'tree' or 'fused' with engine.gpu_pinned = false (the warps' reductions are compiled only into the pinned "
+         "launches)")
     regs = vals["engine.gpu_max_registers"]
     need("engine.gpu_max_registers", regs == 0 or 32 <= regs <= 255, "0 (the compiler's choice) or 32 to 255")
     k_n = vals["contact.k_n"]

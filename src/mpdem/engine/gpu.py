@@ -40,7 +40,7 @@ BATCH = 1000
 # engine.gpu_threads: how the forces take the GPU's threads (``Engine``)
 THREADS = ("row", "entry", "lanes2", "lanes4", "lanes8", "lanes16")
 # engine.gpu_reductions
-REDUCTIONS = ("tree", "fused")
+REDUCTIONS = ("tree", "fused", "warp")
 # engine.gpu_samples
 SAMPLES = ("host", "device")
 # engine.gpu_drift
@@ -133,9 +133,10 @@ class Engine(EngineBase):
     max_registers : int
         The step's kernels compiled with at most this many registers a thread (``engine.gpu_max_registers``;
         0: the compiler's choice); no effect on results.
-    reductions : {"tree", "fused"}
+    reductions : {"tree", "fused", "warp"}
         The fused steps' block reductions (``engine.gpu_reductions``): a tree a value, or a phase's
-        values in one tree (``kernels.gpu.reduce``); no effect on results.
+        values in one tree (``kernels.gpu.reduce``), or (with ``pinned``, in the launches of many steps)
+        a phase's values by warp shuffles, two block barriers a phase; no effect on results.
     samples : {"host", "device"}
         Where ``kinetic`` and ``force_ratio`` sum (``engine.gpu_samples``): on the host from the rows
         and the entries' forces copied there, or on the GPU (``kernels.gpu.samples``: the same exact
@@ -186,8 +187,9 @@ class Engine(EngineBase):
         self._capped = runtime.capped
         if reductions not in REDUCTIONS:
             raise ValueError(f"reductions = {reductions!r}: accepted {', '.join(map(repr, REDUCTIONS))}")
-        # the fused steps' reductions: one tree a phase ("fused") or one a value ("tree")
-        self.fused = reductions == "fused"
+        # the fused steps' reductions: one a value ("tree", 0), one tree a phase ("fused", 1) or by warp shuffles
+        # ("warp", ``kernels.gpu.step.WARP``: only in the pinned launches, their constant)
+        self.fused = REDUCTIONS.index(reductions)
         if samples not in SAMPLES:
             raise ValueError(f"samples = {samples!r}: accepted {', '.join(map(repr, SAMPLES))}")
         # the stop rule's sums on the GPU (``kernels.gpu.samples``) or on the host
@@ -229,6 +231,9 @@ class Engine(EngineBase):
         self.by_entry = threads == "entry"
         # the lanes of a warp a row in the launches (0: as ``by_entry`` says)
         self.lanes = int(threads[5:]) if threads.startswith("lanes") else 0
+        if reductions == "warp" and not self.pinned:
+            raise ValueError("reductions = 'warp' needs pinned = True (engine.gpu_pinned: the warps' reductions are "
+                             "compiled only into the launches made for a run's options)")
         if self.lanes and not self.pinned:
             raise ValueError(f"threads = {threads!r} needs pinned = True (engine.gpu_pinned: the lanes are compiled "
                              "only into the launches made for a run's options)")
@@ -911,7 +916,8 @@ class Engine(EngineBase):
             head = (s.n_own, d["x"], d["v"], d["omega"], d["f"], d["torque"], d["fixed"], d["x_ref"], d["start"],
                     d["nbr"], d["hist"], d["stamp"], self._pairs(False), d["wall_ds"], planes_d, kinds_d, self._epoch,
                     *make_box(s.L_x, s.L_y), self.law, self._kick_due, 0.5 * p.skin, m, self._rec)
-            tail = (max(self._k, 1), d.get("row", d["nbr"]), self.fused, *self._second_rows(), self.one_barrier)
+            tail = (max(self._k, 1), d.get("row", d["nbr"]), bool(self.fused), *self._second_rows(),
+                    self.one_barrier)
             if self.in_launch:
                 args = head + tail + more
             else:

@@ -23,7 +23,8 @@ import math
 
 import numpy as np
 
-from .reduce import BLOCK_MAX, ROOM, contact_into, drift_into, max_into, min_into, sum_into
+from .reduce import (BLOCK_MAX, ROOM, contact_into, contact_into_warp, drift_into, drift_into_warp, max_into, min_into,
+                     sum_into)
 from .runtime import cuda, device, device_cuda, shfl
 from .rounded import (add, approach, contact_force, contact_torque, dot, drift, kicks, min_image, normal,
                       normal_force, norm2, plane_contact, slip, spin, sqrt, tangential)
@@ -33,6 +34,9 @@ from .lists import RED_ENTRIES, RED_OVERFLOW, RED_SLOTS, rebuild_phases, sort_ph
 # the slots of the step's reductions ``red`` (float64: the counts are integers, exact below 2**53, so
 # their atomic sums do not depend on the order): those of ``kick_drift``, then those of ``forces``
 RED_D2, RED_ZMIN, RED_ZMAX, RED_BAD, RED_OVERLAP, RED_CONTACTS = range(6)
+# ``fused`` of the launches' reductions by warp shuffles (engine.gpu_reductions = "warp"; only as a pinned kernel's
+# constant: a kernel's bool ``fused`` is never equal to it, so the compiler drops that code there)
+WARP = 2
 # their values before any row adds to them; each kernel sets the other's back to these for its next launch
 NEUTRAL = (0.0, math.inf, -math.inf, 0.0, 0.0, 0.0)
 # two slots after those of the engine's own ``red`` (the step's kernels launched one by one) and of ``rec``'s
@@ -114,8 +118,11 @@ def _drift_row(i, x, v, omega, nxt, f, torque, x_ref, dt, L_x, L_y, hx, hy, pend
 @device_cuda
 def _drift_reduce(red, d2, z_lo, z_hi, bad, room, fused):
     """This thread's drift extremes and bad rows into ``red``'s slots RED_D2, RED_ZMAX, RED_ZMIN and
-    RED_BAD (every thread of the block calls it); ``fused``: one tree (``reduce.drift_into``)."""
-    if fused:
+    RED_BAD (every thread of the block calls it); ``fused``: one tree (``reduce.drift_into``), or with 2
+    (``WARP``) warp shuffles (``reduce.drift_into_warp``)."""
+    if fused == WARP:
+        drift_into_warp(red, RED_D2, d2, RED_ZMAX, z_hi, RED_ZMIN, z_lo, room)
+    elif fused:
         drift_into(red, RED_D2, d2, RED_ZMAX, z_hi, RED_ZMIN, z_lo, room)
     else:
         max_into(red, RED_D2, d2, room)
@@ -411,8 +418,11 @@ def _force_phase(n_own, x, v, omega, f, torque, fixed, start, nbr, hist, stamp, 
 @device_cuda
 def _contact_reduce(red, deepest, contacts, room, fused):
     """This thread's largest overlap and contact count into ``red``'s slots RED_OVERLAP and RED_CONTACTS
-    (every thread of the block calls it); ``fused``: one tree (``reduce.contact_into``)."""
-    if fused:
+    (every thread of the block calls it); ``fused``: one tree (``reduce.contact_into``), or with 2 (``WARP``)
+    warp shuffles (``reduce.contact_into_warp``)."""
+    if fused == WARP:
+        contact_into_warp(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
+    elif fused:
         contact_into(red, RED_OVERLAP, deepest, RED_CONTACTS, contacts, room)
     else:
         max_into(red, RED_OVERLAP, deepest, room)
@@ -724,8 +734,9 @@ def pinned_advance(by_entry, fused, one, model, friction, limit_damping, rescale
     ``rebuild`` 1 it is ``advance_lists`` so compiled, 2 ``advance_lists_sorted`` (with ``by_entry``:
     ``advance_lists_entry``, ``advance_lists_entry_sorted``), with ``advance_lists``'s arguments. ``lanes`` (2 to
     32, a power of two; 0 none): the forces with that many threads a row (``_lane_phase``; engine.gpu_threads =
-    "lanesL"), ``by_entry`` false; the grid then ``lanes`` threads a row."""
-    key = (bool(by_entry), bool(fused), bool(one), int(model), bool(friction), bool(limit_damping),
+    "lanesL"), ``by_entry`` false; the grid then ``lanes`` threads a row. ``fused`` 0, 1 or ``WARP``
+    (2: the reductions by warp shuffles, engine.gpu_reductions = "warp")."""
+    key = (bool(by_entry), int(fused), bool(one), int(model), bool(friction), bool(limit_damping),
            bool(rescale_history), int(rebuild), int(lanes))
     if key in _PINNED:
         return _PINNED[key]
