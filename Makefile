@@ -64,14 +64,19 @@ test-pytest:
 # files' collective writes): the runs of a feature (API, flow arrest, stiffening) match one rank at 2 ranks
 MPI_MORE = mpi_tests/test_decomposition.py mpi_tests/test_exchange.py mpi_tests/test_state_files.py \
   mpi_tests/test_mpi_basics.py mpi_tests/test_analysis_files.py mpi_tests/test_grid.py
+# the one-rank references, computed by the 2-rank session and read by the 3- and 4-rank ones (mpi_helpers.py)
+MPI_REFERENCES = $(CURDIR)/build/mpi-references.json
 
 test-mpi:
 	@if ls mpi_tests/test_*.py >/dev/null 2>&1; then \
+	  mkdir -p build; rm -f $(MPI_REFERENCES); \
 	  for n in 2 3 4; do \
 	    files=mpi_tests; [ $$n -gt 2 ] && files="$(MPI_MORE)"; \
 	    echo "== $$files under mpiexec -n $$n"; \
-	    timeout 600 $(MPIEXEC) -n $$n $(PY) -m pytest -q --color=no -p no:cacheprovider $$files || exit 1; \
+	    MPDEM_TEST_REFERENCES=$(MPI_REFERENCES) timeout 600 $(MPIEXEC) -n $$n $(PY) -m pytest -q --color=no \
+	      -p no:cacheprovider $$files || exit 1; \
 	  done; \
+	  rm -f $(MPI_REFERENCES); \
 	else echo "== no mpi_tests yet"; fi
 
 # the long runs alone (physics to convergence, real Slurm jobs); MPI ones, if any is marked, on 2 ranks.

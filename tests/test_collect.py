@@ -6,9 +6,11 @@ whose z follows eq. 7, a phi_i sweep whose phi_f follows eq. 9, a few mu
 values with P(z), g(r) and P(zeta), and runs that must be skipped.
 """
 import csv
+import fcntl
 import json
 import math
 import os
+import pickle
 import shutil
 import subprocess
 from pathlib import Path
@@ -109,8 +111,30 @@ def make_run(run, p, z, phi, alpha, rng, converged=True):
 
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory):
-    """Synthetic runs under one root, collected once; what was made and what was collected."""
-    root = tmp_path_factory.mktemp("runs")
+    """Synthetic runs under one root, collected once; what was made and what was collected.
+
+    Under pytest-xdist the workers share one tree (collecting it takes most of a minute): the first
+    worker to need it makes it in the session's common temporary directory, under a lock, and a
+    worker handed some of this file's tests later reads it back. The tests only read the tree.
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return make_tree(tmp_path_factory.mktemp("runs"))
+    common = tmp_path_factory.getbasetemp().parent
+    with open(common / "collect-tree.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        saved = common / "collect-tree.pickle"
+        if saved.exists():
+            return pickle.loads(saved.read_bytes())
+        root = common / "collect-tree" / "runs"
+        root.mkdir(parents=True)
+        got = make_tree(root)
+        saved.write_bytes(pickle.dumps(got))
+        return got
+
+
+def make_tree(root):
+    """The synthetic runs of ``tree`` written under ``root`` (an empty directory) and collected into
+    a directory beside it: dict(root, out, res, logs, made, bad)."""
     rng = np.random.default_rng(20020304)
     made = {}   # run dir -> (set tuple (mu, eps, k_n, phi_i), summary)
 

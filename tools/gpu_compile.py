@@ -262,7 +262,7 @@ def resident_blocks(res, block=128):
 
 
 def check(name, kernel, args, tools):
-    """One kernel's line of the report; returns (ok, line)."""
+    """One kernel's line of the report; returns (ok, line, resources, PTX)."""
     ptx = ptx_of(kernel, args)
     fused = ptx.count("fma.rn.f64")
     dfma, res = sass(ptx, tools)
@@ -277,7 +277,7 @@ def check(name, kernel, args, tools):
     line = (f"{'; '.join(faults) if faults else 'ok'} ({ptx.count(chr(10))} lines of PTX; SASS: {res['registers']} "
             f"registers, {spills} B spilled, {shared}, at most {resident_blocks(res)} blocks of 128 a "
             f"multiprocessor; {dfma} DFMA, those of division and square root)")
-    return not faults, line, res
+    return not faults, line, res, ptx
 
 
 def controls(tools):
@@ -326,12 +326,11 @@ def _report(job):
     kernel, args = cases()[name]
     t = time.perf_counter()
     try:
-        ok, line, _ = check(name, kernel, args, tools)
+        ok, line, _, ptx = check(name, kernel, args, tools)
     except Exception as e:   # the compiler's own message names the line and the types
         return False, [f"gpu_compile: {name}: does not compile: {type(e).__name__}: {e}"]
     lines = [f"gpu_compile: {name}: {line}, {time.perf_counter() - t:.1f} s"]
     if name == "step.advance":
-        ptx = ptx_of(kernel, args)
         for cap in CAPS:
             res = sass(ptx, tools, cap)[1]
             lines.append(f"gpu_compile: step.advance under engine.gpu_max_registers = {cap}: {res['registers']} "
