@@ -483,14 +483,14 @@ def test_a_position_that_is_not_finite_stops_the_steps_without_list_work():
     assert got[0] == got[1]
 
 
-# L lanes of a warp a row in the launches (``engine.gpu_threads = "lanesL"``, pinned): two rows' groups a block at
-# least, so that groups of one warp diverge (rows of different lengths); the first and the third rebuild inside the
+# L lanes of a warp a row in the launches (``engine.gpu_threads = "lanesL"``, pinned): two rows' groups a block in the
+# first two, so that groups of one warp diverge (rows of different lengths); the first and the third rebuild inside the
 # launches (the third with room for 8 entries at first, so that a rebuild overflows), the second between them
 # through the host, with Hertz, the wall and a lid; the second, the third and the fourth (a thread a row) reduce the
 # steps' values by warp shuffles (``engine.gpu_reductions = "warp"``)
 LANE_GRIDS = ([dict(block=4, threads="lanes2", pinned=True, reductions="fused", drift="fused", rebuilds="launch"),
                dict(block=8, threads="lanes4", pinned=True, reductions="warp"),
-               dict(block=16, threads="lanes8", pinned=True, reductions="warp", drift="fused", rebuilds="launch",
+               dict(block=8, threads="lanes8", pinned=True, reductions="warp", drift="fused", rebuilds="launch",
                     sort="device", list_capacity=8),
                dict(block=8, threads="row", pinned=True, reductions="warp", drift="fused", rebuilds="launch")]
               if runtime.SIMULATOR else

@@ -103,18 +103,12 @@ def cases():
             step.pinned_advance(True, True, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
         "step.advance_lists_entry_sorted pinned (fused, drift fused, Hooke, mu > 0)": (
             step.pinned_advance(True, True, True, MODEL_HOOKE, True, False, False, 2), advance_lists),
-        # the same with lanes of a warp a row (engine.gpu_threads = "lanes4", "lanes8"), the default's other switches
-        "step.advance_lists pinned (lanes4, fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 1, 4), advance_lists),
-        "step.advance_lists pinned (lanes8, fused, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, True, True, MODEL_HOOKE, True, False, False, 1, 8), advance_lists),
-        "step.advance pinned (lanes4, fused, drift fused, Hooke, mu = 0)": (
-            step.pinned_advance(False, True, True, MODEL_HOOKE, False, False, False, 0, 4), advance),
-        # the reductions by warp shuffles (engine.gpu_reductions = "warp"), a thread a row and lanes of a warp a row
-        "step.advance_lists pinned (warp, drift fused, Hooke, mu > 0)": (
-            step.pinned_advance(False, step.WARP, True, MODEL_HOOKE, True, False, False, 1), advance_lists),
+        # lanes of a warp a row (engine.gpu_threads = "lanes4"; other L differ by a constant) with the reductions by
+        # warp shuffles (engine.gpu_reductions = "warp"), and frictionless with the fused trees and no rebuild
         "step.advance_lists pinned (lanes4, warp, drift fused, Hooke, mu > 0)": (
             step.pinned_advance(False, step.WARP, True, MODEL_HOOKE, True, False, False, 1, 4), advance_lists),
+        "step.advance pinned (lanes4, fused, drift fused, Hooke, mu = 0)": (
+            step.pinned_advance(False, True, True, MODEL_HOOKE, False, False, False, 0, 4), advance),
         # compiled for one run's options (engine.gpu_pinned): a row a thread, Hooke, frictionless and frictional,
         # then a thread an entry, the fused reductions and the fused drift (engine.gpu_drift)
         "step.advance pinned (row, Hooke, mu = 0)": (step.pinned_advance(False, False, False, MODEL_HOOKE, False,
