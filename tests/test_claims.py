@@ -172,6 +172,15 @@ def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
     rungs = [r6, st("S28", 2e7, [6.03], 2e6), st("S29", 2e8, [6.02], 2e7)]
     got = ladder.ladders([base, poured2e6, *rungs], lambda fam, m: calls.append(m) or {"status": "fitted"})
     assert got[0]["status"] == "fitted" and [s.id for s in calls[0]] == ["S12", "S27", "S28", "S29"]
+    # rungs stopped on the translational energy (a spinner) find the pile they were stiffened from, poured on the
+    # default rule, when no poured set shares their rule; one that does is taken first
+    tr = {"stop.energy": "translational"}
+    spun = [Set(r.id, r.params, r.runs, {**r.extra, **tr}) for r in rungs]
+    got = ladder.ladders([base, poured2e6, *spun], lambda fam, m: {"status": "fitted"})
+    assert got[0]["base"] == "S12" and got[0]["sets"] == ["S12", "S27", "S28", "S29"]
+    same_rule = Set("S40", base.params, base.runs, dict(tr))
+    got = ladder.ladders([base, same_rule, poured2e6, *spun], lambda fam, m: {"status": "fitted"})
+    assert got[0]["base"] == "S40"
 
 
 # ---------------------------------------------------------------- the claims themselves

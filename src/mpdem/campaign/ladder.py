@@ -14,23 +14,30 @@ import math
 from .runs import families
 
 K_FROM = "stiffen.k_n_from"
+# the stop rule's settings: a ladder's base may differ from its rungs in them (``_base``)
+STOP = "stop."
 MIN_K_N = 4     # distinct k_n for eq. 7 with alpha_n free: 3 parameters and a degree of freedom
 RUNG_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "overlap_median", "overlap_max", "step", "z_10_30")
 
 
 def _base(rungs, sets):
     """The poured set a ladder starts from: no setting away from its default, the rungs' parameters but
-    k_n (and what follows k_n), at the lowest rung's k_n_from."""
+    k_n (and what follows k_n), at the lowest rung's k_n_from; where none has the rungs' own stop rule,
+    the one that differs from them only in it (a ladder's rungs may stop on the translational energy, a
+    spinner holding the total, while its pile was poured on the default: ``STOP_ENERGY`` of ladder.sh)."""
     from .runs import family_key
     low = min(rungs, key=lambda s: s.p("k_n"))
     k0 = low.extra[K_FROM]
     extra = {k: v for k, v in low.extra.items() if k != K_FROM}
-    want = family_key(low.params, "contact.k_n", extra)
-    for s in sets:
-        if K_FROM in s.extra or s.p("k_n") != k0:
-            continue
-        if s.extra == extra and family_key(s.params, "contact.k_n", s.extra) == want:
-            return s
+    for strip in (False, True):
+        want_extra = {k: v for k, v in extra.items() if not (strip and k.startswith(STOP))}
+        want = family_key(low.params, "contact.k_n", want_extra)
+        for s in sets:
+            if K_FROM in s.extra or s.p("k_n") != k0:
+                continue
+            got = {k: v for k, v in s.extra.items() if not (strip and k.startswith(STOP))}
+            if got == want_extra and family_key(s.params, "contact.k_n", got) == want:
+                return s
     return None
 
 
