@@ -100,6 +100,28 @@ def _tree(room, t, n, k_max, k_sum):
 
 
 @device_cuda
+def _drift_out(red, k_d2, k_hi, k_lo, room, t):
+    """Thread 0 puts the block's drift extremes (``room``'s slot 0 of its first three columns: d2, z_hi and
+    -z_lo) into ``red`` by atomics; then a barrier, every thread calling."""
+    if t == 0:
+        cuda.atomic.max(red, k_d2, room[0])
+        cuda.atomic.max(red, k_hi, room[BLOCK_MAX])
+        cuda.atomic.min(red, k_lo, -room[2 * BLOCK_MAX])
+    cuda.syncthreads()
+
+
+@device_cuda
+def _contact_out(red, k_max, k_sum, room, t):
+    """Thread 0 puts the block's largest overlap and contact count (``room``'s slot 0 of its first two
+    columns) into ``red`` by atomics; then a barrier, every thread calling."""
+    if t == 0:
+        cuda.atomic.max(red, k_max, room[0])
+        if room[BLOCK_MAX] != 0.0:
+            cuda.atomic.add(red, k_sum, room[BLOCK_MAX])
+    cuda.syncthreads()
+
+
+@device_cuda
 def drift_into(red, k_d2, d2, k_hi, z_hi, k_lo, z_lo, room):
     """red[k_d2] = max(red[k_d2], the block's ``d2``), red[k_hi] likewise with ``z_hi``, red[k_lo] =
     min(red[k_lo], the block's ``z_lo``): ``max_into``, ``max_into``, ``min_into`` in one tree.
@@ -109,11 +131,7 @@ def drift_into(red, k_d2, d2, k_hi, z_hi, k_lo, z_lo, room):
     room[BLOCK_MAX + t] = z_hi
     room[2 * BLOCK_MAX + t] = -z_lo
     _tree(room, t, cuda.blockDim.x, 3, 0)
-    if t == 0:
-        cuda.atomic.max(red, k_d2, room[0])
-        cuda.atomic.max(red, k_hi, room[BLOCK_MAX])
-        cuda.atomic.min(red, k_lo, -room[2 * BLOCK_MAX])
-    cuda.syncthreads()
+    _drift_out(red, k_d2, k_hi, k_lo, room, t)
 
 
 @device_cuda
@@ -124,11 +142,7 @@ def contact_into(red, k_max, value, k_sum, count, room):
     room[t] = value
     room[BLOCK_MAX + t] = np.float64(count)
     _tree(room, t, cuda.blockDim.x, 1, 1)
-    if t == 0:
-        cuda.atomic.max(red, k_max, room[0])
-        if room[BLOCK_MAX] != 0.0:
-            cuda.atomic.add(red, k_sum, room[BLOCK_MAX])
-    cuda.syncthreads()
+    _contact_out(red, k_max, k_sum, room, t)
 
 
 @device_cuda
@@ -189,11 +203,7 @@ def drift_into_warp(red, k_d2, d2, k_hi, z_hi, k_lo, z_lo, room):
         room[BLOCK_MAX + j] = b
         room[2 * BLOCK_MAX + j] = c
     _warps(room, t, cuda.blockDim.x, 3, 0)
-    if t == 0:
-        cuda.atomic.max(red, k_d2, room[0])
-        cuda.atomic.max(red, k_hi, room[BLOCK_MAX])
-        cuda.atomic.min(red, k_lo, -room[2 * BLOCK_MAX])
-    cuda.syncthreads()
+    _drift_out(red, k_d2, k_hi, k_lo, room, t)
 
 
 @device_cuda
@@ -208,8 +218,4 @@ def contact_into_warp(red, k_max, value, k_sum, count, room):
         room[j] = a
         room[BLOCK_MAX + j] = b
     _warps(room, t, cuda.blockDim.x, 1, 1)
-    if t == 0:
-        cuda.atomic.max(red, k_max, room[0])
-        if room[BLOCK_MAX] != 0.0:
-            cuda.atomic.add(red, k_sum, room[BLOCK_MAX])
-    cuda.syncthreads()
+    _contact_out(red, k_max, k_sum, room, t)
