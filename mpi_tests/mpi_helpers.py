@@ -13,7 +13,7 @@ PILE = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=200", "pour.phi_i=0.3", "pour.K0=5
 
 # one-rank digests already computed in this pytest session, by reference_key (rank 0 only)
 REFERENCES = {}
-# a JSON file of one-rank digests by reference_key, shared by the sessions of one `make test-mpi` (2, 3 and 4
+# a JSON file of one-rank digests by reference_key, shared by the pytest runs of one `make test-mpi` (2, 3 and 4
 # ranks run the same references): the Makefile names it and removes it first, so it never outlives the code
 SHARED = os.path.abspath(os.environ["MPDEM_TEST_REFERENCES"]) if os.environ.get("MPDEM_TEST_REFERENCES") else None
 
@@ -64,7 +64,7 @@ def serial_digest(cfg, out, comm):
     """The one-rank digest of ``cfg``, computed on rank 0 (in ``out``) once per pytest session and
     shared with every rank; a test that asks again for the same run gets the stored digest. Under
     ``make test-mpi`` the digests are also kept in the file ``MPDEM_TEST_REFERENCES`` names, so that the
-    3- and 4-rank sessions take the references the 2-rank session computed instead of running them again.
+    3- and 4-rank pytest runs take the references the 2-rank run computed instead of running them again.
 
     Collective-safe: only rank 0 looks in ``REFERENCES`` and runs, every other rank just receives
     (one bcast on every path), so all ranks take the same collective calls whether the reference

@@ -114,7 +114,7 @@ def tree(tmp_path_factory):
     """Synthetic runs under one root, collected once; what was made and what was collected.
 
     Under pytest-xdist the workers share one tree (collecting it takes most of a minute): the first
-    worker to need it makes it in the session's common temporary directory, under a lock, and a
+    worker to need it makes it in the pytest run's common temporary directory, under a lock, and a
     worker handed some of this file's tests later reads it back. The tests only read the tree.
     """
     if not os.environ.get("PYTEST_XDIST_WORKER"):
