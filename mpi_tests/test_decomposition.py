@@ -244,18 +244,26 @@ def test_a_reference_is_known_by_its_inputs_not_their_paths():
 
 def test_slabs_balanced_by_work_match_one_rank(comm, monkeypatch):
     """Bounds moved by the measured work (``decomp.balance_by = work``), with rank 0's seconds
-    made three times what it measured so that they do move at every rebuild: the digest of one rank."""
-    cfg = config.load(None, PILE + ["run.max_steps=20000", "decomp.balance_by=work", "decomp.balance_tolerance=0.02"])
+    made three times what it measured so that they do move at every rebuild, and at the checks
+    between rebuilds (``decomp.balance_every``, the seconds' floor lifted), whose rebuilds come
+    when no particle's motion asks for one: the digest of one rank."""
+    import mpdem.decomp
+    from mpdem.engine.base import EngineBase
+    cfg = config.load(None, PILE + ["run.max_steps=20000", "decomp.balance_by=work", "decomp.balance_tolerance=0.02",
+                                    "decomp.balance_every=20"])
     base = shared_dir(comm)
+    monkeypatch.setattr(mpdem.decomp, "BALANCE_SECONDS", 0.0)
     if comm.Get_size() > 1 and comm.Get_rank() == 0:
-        from mpdem.decomp import Domain
-        rebuild = Domain.rebuild
-        monkeypatch.setattr(Domain, "rebuild", lambda self, state, work=0.0: rebuild(self, state, 3.0 * work))
+        work = EngineBase.work_since_rebuild
+        monkeypatch.setattr(EngineBase, "work_since_rebuild", lambda self: 3.0 * work(self))
     r, s = run(cfg, os.path.join(base, "w"), comm)
     monkeypatch.undo()
     ref = serial_digest(cfg, os.path.join(base, "ws"), comm)
     if comm.Get_size() > 1:
         assert r.domain.by_work
         assert r.domain.n_rebalances >= 3
+        # every rank answered the checks alike (their rebuilds are collectives: one rank alone would hang)
+        assert r.domain.n_balance_rebuilds >= 1
+        assert len(set(comm.allgather(r.domain.n_balance_rebuilds))) == 1
     if comm.Get_rank() == 0:
         assert s["digest"] == ref

@@ -212,6 +212,11 @@ SCHEMA = (
     _k("decomp", "balance_tolerance", 0.1,
        "rebalance the slabs at a list rebuild when max/mean over the ranks of what they balance > 1 + this",
        restart=True, physics=False),
+    _k("decomp", "balance_every", 500,
+       "with balance_by = 'work': steps since the last list rebuild between checks of the ranks' work (one small "
+       "collective); an uneven one (decomp.balance_tolerance, once the slowest rank measured 0.5 s) rebuilds the "
+       "lists there to rebalance, where a settled pile may not rebuild for thousands of steps; 0 = rebalance only at "
+       "the rebuilds the particles' motion calls for; no effect on results", int, restart=True, physics=False),
     _k("decomp", "balance_damping", 0.5,
        "fraction of the way the slab bounds move toward balance at a rebalance", restart=True, physics=False),
     _k("output", "progress_every", 10000, "steps between progress lines", int, restart=True, physics=False),
@@ -702,6 +707,7 @@ def resolve(raw):
     need("output.checkpoint_keep", vals["output.checkpoint_keep"] >= 1, "checkpoint_keep >= 1")
     need("decomp.grid", len(vals["decomp.grid"]) in (0, 3), "[] (chosen) or three integers [Px, Py, Pz]")
     need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
+    need("decomp.balance_every", vals["decomp.balance_every"] >= 0, "balance_every >= 0 (0 = at rebuilds only)")
     need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
     need("bed.seed", vals["bed.seed"] >= -1, "-1 (run.seed) or a seed >= 0")
     need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")

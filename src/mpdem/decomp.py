@@ -54,6 +54,10 @@ MOVING = tuple(f for f in FIELDS if f.migrates)
 # (height range / HIST_BINS) of the exact quantile, and a rank sends these counts, not its heights
 HIST_BINS = 4096
 
+# compute seconds a rank has measured at least before a check between rebuilds may rebalance on them
+# (``Domain.rebalance_due``): less is mostly the clock's noise
+BALANCE_SECONDS = 0.5
+
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11
 TAG_HALO_COUNT = 21
@@ -74,6 +78,9 @@ class Domain:
         bounds by this fraction of the way to the balanced ones.
     by_work : bool
         Balance the measured work (``rebuild``'s ``work``), not the counts.
+    balance_every : int
+        With ``by_work``, ask every this many steps since the last rebuild whether the work is uneven
+        (``rebalance_due``); 0 = only at the rebuilds the particles' motion calls for.
     grid : None, "auto" or (Px, Py, Pz)
         The grid of domains (``domains``): None is all slabs (1, 1, P); "auto" is chosen from the
         ranks, the box and the pile's height when the particles are first placed (``scatter``,
@@ -86,15 +93,18 @@ class Domain:
         Every column's slab bounds [d]; ``bounds`` is this rank's column's row (a view).
     """
 
-    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False, grid=None):
+    def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False, grid=None,
+                 balance_every=0):
         self.net = channel(net)
         self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
-        self.by_work = by_work
+        self.by_work, self.balance_every = by_work, int(balance_every)
+        self._since_rebuild = 0     # steps since the last rebuild (``rebalance_due``)
         # max/mean of the ranks' work at the last rebuild (None: not balancing work, or not measured)
         self.work_imbalance = None
         self.n_migrated = 0
         self.n_rebalances = 0
+        self.n_balance_rebuilds = 0     # rebuilds ``rebalance_due`` asked for
         self._plan = None
         self.L_x = self.L_y = None
         self.auto = isinstance(grid, str) and grid == "auto"
@@ -203,7 +213,8 @@ class Domain:
         """The Domain of a run's Config: halo 1 + ``integration.skin``, the ``decomp`` keys."""
         d = cfg.decomp
         return cls(net, r_list=1.0 + cfg.integration.skin, tolerance=d.balance_tolerance,
-                   damping=d.balance_damping, by_work=d.balance_by == "work", grid=tuple(d.grid) or "auto")
+                   damping=d.balance_damping, by_work=d.balance_by == "work", grid=tuple(d.grid) or "auto",
+                   balance_every=d.balance_every)
 
     def balanced_bounds(self, z_mobile_all, cost=None):
         """Inner bounds splitting the mobile heights (of one column) into Pz equal counts, or equal sums
@@ -343,6 +354,7 @@ class Domain:
         with ``by_work``; counts are balanced until every rank has measured some).
         """
         state.n_rows = state.n_own
+        self._since_rebuild = 0
         if self._plan is not None:
             self._plan.free()
             self._plan = None
@@ -360,8 +372,7 @@ class Domain:
                 works = None
                 self.work_imbalance = None
         # every rank sees every column's measure, so all agree on which columns rebalance
-        per_column = np.asarray(measure, float).reshape(self.n_columns, self.grid[2])
-        uneven = [bool(m.sum() > 0 and m.max() / (m.sum() / len(m)) > 1.0 + self.tolerance) for m in per_column]
+        uneven = self._uneven(measure)
         if uneven[self.col]:
             zs = state.x[:state.n_own, 2][state.fixed[:state.n_own] == 0]
             # each particle carries its rank's seconds over its particles (``works``), or counts one
@@ -375,6 +386,35 @@ class Domain:
             self._share_bounds()
             self._migrate(state)
         self._halo(state)
+
+    def _uneven(self, measure):
+        """Per column, whether max/mean of ``measure`` (one value a rank, (P,)) over its ranks > 1 + tolerance."""
+        per_column = np.asarray(measure, float).reshape(self.n_columns, self.grid[2])
+        return [bool(m.sum() > 0 and m.max() / (m.sum() / len(m)) > 1.0 + self.tolerance) for m in per_column]
+
+    def rebalance_due(self, work):
+        """Count a step; whether a rebuild now should rebalance the slabs by work.
+
+        Every ``balance_every`` steps since the last rebuild (a count every rank keeps alike) the ranks'
+        compute seconds since it, ``work()`` here [s] (a callable: asked on those steps only), are gathered
+        (one small collective on those steps only); the answer is yes, the same on every rank, when some
+        column's max/mean exceeds ``1 + tolerance`` and its slowest rank has measured at least
+        ``BALANCE_SECONDS`` (less is the clock's noise). A settled pile rebuilds its lists rarely (once in
+        hundreds of steps), so without this its slabs kept the balance of counts its start gave them
+        (benches of the 20k pile on a 16-core machine: the slowest rank's work 1.05-1.55 times the mean on
+        2-12 ranks). A rebuild made early changes no bit.
+        """
+        if not (self.balance_every > 0 and self.by_work and self.parallel):
+            return False
+        self._since_rebuild += 1
+        if self._since_rebuild % self.balance_every:
+            return False
+        works = np.array(self.allgather(float(work())))
+        if not (np.all(works > 0.0) and np.all(np.isfinite(works)) and works.max() >= BALANCE_SECONDS):
+            return False
+        due = any(self._uneven(works))
+        self.n_balance_rebuilds += due
+        return due
 
     def _migrate(self, state):
         """Send owned particles outside this domain, with their slots, to their owners.

@@ -152,6 +152,11 @@ class EngineBase:
         self.complete()
         return infos[-1] if len(infos) else self.info
 
+    def work_since_rebuild(self):
+        """This rank's compute seconds since its last list rebuild (``timers``, communication left out): what
+        the slabs balance with ``decomp.balance_by = "work"``."""
+        return sum(self.timers.values()) - self._work_mark
+
     def _not_finite(self, overlap, z_max, flags):
         """End a step whose drift made a position NaN or infinite (an infinite displacement in the
         step's reduction, the same on every rank): no list work or forces on such rows (a cell index

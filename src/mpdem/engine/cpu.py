@@ -151,7 +151,7 @@ class Engine(EngineBase):
             self.sync_slots()
         # the slabs may be balanced by the compute seconds since the last rebuild (``Domain.rebuild``)
         spent = sum(self.timers.values())
-        self.lists.build(self.domain, spent - self._work_mark, self._epoch, self.law.mu == 0.0)
+        self.lists.build(self.domain, self.work_since_rebuild(), self._epoch, self.law.mu == 0.0)
         self._work_mark = spent
         if self.lists.longest() > self._work.found.shape[1]:
             self._scratch(2 * self.lists.longest())
@@ -211,7 +211,7 @@ class Engine(EngineBase):
         # the displacement since the last filtering plus those before bounds every one since the build
         # (rebuilding early changes no bit: sums run in partner-id order and left-out pairs add zeros)
         moved, lists = math.sqrt(n2), self.lists
-        if not moved + lists.moved < 0.5 * p.skin:
+        if not moved + lists.moved < 0.5 * p.skin or dom.rebalance_due(self.work_since_rebuild):
             self.rebuild()
         else:
             dom.refresh(s)

@@ -466,7 +466,7 @@ class Engine(EngineBase):
             self.sync_state()
         sort_rows(s, self.r_list)
         spent = sum(self.timers.values())
-        self.domain.rebuild(s, spent - self._work_mark)
+        self.domain.rebuild(s, self.work_since_rebuild())
         self._work_mark = spent
         n = s.n_own
         if len(self.nbr_start) < n + 1:
@@ -870,7 +870,7 @@ class Engine(EngineBase):
         n2, overlap, neg_z_min, z_max, *agreed = self.domain.max_many(np.array(reduce)).tolist()
         if math.isinf(n2):
             return self._not_finite(overlap, z_max, flags._make(agreed))
-        if not math.sqrt(n2) < 0.5 * p.skin:
+        if not math.sqrt(n2) < 0.5 * p.skin or self.domain.rebalance_due(self.work_since_rebuild):
             self.rebuild()
         else:
             self._refresh()
