@@ -46,3 +46,37 @@ def test_collective_hdf5_write_and_read(comm):
     for r, c in enumerate(counts):
         assert np.array_equal(x[k:k + c, 0], r + np.arange(c))
         k += c
+
+
+def test_ranks_bind_to_cores_of_their_own_only_where_the_launcher_left_them_free(comm):
+    """``threads.bind``: ranks that may all run on the same cores (as MPICH's mpiexec leaves them) take
+    disjoint sets of ``n_threads`` cores when they fit, in local-rank order; more than fit, or ranks a
+    launcher bound already (different affinities), are left as they are."""
+    from mpdem import threads
+    saved = os.sched_getaffinity(0)
+    node = sorted(set().union(*comm.allgather(sorted(saved))))
+    try:
+        for n_threads in (1, 2):
+            os.sched_setaffinity(0, node)       # unbound, as a launcher that binds nothing leaves them
+            got = threads.bind(comm, n_threads)
+            fits = comm.Get_size() * n_threads <= len(node)    # every rank of these tests is on one node
+            if not fits:
+                assert got is None and sorted(os.sched_getaffinity(0)) == node
+                continue
+            every = comm.allgather(got)
+            assert every[comm.Get_rank()] == tuple(sorted(os.sched_getaffinity(0)))
+            assert all(len(c) == n_threads for c in every)
+            assert sorted(sum(every, ())) == node[:comm.Get_size() * n_threads]   # disjoint, in rank order
+        # ranks a launcher bound, to sets that differ (rank 0's all the node's cores, which alone would fit),
+        # are left alone
+        os.sched_setaffinity(0, node if comm.Get_rank() == 0 else node[-1:])
+        before = os.sched_getaffinity(0)
+        got = threads.bind(comm, 1)
+        if len(node) > 1:
+            assert got is None and os.sched_getaffinity(0) == before
+        # "none" binds nothing
+        os.sched_setaffinity(0, node)
+        assert threads.bind(comm, 1, "none") is None and sorted(os.sched_getaffinity(0)) == node
+    finally:
+        os.sched_setaffinity(0, saved)
+        threads.BOUND = None

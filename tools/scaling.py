@@ -7,7 +7,8 @@ TABLE is a landed pile (e.g. landed20k.txt.gz: 20 000 spheres on 20 d x 20 d). E
 
 - ceiling R: R single-rank benches of one tile, all at once: what the node's cores and memory allow
   when R of them work (the mean of their ns per atom-step);
-- strong R: the one tile on R ranks, the grid chosen (``decomp.grid = []``) and all slabs;
+- strong R: the one tile on R ranks, the grid chosen (``decomp.grid = []``) and all slabs, and the chosen grid
+  again with ``--bind none`` (the ranks as the launcher left them: MPICH's mpiexec binds nothing);
 - weak R: R tiles (the most nearly square A x B = R) on R ranks, the grid chosen;
 - wide: the WIDE tiles (7 x 7: 994k spheres) on the largest R, the grid chosen and all slabs.
 
@@ -41,8 +42,9 @@ def tiles_of(R):
     return (R // a, a)
 
 
-def bench_cmd(py, table, steps, tile, grid=None):
-    cmd = [py, "-m", "mpdem", "bench", "--table", table, "--steps", str(steps), "--tile", f"{tile[0]}x{tile[1]}"]
+def bench_cmd(py, table, steps, tile, grid=None, extra=()):
+    cmd = [py, "-m", "mpdem", "bench", "--table", table, "--steps", str(steps), "--tile", f"{tile[0]}x{tile[1]}",
+           *extra]
     if grid:
         cmd += ["--set", f"decomp.grid={list(grid)}"]
     return cmd
@@ -154,10 +156,12 @@ def main(argv=None):
         c_ns = sum(ns) / len(ns) if len(ns) == R else None
         one = one or (c_ns if R == 1 else None)
         keep(dict(kind="ceiling", R=R, label=f"{R} x 1 rank", ns=c_ns, rc=0 if c_ns else "failed"))
-        for label, grid in (("chosen", None), ("slabs", (1, 1, R))):
-            if R == 1 and grid:
+        # the ranks as the launcher left them (--bind none) beside mpdem's own binding, on the chosen grid
+        for label, grid, extra in (("chosen", None, ()), ("chosen unbound", None, ("--bind", "none")),
+                                   ("slabs", (1, 1, R), ())):
+            if R == 1 and (grid or extra):
                 continue
-            row = run_one(mpi_cmd(mpiexec, R, bench_cmd(py, a.table, a.steps, (1, 1), grid)), a.timeout, log)
+            row = run_one(mpi_cmd(mpiexec, R, bench_cmd(py, a.table, a.steps, (1, 1), grid, extra)), a.timeout, log)
             row.update(kind="strong", R=R, label=label, eff_one=efficiency(one, row["ns"], R),
                        eff_ceiling=efficiency(c_ns, row["ns"], R))
             keep(row)

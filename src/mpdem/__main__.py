@@ -283,6 +283,9 @@ def parser():
                        help="what steps the particles (engine.device; default the config's, cpu)")
         q.add_argument("--threads", type=positive_int("--threads"), default=1, metavar="T",
                        help="numba threads per rank (default 1)")
+        q.add_argument("--bind", choices=("auto", "none"), default="auto",
+                       help="auto (default): where the launcher left this node's ranks unbound and they fit its "
+                            "cores, each rank binds itself to --threads cores of its own; none: as launched")
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
                        help="write a checkpoint and exit (status 75) before this much wall time")
         q.add_argument("--walltime-margin", type=seconds("--walltime-margin"), default=None, metavar="SECONDS",
@@ -303,6 +306,9 @@ def parser():
     b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
     b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",
                    help="numba threads per rank (default 1 with --table; numba's default otherwise)")
+    b.add_argument("--bind", choices=("auto", "none"), default="auto",
+                   help="auto (default): where the launcher left this node's ranks unbound and they fit its "
+                        "cores, each rank binds itself to --threads cores of its own; none: as launched")
     b.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
                    help="time the CPU engine (default) or the GPU engine (--table only)")
     b.add_argument("--tile", type=tile, default=(1, 1), metavar="NXxNY",
@@ -414,8 +420,11 @@ def _main(argv):
     from .parallel import world
     net = world(EXIT_ERROR)
     # before anything imports the numba kernels (numba sizes its pool at import)
-    from .threads import ThreadsError, configure, usable_cores
+    from .threads import ThreadsError, bind, configure, usable_cores
     n_threads = threads_wanted(args)
+    if n_threads is not None and getattr(args, "bind", "none") == "auto":
+        # before numba starts its threads, which take the affinity of the thread that starts them
+        bind(net.comm, n_threads)
     try:
         if n_threads is not None:
             configure(n_threads)

@@ -322,7 +322,7 @@ def after_loop(eng, dom, st, baseline, phases):
     grown (peak RSS - baseline summed over ranks [bytes]), peak (largest
     process peak RSS [bytes]), engine_bytes (``eng.memory_bytes()`` summed), threads.
     """
-    from .threads import count
+    from .threads import BOUND, count
     et, er = eng.kinetic()
     before, after = phases
     spent = {k: after[k] - before[k] for k in before}
@@ -330,7 +330,8 @@ def after_loop(eng, dom, st, baseline, phases):
                 balanced="work" if dom.work_imbalance is not None else "owned", per_rank=dom.allgather(spent),
                 grown=int(dom.sum_int(np.array([rss_peak() - baseline]))[0]), peak=dom.max(rss_peak()),
                 engine_bytes=int(dom.sum_int(np.array([eng.memory_bytes()]))[0]),
-                threads=count(), grid=dom.grid, **halo_figures(dom, st))
+                threads=count(), bound=dom.max(0.0 if BOUND is None else 1.0) > 0, grid=dom.grid,
+                **halo_figures(dom, st))
 
 
 def halo_figures(dom, st):
@@ -352,7 +353,8 @@ def report_lines(fig):
         f"bench: case {os.path.basename(fig['table'])}{tiled}: {n} atoms = {fig['n_mobile']} mobile + "
         f"{n - fig['n_mobile']} bed, box {fig['L_x']:g} x {fig['L_y']:g}; {c.model} k_n = {c.k_n:g}, "
         f"gamma_t = {c.gamma_t:.6g}, mu = {c.mu:g}, dt = {cfg.integration.dt:g}, skin = {cfg.integration.skin:g}",
-        f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s) on {fig['device']}, {fig['steps']} steps in "
+        f"bench: {fig['ranks']} rank(s) x {fig['threads']} thread(s){' (bound)' if fig.get('bound') else ''} on "
+        f"{fig['device']}, {fig['steps']} steps in "
         f"{fig['wall_max']:.2f} s (after {WARMUP_STEPS} untimed), {fig['rebuilds']} list rebuilds, contacts per "
         f"mobile particle {fig['contacts'] / n_mob:.2f}, E_k/N {fig['ek'] / n_mob:.2e}"
         + (f", imbalance (max/mean {fig['balanced']}) {fig['imbalance']:.2f}" if par else ""),

@@ -13,6 +13,8 @@ from .errors import ThreadsError
 
 # threads of the time-step kernels: one per rank unless asked (numba's own default is every core)
 _requested = 1
+# the cores ``bind`` bound this process to (None: not bound by mpdem)
+BOUND = None
 
 
 def configure(n):
@@ -77,6 +79,49 @@ def apply():
     import numba
     numba.set_num_threads(requested())
     return numba.get_num_threads()
+
+
+def bind(comm, n_threads, mode="auto"):
+    """Bind this rank to cores of its own, where the launcher left the ranks of a node unbound.
+
+    Under MPICH's mpiexec (PyPI's ``mpich`` wheel included), ranks are not bound by default and the
+    kernel may move them between cores and stack two on one. With ``mode`` "auto", when the ranks
+    of this launch on this node (``comm``'s shared-memory split: a collective, every rank calls it)
+    all may run on the same cores, and those number at least ranks x ``n_threads``, local rank i
+    takes the i-th ``n_threads`` of them in ascending order (distinct physical cores where the
+    system numbers the cores before their hyperthread siblings, as Linux does on x86). Anything else
+    (a launcher that bound the ranks already, more ranks than cores, one rank on the node, "none")
+    binds nothing. Must run before numba starts its threads (they inherit the affinity).
+
+    Parameters
+    ----------
+    comm : mpi4py communicator or None
+        The run's ranks (None: one rank, nothing to do).
+    n_threads : int
+        numba threads of each rank.
+    mode : {"auto", "none"}
+
+    Returns
+    -------
+    tuple of int or None
+        The cores this rank was bound to, or None.
+    """
+    if mode == "none" or comm is None or comm.Get_size() == 1 or not hasattr(os, "sched_setaffinity"):
+        return None
+    from mpi4py import MPI
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED, key=comm.Get_rank())
+    try:
+        mine = sorted(os.sched_getaffinity(0))
+        every = node.allgather(mine)
+        local, size = node.Get_rank(), node.Get_size()
+    finally:
+        node.Free()
+    if size == 1 or any(a != mine for a in every) or len(mine) < size * n_threads:
+        return None
+    global BOUND
+    BOUND = cores = tuple(mine[local * n_threads:(local + 1) * n_threads])
+    os.sched_setaffinity(0, cores)
+    return cores
 
 
 def usable_cores():

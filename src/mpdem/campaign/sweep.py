@@ -195,7 +195,8 @@ class Sweep:
         d = self.dir(row)
         if finished(d):
             return "analyze", [sys.executable, "-m", "mpdem", "analyze", d, "--no-plots", "--quiet", "--packing"]
-        threads = ["--threads", str(self.threads), "--quiet"]
+        # rows side by side are separate launches: each would bind its ranks to the same first cores
+        threads = ["--threads", str(self.threads), "--quiet"] + (["--bind", "none"] if self.jobs > 1 else [])
         if rundir.checkpoints(d):
             # a restart keeps its run's config; the sweep's engine.device (if set) moves it, e.g. from a GPU to the CPU
             dev = [s.split("=", 1)[1].strip("\"'") for s in self.sets if s.split("=", 1)[0].strip() == "engine.device"]

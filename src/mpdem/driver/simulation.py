@@ -240,7 +240,8 @@ class Run:
         self.log(f"mpdem: dt = {p.dt:.6g} (t_col / dt = {t_col / p.dt:.1f}), skin = {p.skin:g}, "
                  f"E_stop = {cfg.stop.E_stop:.3g} ({cfg.stop.rule}), max_steps = {cfg.run.max_steps}, "
                  f"seed = {cfg.run.seed}, ranks = {self.domain.size}"
-                 + (f" (grid {' x '.join(map(str, self.domain.grid))})" if self.domain.parallel else ""))
+                 + (f" (grid {' x '.join(map(str, self.domain.grid))})" if self.domain.parallel else "")
+                 + (", each bound to its own core(s)" if threads.BOUND else ""))
         if self.schedule:
             self.log(self.schedule.describe(p.dt))
 
