@@ -25,9 +25,10 @@ pytestmark = [pytest.mark.slurm, pytest.mark.validation]
 ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT / "tools" / "local-slurm.sh"
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
-# a pile that settles in about 75 s of 2 ranks here (875 000 steps); later segments of about
-# 65 s (a 2-minute job less a 50 s margin, MPDEM_MARGIN) if the run outlasts the second
-PILE = "pour.N=600 box.L_x=5 box.L_y=5 run.max_steps=2000000 output.progress_every=50000"
+# a pile that settles in about 47 s of 2 ranks on the 2-core development VM (488 000 steps; 600 spheres
+# took 104 s); later segments of about 65 s (a 2-minute job less a 50 s margin, MPDEM_MARGIN) if the run
+# outlasts the second
+PILE = "pour.N=300 box.L_x=5 box.L_y=5 run.max_steps=2000000 output.progress_every=50000"
 MARGIN = "50"
 # the last line of a jobs.log that ends a chain
 ENDS = ("finished (exit", "error:", "stop:", "not converged:")

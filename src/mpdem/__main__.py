@@ -285,7 +285,8 @@ def parser():
                        help="numba threads per rank (default 1)")
         q.add_argument("--bind", choices=("auto", "none"), default="auto",
                        help="auto (default): where the launcher left this node's ranks unbound and they fit its "
-                            "cores, each rank binds itself to --threads cores of its own; none: as launched")
+                            "cores, each rank binds itself to --threads cores of its own; none: as launched (two "
+                            "launches side by side on one node: docs/cluster.md)")
         q.add_argument("--walltime", type=walltime, metavar="HH:MM:SS",
                        help="write a checkpoint and exit (status 75) before this much wall time")
         q.add_argument("--walltime-margin", type=seconds("--walltime-margin"), default=None, metavar="SECONDS",
@@ -308,7 +309,8 @@ def parser():
                    help="numba threads per rank (default 1 with --table; numba's default otherwise)")
     b.add_argument("--bind", choices=("auto", "none"), default="auto",
                    help="auto (default): where the launcher left this node's ranks unbound and they fit its "
-                        "cores, each rank binds itself to --threads cores of its own; none: as launched")
+                        "cores, each rank binds itself to --threads cores of its own; none: as launched (two "
+                        "launches side by side on one node: docs/cluster.md)")
     b.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
                    help="time the CPU engine (default) or the GPU engine (--table only)")
     b.add_argument("--tile", type=tile, default=(1, 1), metavar="NXxNY",
