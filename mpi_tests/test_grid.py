@@ -172,3 +172,18 @@ def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm):
     # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds)
     for k in ("exchanges", "pickled"):
         assert large[k] <= 1.25 * small[k] + 64 * comm.Get_size(), (k, small[k], large[k])
+
+
+def test_the_bed_made_by_every_rank_together_is_the_one_rank_bed(comm, monkeypatch):
+    """``bedcache.made_bed`` on every rank of the launch makes the bed together (``build.make_bed``: each
+    rank settles the spheres of its domain, the grid chosen for the low layer), and gives every rank
+    the bed one rank makes, bit for bit; made again, rank 0 reads it from the cache and every rank gets it."""
+    from mpdem import bedcache, build
+    from mpdem.parallel import Channel
+    monkeypatch.setenv(bedcache.ENV, os.path.join(shared_dir(comm), "beds"))
+    cfg = config.load(None, ["box.L_x=4", "box.L_y=4", "bed.settle_time=6", "run.max_steps=1"])
+    made = bedcache.made_bed(cfg, net=Channel(comm))
+    kept = bedcache.made_bed(cfg, net=Channel(comm))
+    alone = build.make_bed(cfg)
+    assert len(alone.x) > 10 and made.x.tobytes() == alone.x.tobytes() and made.note == alone.note
+    assert kept.x.tobytes() == alone.x.tobytes() and "kept from its first making" in kept.note

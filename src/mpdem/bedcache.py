@@ -27,6 +27,7 @@ import numpy as np
 
 from . import build
 from .config import bed_seed
+from .parallel import channel
 
 ENV = "MPDEM_BED_CACHE"
 # the bed keys make_bed reads (bed.seed through config.bed_seed)
@@ -92,16 +93,24 @@ def _write(path, bed):
             pass
 
 
-def made_bed(cfg, progress=None):
-    """The bed of ``build.make_bed(cfg, progress)``, read from the cache when it was made before
-    with the same values and code, else made and kept there."""
+def made_bed(cfg, progress=None, net=None):
+    """The bed of ``build.make_bed(cfg, progress, net)``, read from the cache when it was made before
+    with the same values and code, else made (by the ranks of ``net`` together: collective) and kept
+    there. Rank 0 alone reads and writes the cache; every rank gets the bed."""
+    net = channel(net)
     where = directory()
     if where is None:
-        return build.make_bed(cfg, progress=progress)
+        return build.make_bed(cfg, progress=progress, net=net)
     path = where / f"bed-{key(cfg)}.npz"
-    bed = _read(path) if path.exists() else None
-    if bed is not None:
-        return build.Bed(bed.x, note=f"{bed.note}; kept from its first making ({path})")
-    bed = build.make_bed(cfg, progress=progress)
-    _write(path, bed)
+    kept = None
+    if net.rank == 0:
+        bed = _read(path) if path.exists() else None
+        kept = None if bed is None else (bed.x, f"{bed.note}; kept from its first making ({path})")
+    if net.parallel:
+        kept = net.bcast(kept)
+    if kept is not None:
+        return build.Bed(*kept)
+    bed = build.make_bed(cfg, progress=progress, net=net)
+    if net.rank == 0:
+        _write(path, bed)
     return bed

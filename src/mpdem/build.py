@@ -19,6 +19,7 @@ from .errors import InputError
 from .kernels.bundles import make_box
 from .kernels.insert import rsa_batch, rsa_cells
 from .kernels.particle import VOLUME as SPHERE_VOLUME
+from .parallel import channel
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
@@ -105,22 +106,29 @@ class Bed:
         return float(self.x[:, 2].mean()) if len(self.x) else -math.inf
 
 
-def make_bed(cfg, progress=None):
+def make_bed(cfg, progress=None, net=None):
     """Build the rough bed by the recipe of docs/model.md 5.2.
 
     Settles ``settle_density * L_x * L_y`` frictionless spheres onto a flat
     frictionless floor at z = 0, cuts the slab of centres in
     [gap, gap + thickness], and shifts it so the lowest centre is at z = 0.
+    On several ranks (``net``) they settle it together, each the spheres of its
+    domain (the grid chosen for a layer this low: columns), and every rank gets
+    the whole bed: the same bits as on one rank, as every run's.
 
     Parameters
     ----------
     cfg : Config
     progress : callable or None
         Takes a line of progress, after every short call of the settle (about
-        ``SETTLE_ROW_STEPS`` sphere-steps) and of the insertion; the caller decides
-        which to show (``watch.Watch`` shows one every half minute and honours stop
-        signals there).
+        ``SETTLE_ROW_STEPS`` sphere-steps, the bed's on one rank, in all) and of the
+        insertion; the caller decides which to show (``watch.Watch`` shows one every
+        half minute and honours stop signals there). On several ranks every rank calls
+        it at the same points (a collective look may be made there).
+    net : parallel.Channel, mpi4py communicator or None
+        The ranks that make the bed together (collective); None is one rank.
     """
+    net = channel(net)
     b, L_x, L_y = cfg.bed, cfg.box.L_x, cfg.box.L_y
     n = max(1, round(b.settle_density * L_x * L_y))
     gen = rng(bed_seed(cfg), STREAM_BED)
@@ -132,8 +140,14 @@ def make_bed(cfg, progress=None):
     phys = Physics.of(k_n=k_n, k_t=0.0, gamma_n=gamma_n_from_epsilon(b.settle_epsilon, k_n),
                       gamma_t=0.0, mu=0.0, dt=1e-4 * math.sqrt(2e5 / k_n), skin=0.3,
                       gravity=1.0, floor=True)
-    state = State(np.arange(n), x, L_x=L_x, L_y=L_y)
-    eng = Engine(state, phys, Domain(None))
+    if net.parallel:
+        dom = Domain(net, r_list=1.0 + phys.skin, grid="auto")
+        still = np.zeros((n, 3))
+        state = dom.scatter({"id": np.arange(n, dtype=np.int64), "x": x, "v": still, "omega": still.copy(),
+                             "fixed": np.zeros(n, np.uint8)}, L_x, L_y)
+    else:
+        dom, state = Domain(None), State(np.arange(n), x, L_x=L_x, L_y=L_y)
+    eng = Engine(state, phys, dom)
     eng.start()
     steps = int(math.ceil(b.settle_time / phys.dt))
     # the deferred half-kicks are completed every tenth of the settle (the bed's bits depend on
@@ -148,7 +162,12 @@ def make_bed(cfg, progress=None):
                 say(f"bed: settling {n} spheres, step {min(at + per_call, end)}/{steps}")
         eng.complete()
         say(f"bed: settling {n} spheres, step {end}/{steps}")
-    xs = state.x[:n]
+    xs = state.x[:state.n_own]
+    if net.parallel:
+        # the bed is a layer (some L_x L_y spheres), wanted whole on every rank: each rank's rows to all
+        parts = net.allgather((state.id[:state.n_own].copy(), xs.copy()))
+        ids = np.concatenate([p[0] for p in parts])
+        xs = np.concatenate([p[1] for p in parts])[np.argsort(ids, kind="stable")]
     sel = (xs[:, 2] >= b.gap) & (xs[:, 2] <= b.gap + b.thickness)
     bed = xs[sel].copy()
     if len(bed) == 0:

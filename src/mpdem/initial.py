@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bedcache, build, state, stiffen
-from .errors import InputError, Interrupted
+from .errors import InputError
 from .watch import Watch
 from .io import tables
 from .io import checkpoint, lammps, packing
@@ -150,11 +150,11 @@ def from_packing(path, cfg, log=print):
 
 
 def bed(cfg, net, log, watch=None):
-    """The frozen bed of a pour: from ``bed.file``, or made by rank 0 (or read from the beds made
-    before, ``bedcache``) and sent to all.
+    """The frozen bed of a pour: from ``bed.file``, or made by the ranks together (or read by rank 0
+    from the beds made before, ``bedcache``, and sent to all).
 
-    ``watch`` (``watch.Watch``) sees rank 0's making of the bed between its short calls (progress,
-    a stop signal); a stop there reaches every rank with the bed's broadcast.
+    ``watch`` (``watch.Watch``) sees the making of the bed between its short calls (progress, a
+    stop signal agreed over the ranks, so that a stop there ends every rank at once).
     Warns when its areal density is outside [bed.density_min, bed.density_max].
     """
     watch = watch or Watch(log, net)
@@ -164,9 +164,10 @@ def bed(cfg, net, log, watch=None):
     else:
         n = max(1, round(cfg.bed.settle_density * cfg.box.L_x * cfg.box.L_y))
         watch.begin("the making of the bed",
-                    f"bed: making it on rank 0, or reading it from the beds made before ({n} spheres settled "
-                    f"for {cfg.bed.settle_time:g} tau)")
-        b = net.on_root(bedcache.made_bed, cfg, watch.local(), catch=(Interrupted,))
+                    f"bed: making it on {net.size} rank(s), or reading it from the beds made before ({n} spheres "
+                    f"settled for {cfg.bed.settle_time:g} tau)")
+        # every rank makes it together, each looking at the signals with the others at the same points
+        b = bedcache.made_bed(cfg, lambda line=None: watch(line, everywhere=True), net)
     dens = len(b.x) / (cfg.box.L_x * cfg.box.L_y)
     log(f"bed: {len(b.x)} frozen spheres, {dens:.3f} per d^2, z_bed = {b.z_top:.4f}; {b.note}")
     if not cfg.bed.density_min <= dens <= cfg.bed.density_max:
