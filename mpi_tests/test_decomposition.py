@@ -250,7 +250,7 @@ def test_slabs_balanced_by_work_match_one_rank(comm, monkeypatch):
     import mpdem.decomp
     from mpdem.engine.base import EngineBase
     cfg = config.load(None, PILE + ["run.max_steps=20000", "decomp.balance_by=work", "decomp.balance_tolerance=0.02",
-                                    "decomp.balance_every=20"])
+                                    "decomp.balance_every=100"])
     base = shared_dir(comm)
     monkeypatch.setattr(mpdem.decomp, "BALANCE_SECONDS", 0.0)
     if comm.Get_size() > 1 and comm.Get_rank() == 0:
