@@ -98,19 +98,17 @@ def made_bed(cfg, progress=None, net=None):
     with the same values and code, else made (by the ranks of ``net`` together: collective) and kept
     there. Rank 0 alone reads and writes the cache; every rank gets the bed."""
     net = channel(net)
-    where = directory()
-    if where is None:
-        return build.make_bed(cfg, progress=progress, net=net)
-    path = where / f"bed-{key(cfg)}.npz"
-    kept = None
-    if net.rank == 0:
-        bed = _read(path) if path.exists() else None
+    kept = path = None
+    if net.rank == 0:       # rank 0's environment decides where the cache is, for every rank
+        where = directory()
+        path = None if where is None else where / f"bed-{key(cfg)}.npz"
+        bed = _read(path) if path is not None and path.exists() else None
         kept = None if bed is None else (bed.x, f"{bed.note}; kept from its first making ({path})")
     if net.parallel:
         kept = net.bcast(kept)
     if kept is not None:
         return build.Bed(*kept)
     bed = build.make_bed(cfg, progress=progress, net=net)
-    if net.rank == 0:
+    if path is not None:
         _write(path, bed)
     return bed

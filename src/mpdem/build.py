@@ -171,11 +171,14 @@ def make_bed(cfg, progress=None, net=None):
     sel = (xs[:, 2] >= b.gap) & (xs[:, 2] <= b.gap + b.thickness)
     bed = xs[sel].copy()
     if len(bed) == 0:
-        raise InputError("bed: the settled packing has no sphere in the cut slab; raise bed.settle_density")
+        # every rank has the same bed: the same error on all of them together
+        raise InputError("bed: the settled packing has no sphere in the cut slab; raise bed.settle_density",
+                         agreed=net.parallel)
     bed[:, 2] -= bed[:, 2].min()
     # sort for a stable id order
     bed = bed[np.lexsort((bed[:, 0], bed[:, 1], bed[:, 2]))]
     ek = eng.kinetic()
+    dom.free()
     return Bed(bed, note=f"settled {n} spheres for {b.settle_time:g} tau (E_k/N = {sum(ek) / n:.2e})")
 
 

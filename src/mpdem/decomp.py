@@ -346,6 +346,16 @@ class Domain:
         inner[self.col] = self.zb[self.col, 1:-1]
         self.zb[:, 1:-1] = np.asarray(self.max_many(inner.ravel())).reshape(inner.shape)
 
+    def free(self):
+        """Release this Domain's MPI resources (the ghost plan's requests, the column's communicator):
+        for a Domain of a part of a run (``build.make_bed``'s), not the run's own (collective)."""
+        if self._plan is not None:
+            self._plan.free()
+            self._plan = None
+        if self.col_net is not self.net:
+            self.col_net.comm.Free()
+            self.col_net = self.net
+
     # -- particle movement --
     def rebuild(self, state, work=0.0):
         """Migrate, rebalance the uneven columns, then build the halo (ghost rows).

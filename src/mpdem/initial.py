@@ -204,7 +204,7 @@ def initial_state(cfg, net, log, lammps_table=None, watch=None):
     ----------
     cfg : Config
     net : parallel.Channel
-        Rank 0 makes the bed; the others receive it.
+        The ranks make the bed together (or rank 0 reads it from the beds made before and sends it).
     log : schedule.Logger
     lammps_table : dict or None
         A LAMMPS ``run.initial_file`` already read (``lammps.initial_for``).

@@ -119,8 +119,12 @@ def bind(comm, n_threads, mode="auto"):
     if size == 1 or any(a != mine for a in every) or len(mine) < size * n_threads:
         return None
     global BOUND
-    BOUND = cores = tuple(mine[local * n_threads:(local + 1) * n_threads])
-    os.sched_setaffinity(0, cores)
+    cores = tuple(mine[local * n_threads:(local + 1) * n_threads])
+    try:
+        os.sched_setaffinity(0, cores)
+    except OSError:     # a container or cpuset that refuses it: the rank stays as launched
+        return None
+    BOUND = cores
     return cores
 
 

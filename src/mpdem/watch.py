@@ -11,11 +11,10 @@ signal received since the set-up began ends it with ``Interrupted``.
 Nothing is saved during the set-up, so a stop there ends the process at once: one line, exit
 status 128 + the signal's number (143 for SIGTERM, 130 for SIGINT, as a shell reports a process
 ended by that signal), no state file. A stop must reach every rank together, or the others would
-wait in a collective for ever: work that every rank does alike (the insertion, the first build)
-looks with ``everywhere=True``, which agrees the signals by one max over the ranks; work of rank 0
-alone (making the bed) looks on its own, and its ``Interrupted`` reaches the other ranks with the
-bed's broadcast (``parallel.Channel.on_root``). SIGUSR1, a batch system's early warning, is not a
-stop here: the run's first step takes it and writes a checkpoint (``driver.simulation``).
+wait in a collective for ever: work that every rank does alike (the insertion, the making of the
+bed, the first build) looks with ``everywhere=True``, which agrees the signals by one max over the
+ranks. SIGUSR1, a batch system's early warning, is not a stop here: the run's first step takes it
+and writes a checkpoint (``driver.simulation``).
 
 Some work has no short calls to look between: numba compiling or loading its kernels (the first
 calls of a process), the first neighbour-list build. There a guard thread, told of each signal at
@@ -226,9 +225,6 @@ class Watch:
         if line is not None and self.clock() - self.last >= self.every:
             self.say(line() if callable(line) else line)
 
-    def local(self, line_of=None):
-        """A look for work of this rank alone (``make_bed``'s ``progress``): takes the work's line."""
-        return lambda line=None: self(line if line_of is None else line_of(line))
 
 
 def interrupted(sig, phase, again=AGAIN_NEW):
