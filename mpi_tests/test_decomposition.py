@@ -245,14 +245,12 @@ def test_a_reference_is_known_by_its_inputs_not_their_paths():
 def test_slabs_balanced_by_work_match_one_rank(comm, monkeypatch):
     """Bounds moved by the measured work (``decomp.balance_by = work``), with rank 0's seconds
     made three times what it measured so that they do move at every rebuild, and at the checks
-    between rebuilds (``decomp.balance_every``, the seconds' floor lifted), whose rebuilds come
-    when no particle's motion asks for one: the digest of one rank."""
-    import mpdem.decomp
+    between rebuilds (``decomp.balance_every``; ``decomp.balance_seconds``, the seconds' floor, lifted),
+    whose rebuilds come when no particle's motion asks for one: the digest of one rank."""
     from mpdem.engine.base import EngineBase
     cfg = config.load(None, PILE + ["run.max_steps=20000", "decomp.balance_by=work", "decomp.balance_tolerance=0.02",
-                                    "decomp.balance_every=100"])
+                                    "decomp.balance_every=100", "decomp.balance_seconds=0"])
     base = shared_dir(comm)
-    monkeypatch.setattr(mpdem.decomp, "BALANCE_SECONDS", 0.0)
     if comm.Get_size() > 1 and comm.Get_rank() == 0:
         work = EngineBase.work_since_rebuild
         monkeypatch.setattr(EngineBase, "work_since_rebuild", lambda self: 3.0 * work(self))

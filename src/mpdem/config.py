@@ -214,9 +214,13 @@ SCHEMA = (
        restart=True, physics=False),
     _k("decomp", "balance_every", 500,
        "with balance_by = 'work': steps since the last list rebuild between checks of the ranks' work (one small "
-       "collective); an uneven one (decomp.balance_tolerance, once the slowest rank measured 0.5 s) rebuilds the "
+       "collective); an uneven one (decomp.balance_tolerance, once the slowest rank measured decomp.balance_seconds) "
+       "rebuilds the "
        "lists there to rebalance, where a settled pile may not rebuild for thousands of steps; 0 = rebalance only at "
        "the rebuilds the particles' motion calls for; no effect on results", int, restart=True, physics=False),
+    _k("decomp", "balance_seconds", 0.5,
+       "compute seconds the slowest rank has measured at least before a check of decomp.balance_every may "
+       "rebalance (less is mostly the clock's noise) [s]", restart=True, physics=False),
     _k("decomp", "balance_damping", 0.5,
        "fraction of the way the slab bounds move toward balance at a rebalance", restart=True, physics=False),
     _k("output", "progress_every", 10000, "steps between progress lines", int, restart=True, physics=False),
@@ -708,6 +712,7 @@ def resolve(raw):
     need("decomp.grid", len(vals["decomp.grid"]) in (0, 3), "[] (chosen) or three integers [Px, Py, Pz]")
     need("decomp.balance_tolerance", vals["decomp.balance_tolerance"] > 0, "balance_tolerance > 0")
     need("decomp.balance_every", vals["decomp.balance_every"] >= 0, "balance_every >= 0 (0 = at rebuilds only)")
+    need("decomp.balance_seconds", vals["decomp.balance_seconds"] >= 0, "balance_seconds >= 0")
     need("decomp.balance_damping", 0 < vals["decomp.balance_damping"] <= 1, "0 < balance_damping <= 1")
     need("bed.seed", vals["bed.seed"] >= -1, "-1 (run.seed) or a seed >= 0")
     need("bed.thickness", vals["bed.thickness"] > 0, "thickness > 0")

@@ -54,10 +54,6 @@ MOVING = tuple(f for f in FIELDS if f.migrates)
 # (height range / HIST_BINS) of the exact quantile, and a rank sends these counts, not its heights
 HIST_BINS = 4096
 
-# compute seconds a rank has measured at least before a check between rebuilds may rebalance on them
-# (``Domain.rebalance_due``): less is mostly the clock's noise
-BALANCE_SECONDS = 0.5
-
 # point-to-point tags of the rebuild exchanges (the refresh uses parallel.TAG_GHOSTS)
 TAG_MIGRATE = 11
 TAG_HALO_COUNT = 21
@@ -81,6 +77,8 @@ class Domain:
     balance_every : int
         With ``by_work``, ask every this many steps since the last rebuild whether the work is uneven
         (``rebalance_due``); 0 = only at the rebuilds the particles' motion calls for.
+    balance_seconds : float
+        Seconds the slowest rank has measured at least before such a check may rebalance [s].
     grid : None, "auto" or (Px, Py, Pz)
         The grid of domains (``domains``): None is all slabs (1, 1, P); "auto" is chosen from the
         ranks, the box and the pile's height when the particles are first placed (``scatter``,
@@ -94,11 +92,11 @@ class Domain:
     """
 
     def __init__(self, net=None, r_list=1.2, tolerance=0.1, damping=0.5, by_work=False, grid=None,
-                 balance_every=0):
+                 balance_every=0, balance_seconds=0.5):
         self.net = channel(net)
         self.size, self.rank = self.net.size, self.net.rank
         self.r_list, self.tolerance, self.damping = r_list, tolerance, damping
-        self.by_work, self.balance_every = by_work, int(balance_every)
+        self.by_work, self.balance_every, self.balance_seconds = by_work, int(balance_every), balance_seconds
         self._since_rebuild = 0     # steps since the last rebuild (``rebalance_due``)
         # max/mean of the ranks' work at the last rebuild (None: not balancing work, or not measured)
         self.work_imbalance = None
@@ -214,7 +212,7 @@ class Domain:
         d = cfg.decomp
         return cls(net, r_list=1.0 + cfg.integration.skin, tolerance=d.balance_tolerance,
                    damping=d.balance_damping, by_work=d.balance_by == "work", grid=tuple(d.grid) or "auto",
-                   balance_every=d.balance_every)
+                   balance_every=d.balance_every, balance_seconds=d.balance_seconds)
 
     def balanced_bounds(self, z_mobile_all, cost=None):
         """Inner bounds splitting the mobile heights (of one column) into Pz equal counts, or equal sums
@@ -409,18 +407,19 @@ class Domain:
         compute seconds since it, ``work()`` here [s] (a callable: asked on those steps only), are gathered
         (one small collective on those steps only); the answer is yes, the same on every rank, when some
         column's max/mean exceeds ``1 + tolerance`` and its slowest rank has measured at least
-        ``BALANCE_SECONDS`` (less is the clock's noise). A settled pile rebuilds its lists rarely (once in
+        ``balance_seconds`` (less is the clock's noise). A settled pile rebuilds its lists rarely (once in
         hundreds of steps), so without this its slabs kept the balance of counts its start gave them
         (benches of the 20k pile on a 16-core machine: the slowest rank's work 1.05-1.55 times the mean on
         2-12 ranks). A rebuild made early changes no bit.
         """
-        if not (self.balance_every > 0 and self.by_work and self.parallel):
+        # one slab a column: nothing to balance (the columns keep equal widths)
+        if not (self.balance_every > 0 and self.by_work and self.parallel and self.grid[2] > 1):
             return False
         self._since_rebuild += 1
         if self._since_rebuild % self.balance_every:
             return False
         works = np.array(self.allgather(float(work())))
-        if not (np.all(works > 0.0) and np.all(np.isfinite(works)) and works.max() >= BALANCE_SECONDS):
+        if not (np.all(works > 0.0) and np.all(np.isfinite(works)) and works.max() >= self.balance_seconds):
             return False
         due = any(self._uneven(works))
         self.n_balance_rebuilds += due
