@@ -141,6 +141,26 @@ def test_steps_in_one_launch_keep_no_pairs_as_on_the_cpu():
         assert np.isnan(ratio) and loose == -1, (engine.__module__, grid)
 
 
+def test_rebuilds_asked_for_by_the_balance_change_no_bit(monkeypatch):
+    """A rebuild that ``Domain.rebalance_due`` asks for between the motion's (``decomp.balance_every``:
+    here every third step, as a rank of several would be told) in each engine's step path: the bits of
+    the plain CPU steps."""
+    phys = CASES["mu0.5-gamma_t"]
+    want, st_c = stepped(cpu.Engine, phys, 20)
+    asked = []
+    monkeypatch.setattr(Domain, "rebalance_due", lambda self, work: asked.append(work()) or len(asked) % 3 == 0)
+    for engine, kw in ((cpu.Engine, {}), (gpu.Engine, GRIDS[0])):
+        x, v, omega, fixed, L = tight_lattice(m=5)
+        st = State(np.arange(len(x)), x, 40 * v, 40 * omega, fixed, L, L)
+        eng = engine(st, phys, Domain(None), **kw)
+        eng.start()
+        for _ in range(20):
+            eng.step(keep_pairs=True)
+        assert eng.n_rebuilds > want.n_rebuilds, engine.__module__    # the asked rebuilds came
+        assert checkpoint.digest(checkpoint.gather_state(st)) == checkpoint.digest(checkpoint.gather_state(st_c))
+        assert eng.last_overlap == want.last_overlap and eng.contacts() == want.contacts()
+
+
 @pytest.mark.parametrize("grid", [0, 2])
 def test_every_step_record_of_one_launch_is_the_cpu_engines(grid):
     """Each StepInfo of ``run_quiet`` (its overlap, contact count and height range), and the overlap
