@@ -66,7 +66,10 @@ def test_ranks_bind_to_cores_of_their_own_only_where_the_launcher_left_them_free
             every = comm.allgather(got)
             assert every[comm.Get_rank()] == tuple(sorted(os.sched_getaffinity(0)))
             assert all(len(c) == n_threads for c in every)
-            assert sorted(sum(every, ())) == node[:comm.Get_size() * n_threads]   # disjoint, in rank order
+            # disjoint, in rank order, one hyperthread of every core first
+            first = threads.cores_first(node)
+            assert list(every) == [tuple(sorted(first[r * n_threads:(r + 1) * n_threads]))
+                                   for r in range(comm.Get_size())]
         # ranks a launcher bound, to sets that differ (rank 0's all the node's cores, which alone would fit),
         # are left alone
         os.sched_setaffinity(0, node if comm.Get_rank() == 0 else node[-1:])

@@ -146,3 +146,17 @@ def test_the_mpi_test_suite_stops_at_the_first_failure_on_any_rank(tmp_path):
     assert p.returncode != 0
     out = p.stdout + p.stderr
     assert "test_rank_one_fails failed on rank 1 of 2" in out and "rank 1 says no" in out
+
+
+def test_binding_takes_one_hyperthread_of_every_core_before_a_second():
+    """``threads.cores_first``: cores numbered before their siblings (x86 Linux: cpu i and i + 4 share a
+    core) stay in order; threads of a core numbered side by side (POWER, some ARM: 0-1, 2-3, ...) are
+    taken one a core first; a cpu whose siblings are unknown is a core of its own."""
+    from mpdem.threads import cores_first
+    x86 = {c: sorted({c % 4, c % 4 + 4}) for c in range(8)}
+    assert cores_first(range(8), x86.get) == list(range(8))
+    side = {c: [c - c % 2, c - c % 2 + 1] for c in range(8)}
+    assert cores_first(range(8), side.get) == [0, 2, 4, 6, 1, 3, 5, 7]
+    # a share of the machine (an affinity of cpus 2-5): still a whole core for each of the first two
+    assert cores_first([2, 3, 4, 5], side.get) == [2, 4, 3, 5]
+    assert cores_first([5, 3, 9], lambda c: [c]) == [3, 5, 9]

@@ -88,10 +88,9 @@ def bind(comm, n_threads, mode="auto"):
     kernel may move them between cores and stack two on one. With ``mode`` "auto", when the ranks
     of this launch on this node (``comm``'s shared-memory split: a collective, every rank calls it)
     all may run on the same cores, and those number at least ranks x ``n_threads``, local rank i
-    takes the i-th ``n_threads`` of them in ascending order (distinct physical cores where the
-    system numbers the cores before their hyperthread siblings, as Linux does on x86). Anything else
-    (a launcher that bound the ranks already, more ranks than cores, one rank on the node, "none")
-    binds nothing. Must run before numba starts its threads (they inherit the affinity).
+    takes the i-th ``n_threads`` of them, one hyperthread of every physical core before any second
+    one (``cores_first``). Anything else (a launcher that bound the ranks already, more ranks than
+    cores, one rank on the node, "none") binds nothing. Must run before numba starts its threads (they inherit the affinity).
 
     Parameters
     ----------
@@ -119,13 +118,44 @@ def bind(comm, n_threads, mode="auto"):
     if size == 1 or any(a != mine for a in every) or len(mine) < size * n_threads:
         return None
     global BOUND
-    cores = tuple(mine[local * n_threads:(local + 1) * n_threads])
+    order = cores_first(mine)
+    cores = tuple(sorted(order[local * n_threads:(local + 1) * n_threads]))
     try:
         os.sched_setaffinity(0, cores)
     except OSError:     # a container or cpuset that refuses it: the rank stays as launched
         return None
     BOUND = cores
     return cores
+
+
+def cores_first(cpus, siblings=None):
+    """``cpus`` ordered so that one of each physical core's hyperthreads comes before any second one:
+    by the position of each among its core's siblings, then by number (x86 Linux numbers the cores
+    before their siblings already; POWER and some ARM number a core's threads next to each other).
+
+    Parameters
+    ----------
+    cpus : sequence of int
+    siblings : callable or None
+        cpu -> the sorted cpus of its physical core (default: Linux's ``thread_siblings_list``; a cpu
+        whose list cannot be read is a core of its own).
+    """
+    siblings = siblings or _siblings
+    return sorted(cpus, key=lambda c: (siblings(c).index(c) if c in siblings(c) else 0, c))
+
+
+def _siblings(cpu):
+    """The cpus that share ``cpu``'s physical core, sorted (Linux sysfs; [cpu] when unknown)."""
+    try:
+        with open(f"/sys/devices/system/cpu/cpu{cpu}/topology/thread_siblings_list") as fh:
+            text = fh.read().strip()
+    except OSError:
+        return [cpu]
+    out = []
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out += range(int(lo), int(hi or lo) + 1)
+    return sorted(out)
 
 
 def usable_cores():
