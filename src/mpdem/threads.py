@@ -90,7 +90,8 @@ def bind(comm, n_threads, mode="auto"):
     all may run on the same cores, and those number at least ranks x ``n_threads``, local rank i
     takes the i-th ``n_threads`` of them, one hyperthread of every physical core before any second
     one (``cores_first``). Anything else (a launcher that bound the ranks already, more ranks than
-    cores, one rank on the node, "none") binds nothing. Must run before numba starts its threads (they inherit the affinity).
+    cores, one rank on the node, "none") binds nothing. Must run before numba starts its threads
+    (they inherit the affinity).
 
     Parameters
     ----------
