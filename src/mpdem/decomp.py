@@ -347,12 +347,16 @@ class Domain:
     def free(self):
         """Release this Domain's MPI resources (the ghost plan's requests, the column's communicator):
         for a Domain of a part of a run (``build.make_bed``'s), not the run's own (collective)."""
-        if self._plan is not None:
-            self._plan.free()
-            self._plan = None
+        self._drop_plan()
         if self.col_net is not self.net:
             self.col_net.comm.Free()
             self.col_net = self.net
+
+    def _drop_plan(self):
+        """Free the ghost refresh's plan (its persistent requests), if there is one."""
+        if self._plan is not None:
+            self._plan.free()
+            self._plan = None
 
     # -- particle movement --
     def rebuild(self, state, work=0.0):
@@ -363,9 +367,7 @@ class Domain:
         """
         state.n_rows = state.n_own
         self._since_rebuild = 0
-        if self._plan is not None:
-            self._plan.free()
-            self._plan = None
+        self._drop_plan()
         if not self.parallel:
             return
         self._migrate(state)

@@ -142,7 +142,11 @@ def cores_first(cpus, siblings=None):
         whose list cannot be read is a core of its own).
     """
     siblings = siblings or _siblings
-    return sorted(cpus, key=lambda c: (siblings(c).index(c) if c in siblings(c) else 0, c))
+
+    def key(c):
+        mates = siblings(c)
+        return (mates.index(c) if c in mates else 0, c)
+    return sorted(cpus, key=key)
 
 
 def _siblings(cpu):
