@@ -303,7 +303,8 @@ class Run:
                 if (flags.signal or flags.walltime) and st.step < max_steps:
                     self._interrupt(flags.signal)
                     break
-                if self.checkpoints.due(st.step, flags.clock):
+                # a clock checkpoint at the last step would only repeat the final state written next
+                if self.checkpoints.due(st.step, flags.clock and st.step < max_steps):
                     self.thermo.flush()
                     self.checkpoints.write(st.step)
                 if show:
