@@ -187,3 +187,21 @@ def test_the_bed_made_by_every_rank_together_is_the_one_rank_bed(comm, monkeypat
     alone = build.make_bed(cfg)
     assert len(alone.x) > 10 and made.x.tobytes() == alone.x.tobytes() and made.note == alone.note
     assert kept.x.tobytes() == alone.x.tobytes() and "kept from its first making" in kept.note
+
+
+TILED = ["box.L_x=10.0", "box.L_y=10.0", "pour.N=200", "pour.phi_i=0.1", "pour.K0=5.0", "pour.insertion=tiles",
+         "pour.tile=4.0", "output.progress_every=100000", "stop.sample_interval=0.01", "run.max_steps=2000",
+         "contact.mu=0.5"]
+
+
+@pytest.mark.parametrize("grid", [None, "columns"])
+def test_a_tiled_pour_filled_by_the_ranks_gives_the_one_rank_digest(comm, grid):
+    """``pour.insertion = "tiles"``: each rank fills its share of the 8 tiles (2 x 2 x 2) and holds only
+    its rows; the rows travel to their owners (on the grid chosen, and on columns): one rank's bits."""
+    P = comm.Get_size()
+    sets = TILED + ([f"decomp.grid=[{P}, 1, 1]"] if grid else [])
+    base = shared_dir(comm)
+    _, s = run(config.load(None, sets), os.path.join(base, "t"), comm)
+    ref = serial_digest(config.load(None, TILED), os.path.join(base, "s"), comm)
+    if comm.Get_rank() == 0:
+        assert s["digest"] == ref

@@ -35,3 +35,57 @@ def test_a_signal_on_rank_0_while_the_ranks_make_the_bed_stops_every_rank(comm, 
     with pytest.raises(Interrupted, match="^stopped by SIGINT during the making of the bed") as e:
         bed(cfg, net, lambda line: None, w)
     assert e.value.status == 130 and e.value.agreed
+
+
+class LateSignal(Watch):
+    """A Watch that receives SIGTERM at its ``at``-th look (on the rank that makes it)."""
+
+    def __init__(self, net, at):
+        super().__init__(lambda line: None, net, [], every=1e9)
+        self.looks, self.at = 0, at
+
+    def __call__(self, line=None, everywhere=False):
+        self.looks += 1
+        if self.looks == self.at:
+            self.signals.append(int(signal.SIGTERM))
+        return super().__call__(line, everywhere)
+
+
+def _tiled(monkeypatch):
+    from mpdem import build, config
+    # small batches, so that the ranks' runs of tiles take different numbers of rounds
+    monkeypatch.setattr(build, "RSA_BATCH", 64)
+    cfg = config.load(None, ["box.L_x=10", "box.L_y=10", "pour.N=400", "pour.phi_i=0.1", "pour.insertion=tiles",
+                             "pour.tile=4", "run.max_steps=1"])
+    return cfg, build.Bed(build.insert_random(build.rng(1, 9), 30, 10.0, 10.0, 0.5, 1.0))
+
+
+def test_the_ranks_fill_their_tiles_in_rounds_until_the_last_is_done(comm, monkeypatch):
+    """A tiled pour: each rank fills its own run of tiles a batch a round, every rank looking each round,
+    until the last rank is done (runs of different lengths: no rank leaves the others waiting)."""
+    from mpdem.initial import pour_tiled
+    net = Channel(comm)
+    cfg, b = _tiled(monkeypatch)
+    w = LateSignal(net, at=0)
+    rows, _ = pour_tiled(cfg, b, net, lambda line: None, w)
+    looks = comm.allgather(w.looks)
+    assert len(set(looks)) == 1 and looks[0] > 2
+    assert sum(comm.allgather(int((rows["fixed"] == 0).sum()))) == 400
+    assert sum(comm.allgather(len(rows["id"]))) == 430
+
+
+@pytest.mark.parametrize("late", [False, True])
+def test_a_signal_on_one_rank_during_a_tiled_pour_stops_every_rank(comm, monkeypatch, late):
+    """Rank 0 receives it at its second look, or (``late``) at the look before the last round, when the
+    ranks' runs of tiles of fewer rounds are done: every rank stops at the same look."""
+    from mpdem.initial import pour_tiled
+    net = Channel(comm)
+    cfg, b = _tiled(monkeypatch)
+    probe = LateSignal(net, at=0)
+    pour_tiled(cfg, b, net, lambda line: None, probe)
+    rounds = probe.looks
+    w = LateSignal(net, at=(rounds - 1 if late else 2) if net.rank == 0 else 0)
+    with pytest.raises(Interrupted, match="^stopped by SIGTERM during the pour's insertion") as e:
+        pour_tiled(cfg, b, net, lambda line: None, w)
+    assert e.value.status == 143 and e.value.agreed
+    assert comm.allgather(w.looks) == [w.looks] * net.size

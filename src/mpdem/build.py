@@ -23,6 +23,8 @@ from .parallel import channel
 from .state import State
 
 STREAM_BED, STREAM_POUR, STREAM_VELOCITY = 1, 2, 3
+# the streams of a tiled pour's tiles (``fill_tile``: one of each a tile)
+STREAM_POUR_TILE, STREAM_VELOCITY_TILE = 4, 5
 # candidates of one batch of the random insertion (``insert_random``): about a tenth of a second
 RSA_BATCH = 1 << 17
 # sphere-steps of one call of the bed-making settle between the caller's looks (``make_bed``)
@@ -59,8 +61,20 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000, 
     (n, 3) float64 centres, in insertion order.
     """
     out = np.zeros((n, 3))
+    for done in rsa_batches(gen, out, make_box(L_x, L_y), np.array([0.0, 0.0, z_lo]),
+                            np.array([L_x, L_y, z_hi - z_lo]), obstacles, max_tries, batch):
+        if progress is not None:
+            progress(done, n)
+    return out
+
+
+def rsa_batches(gen, out, box, lo, span, obstacles=None, max_tries=2000, batch=None):
+    """Fill ``out`` ((n, 3), in place) with non-overlapping unit spheres by RSA, centres uniform in
+    [lo, lo + span] [d] (periodic ``box``, ``kernels.bundles.make_box``), a batch of candidates at a
+    time: a generator of the spheres placed after each batch (``insert_random``)."""
+    n = len(out)
     obs = np.zeros((0, 3)) if obstacles is None else np.ascontiguousarray(obstacles, float)
-    box = make_box(L_x, L_y)
+    z_lo, z_hi = float(lo[2]), float(lo[2] + span[2])
     head, nxt, pos, m, geo = rsa_cells(obs, n, box, z_lo, z_hi)
     done, tried = 0, 0
     batch = max(1, min(int(RSA_BATCH if batch is None else batch), max(1024, 2 * n)))
@@ -69,11 +83,93 @@ def insert_random(gen, n, L_x, L_y, z_lo, z_hi, obstacles=None, max_tries=2000, 
             raise InputError(f"random insertion placed only {done} of {n} spheres after {tried} tries; "
                              f"lower pour.phi_i")
         cand = gen.random((batch, 3))
-        done, m = rsa_batch(cand, out, done, head, nxt, pos, m, geo, box, z_lo, z_hi)
+        done, m = rsa_batch(cand, out, done, head, nxt, pos, m, geo, box, lo, span)
         tried += batch
-        if progress is not None:
-            progress(done, n)
-    return out
+        yield done
+
+
+@dataclass(frozen=True)
+class PourTiles:
+    """A pour's insertion region cut into tiles that are filled on their own (``pour.insertion =
+    "tiles"``, docs/model.md 5.3): ``n`` = (n_x, n_y, n_z) tiles of ``w`` = (L_x / n_x, L_y / n_y,
+    H / n_z) [d] over [0, L_x) x [0, L_y) x [z_lo, z_lo + H]. Where an axis has several tiles, the
+    centres keep d / 2 from each face between two tiles (the periodic faces in x and y included), so
+    that spheres of two tiles never overlap; H is raised by those gaps so that the space the centres
+    may take holds the N spheres at phi_i. Tile k = (i_z n_y + i_y) n_x + i_x holds ``counts[k]``
+    spheres, N split in proportion to the tiles' spaces, ids ``start[k]`` on; what it holds depends on
+    (seed, k) alone, never on which rank fills it.
+    """
+    N: int
+    L_x: float
+    L_y: float
+    z_lo: float
+    H: float
+    n: tuple
+    counts: np.ndarray
+
+    @property
+    def w(self):
+        return (self.L_x / self.n[0], self.L_y / self.n[1], self.H / self.n[2])
+
+    @property
+    def start(self):
+        """First id of each tile's spheres, (T + 1,) int64 (the last: N)."""
+        return np.concatenate([[0], np.cumsum(self.counts)]).astype(np.int64)
+
+    def region(self, k):
+        """Tile k's (origin, lo, span, period): its spheres' centres are ``origin + c`` with c in
+        [lo, lo + span] in a periodic box of ``period`` ((2,): x and y) [d]."""
+        nx, ny, nz = self.n
+        iz, rem = divmod(k, nx * ny)
+        iy, ix = divmod(rem, nx)
+        wx, wy, wz = self.w
+        origin, lo, span, period = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(2)
+        for a, (i, m, w, L) in enumerate(((ix, nx, wx, self.L_x), (iy, ny, wy, self.L_y))):
+            if m == 1:      # the whole periodic axis
+                lo[a], span[a], period[a] = 0.0, L, L
+            else:           # a gap of d / 2 at both faces; a period that no two centres can wrap across
+                origin[a], lo[a], span[a], period[a] = i * w, 0.5, w - 1.0, w + 1.0
+        below, above = (0.5 if iz > 0 else 0.0), (0.5 if iz < nz - 1 else 0.0)
+        lo[2] = self.z_lo + iz * wz + below
+        span[2] = wz - below - above
+        return origin, lo, span, period
+
+
+def pour_tiles(N, L_x, L_y, z_lo, phi_i, tile):
+    """The PourTiles of a pour of ``N`` spheres at ``phi_i`` above ``z_lo`` [d] in tiles of about
+    ``tile`` d (``pour.tile``): as many whole tiles of at least that edge as the box and the
+    insertion's height H (``insertion_height``) hold along each axis, at least one."""
+    nx, ny = max(1, int(L_x // tile)), max(1, int(L_y // tile))
+    nz = max(1, int(insertion_height(N, L_x, L_y, phi_i) // tile))
+    ux = L_x if nx == 1 else L_x - nx
+    uy = L_y if ny == 1 else L_y - ny
+    # the centres' space: (ux uy) (H - (nz - 1)), holding N at phi_i
+    H = insertion_height(N, ux, uy, phi_i) + (nz - 1)
+    wz = H / nz
+    space = np.array([wz - (0.5 if iz > 0 else 0.0) - (0.5 if iz < nz - 1 else 0.0) for iz in range(nz)])
+    per_tile = np.repeat(space, nx * ny)
+    cum = np.cumsum(per_tile)
+    ends = np.floor(N * (cum / cum[-1])).astype(np.int64)
+    ends[-1] = N
+    counts = np.diff(np.concatenate([[0], ends]))
+    return PourTiles(int(N), float(L_x), float(L_y), float(z_lo), float(H), (nx, ny, nz), counts)
+
+
+def fill_tile(tiles, k, seed, K0, out, v_out, batch=None):
+    """Fill tile ``k`` of ``tiles``: centres into ``out`` and velocities into ``v_out`` ((counts[k], 3)
+    each, in place), from the streams of (``seed``, k) alone (``STREAM_POUR_TILE``,
+    ``STREAM_VELOCITY_TILE``); the velocities' mean kinetic energy is ``K0`` within the tile. A
+    generator of the spheres placed after each batch of candidates."""
+    origin, lo, span, period = tiles.region(k)
+    gen = tile_rng(seed, STREAM_POUR_TILE, k)
+    yield from rsa_batches(gen, out, make_box(period[0], period[1]), lo, span, batch=batch)
+    out[:, :2] += origin[:2]
+    v_out[:] = initial_velocities(tile_rng(seed, STREAM_VELOCITY_TILE, k), len(out), K0)
+
+
+def tile_rng(seed, purpose, k):
+    """The random stream of tile ``k`` of a purpose for a seed."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, purpose, k])))
 
 
 def insertion_height(n, L_x, L_y, phi_i):

@@ -69,6 +69,14 @@ SCHEMA = (
     _k("pour", "N", 20000, "number of mobile spheres", int, param=9),
     _k("pour", "phi_i", 0.13, "initial packing fraction of the random insertion (docs/model.md 5.3)", param=8),
     _k("pour", "K0", 0.0, "initial mean translational kinetic energy per particle [m g d]; 0 = at rest", param=10),
+    _k("pour", "insertion", "whole",
+       "how the pour's spheres are placed (docs/model.md 5.3): 'whole' (one random sequential addition over the "
+       "whole insertion region, made by every rank alike: the paper's) or 'tiles' (the region cut into tiles of "
+       "about pour.tile d, each filled on its own from its own random stream with gaps of d/2 at the faces "
+       "between tiles; each rank fills its share of the tiles and holds only its rows, so a pour of many "
+       "millions of spheres starts on many ranks; other centres, so other bits)", str, ("whole", "tiles")),
+    _k("pour", "tile", 20.0, "the edge of a tiled pour's tiles at least [d] (pour.insertion = 'tiles'; an axis "
+       "shorter than it is one tile)"),
     _k("contact", "model", "hooke", "normal/tangential force law: hooke or hertz (kernels/models.py)", str,
        tuple(MODELS), param=7),
     _k("contact", "k_n", 2e5, "normal spring constant [m g / d]", param=3),
@@ -649,6 +657,7 @@ def resolve(raw):
         warns.append(f"pour.phi_i = {phi:g} is above the paper's range (0.02 to 0.3)")
     need("pour.N", vals["pour.N"] >= 1, "N >= 1")
     need("pour.K0", vals["pour.K0"] >= 0, "K0 >= 0")
+    need("pour.tile", vals["pour.tile"] >= 4, "tile >= 4 d (a tile's centres keep d/2 from its faces)")
     need("run.max_steps", vals["run.max_steps"] > 0, "max_steps > 0")
     need("run.seed", vals["run.seed"] >= 0, "seed >= 0")
     need("box.gravity", vals["box.gravity"] >= 0, "gravity >= 0 (it points along -z, tilted by box.incline)")

@@ -8,7 +8,8 @@ times counts from the pile's geometry, in three phases whose largest sets the ne
 
 - the set-up: every rank builds the whole pile (``initial.initial_state``: its arrays, the
   insertion's cell lists, the new velocities), then keeps its own rows (``Domain.scatter``: a copy
-  of them, then its State);
+  of them, then its State); in a tiled pour (``pour.insertion = "tiles"``) a rank fills its share
+  of the tiles and holds its share of the rows, and the whole bed;
 - the run: the rank's rows and ghosts with their lists, contact slots, near lists and the pair
   store of a settled pile, and the copy of its rows a state file is written from;
 - the end (rank 0): the whole final state gathered for the summary (``Domain.gather_arrays``:
@@ -127,7 +128,8 @@ class Estimate:
         return self.rank0() + (local - 1) * self.other()
 
 
-def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_height=0.0, from_file=False):
+def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_height=0.0, from_file=False,
+             tile_cells=None):
     """The memory of a run of ``n_mobile`` + ``n_bed`` spheres on ``ranks`` ranks.
 
     Parameters
@@ -143,6 +145,10 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
         Height of a pour's insertion region [d] (0: no insertion, a pile read from a file).
     from_file : bool
         The rows come from a state file with their contact slots (each rank reads a share).
+    tile_cells : float or None
+        A tiled pour (``pour.insertion = "tiles"``): the cells of the insertion's cell lists of its
+        largest tile; each rank fills its share of the tiles and keeps its share of the rows, beside
+        the whole bed. None: every rank inserts the whole pour.
 
     Returns
     -------
@@ -162,6 +168,12 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
     if from_file:
         # each rank reads its share with the slots, then the rows travel to their owners
         setup = 2 * own * (stored + contacts * slot) + CAPACITY * own * row
+    elif tile_cells is not None:
+        # the whole bed (its centres); this rank's share of new rows, the tile's cells, then the rows sent
+        # to their owners (the parts, the rows received, merged and sorted by id) and its State
+        share = n_mobile / P + n_bed / P
+        filling = n_bed * 3 * f8 + share * initial + n_mobile / P * (3 * f8 + 8) + tile_cells * 8
+        setup = n_bed * 3 * f8 + max(filling, 3 * share * initial + CAPACITY * own * row)
     else:
         whole = n * initial
         # the insertion: the new centres, the cell lists (a position and a next per sphere, a head per cell)
@@ -219,8 +231,14 @@ def of_config(cfg, ranks, n_file=None):
     skin, near_skin = cfg.integration.skin, cfg.integration.near_skin
     if n_file is not None:
         return estimate(n_file, 0, ranks, L_x, L_y, skin, near_skin, from_file=True)
-    from .build import insertion_height
+    from .build import insertion_height, pour_tiles
     n_bed = int(math.ceil(cfg.bed.density_max * L_x * L_y))
+    if cfg.pour.insertion == "tiles":
+        tiles = pour_tiles(cfg.pour.N, L_x, L_y, 0.0, cfg.pour.phi_i, cfg.pour.tile)
+        wx, wy, wz = tiles.w
+        cells = INSERT_CELLS * (wx + 1.0) * (wy + 1.0) * (wz + 5.0)
+        return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=tiles.H,
+                        tile_cells=cells)
     H = insertion_height(cfg.pour.N, L_x, L_y, cfg.pour.phi_i)
     return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=H)
 

@@ -51,11 +51,18 @@ class Initial:
         and wall_ds (N, 3) when it has them and the run has the wall).
     pile : Pile
     n_mobile, n_bed : int
+    shared : bool
+        ``whole`` holds this rank's share of the rows only (a tiled pour, ``pour_tiled``): together the
+        ranks hold each row once (``Domain.distribute``'s input), ids mobile first, then the bed's.
+    bed : build.Bed or None
+        The bed of a pour (every rank holds it whole).
     """
     whole: dict
     pile: Pile
     n_mobile: int
     n_bed: int
+    shared: bool = False
+    bed: object = None
 
 
 def particles(path, cfg, all_fixed=False, lammps_table=None, log=print):
@@ -197,6 +204,59 @@ def pour(cfg, b, log, watch=None):
             "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)])}, H
 
 
+def pour_tiled(cfg, b, net, log, watch=None):
+    """This rank's share of a tiled pour (``pour.insertion = "tiles"``, docs/model.md 5.3) above bed
+    ``b``: the tiles of ``build.pour_tiles`` in ``net.size`` runs of consecutive tiles, this rank's
+    filled, and this rank's run of the bed's rows (ids N on, in the bed's order). A rank holds only
+    its share: the set-up's memory does not grow with the pile's size at a fixed share.
+
+    The ranks fill their tiles a batch of candidates a round, all together, each round ending with a
+    look of ``watch`` on every rank (progress, the stop signals agreed) and the sum of the spheres
+    placed and of the ranks still filling (one exact sum). Returns (rows, H) as ``pour``.
+    """
+    N, L_x, L_y = cfg.pour.N, cfg.box.L_x, cfg.box.L_y
+    tiles = build.pour_tiles(N, L_x, L_y, b.z_top + 1.0, cfg.pour.phi_i, cfg.pour.tile)
+    watch = watch or Watch(log, net)
+    T, P, r = len(tiles.counts), (net.size if net is not None else 1), (net.rank if net is not None else 0)
+    mine = range(T * r // P, T * (r + 1) // P)
+    start = tiles.start
+    lo, hi = int(start[mine.start]), int(start[mine.stop])
+    watch.begin("the pour's insertion",
+                f"pour: inserting {N} spheres at phi_i = {cfg.pour.phi_i:g} in {T} tiles of "
+                f"{' x '.join(f'{w:.3g}' for w in tiles.w)} d ({' x '.join(map(str, tiles.n))}) in z in "
+                f"[{tiles.z_lo:.3f}, {tiles.z_lo + tiles.H:.3f}], on {P} rank(s)")
+    x, v = np.zeros((hi - lo, 3)), np.zeros((hi - lo, 3))
+
+    def batches():
+        placed = 0
+        for k in mine:
+            at = slice(int(start[k]) - lo, int(start[k + 1]) - lo)
+            for done in build.fill_tile(tiles, k, cfg.run.seed, cfg.pour.K0, x[at], v[at]):
+                yield placed + done
+            placed += int(tiles.counts[k])
+
+    work, placed, going = batches(), 0, True
+    while True:
+        if going:
+            placed = next(work, None)
+            going = placed is not None
+            placed = hi - lo if placed is None else placed
+        total = net.sum_int(np.array([int(going), placed])) if net is not None and net.parallel else (
+            np.array([int(going), placed]))
+        watch(f"pour: {int(total[1])} of {N} spheres placed", everywhere=True)
+        if not total[0]:
+            break
+    nb = len(b.x)
+    bed = range(nb * r // P, nb * (r + 1) // P)
+    xb = b.x[bed.start:bed.stop]
+    rows = {"id": np.concatenate([np.arange(lo, hi, dtype=np.int64), N + np.arange(bed.start, bed.stop,
+                                                                                     dtype=np.int64)]),
+            "x": np.concatenate([x, xb]), "v": np.concatenate([v, np.zeros_like(xb)]),
+            "omega": np.zeros((hi - lo + len(xb), 3)),
+            "fixed": np.concatenate([np.zeros(hi - lo, np.uint8), np.ones(len(xb), np.uint8)])}
+    return rows, tiles.H
+
+
 def initial_state(cfg, net, log, lammps_table=None, watch=None):
     """A new run's initial state, checked (docs/model.md 8), identical on every rank.
 
@@ -229,7 +289,8 @@ def initial_state(cfg, net, log, lammps_table=None, watch=None):
         z_floor = b.z_mean
     else:
         b = bed(cfg, net, log, watch)
-        p, h_insert = pour(cfg, b, log, watch)
+        tiled = cfg.pour.insertion == "tiles"
+        p, h_insert = pour_tiled(cfg, b, net, log, watch) if tiled else pour(cfg, b, log, watch)
         fixed, x = p["fixed"], p["x"]
         z_bed = b.z_top
         z_floor = z_bed + 0.5
@@ -243,4 +304,6 @@ def initial_state(cfg, net, log, lammps_table=None, watch=None):
     whole = {k: a for k, a in p.items() if state.optional_in(state.FIELD[k], {"wall": cfg.bed.wall})}
     n_bed = len(b.x)
     pile = Pile(z_bed=z_bed, z_bed_mean=b.z_mean if n_bed else -math.inf, h_insert=h_insert)
-    return Initial(whole, pile, n_mobile=int((fixed == 0).sum()), n_bed=n_bed)
+    if poured and cfg.pour.insertion == "tiles":
+        return Initial(whole, pile, n_mobile=cfg.pour.N, n_bed=n_bed, shared=True, bed=b)
+    return Initial(whole, pile, n_mobile=int((fixed == 0).sum()), n_bed=n_bed, bed=b)

@@ -94,12 +94,20 @@ def new_start(cfg, out, domain, log, lammps_initial=None, watch=None):
         rundir.clear(out)
     init = initial.initial_state(cfg, domain.net, log, lammps_initial, watch=watch)
     w = init.whole
-    bed = w["fixed"] == 1
     if init.n_bed and domain.rank == 0:
-        tables.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
+        if init.shared:     # a tiled pour's bed: ids after the N mobile spheres', in the bed's order
+            tables.write_table(os.path.join(out, "bed.txt"), init.n_mobile + np.arange(init.n_bed, dtype=np.int64),
+                               init.bed.x, fixed=np.ones(init.n_bed, np.uint8))
+        else:
+            bed = w["fixed"] == 1
+            tables.write_table(os.path.join(out, "bed.txt"), w["id"][bed], w["x"][bed], fixed=w["fixed"][bed])
     watch(everywhere=True)
-    watch.begin("the distribution of the rows", f"set-up: {len(w['id'])} spheres to {domain.size} rank(s)")
-    st = domain.scatter(w, cfg.box.L_x, cfg.box.L_y)
+    watch.begin("the distribution of the rows",
+                f"set-up: {init.n_mobile + init.n_bed} spheres to {domain.size} rank(s)")
+    if init.shared:     # each rank holds a share: the rows travel to their owners
+        st = domain.distribute(w, cfg.box.L_x, cfg.box.L_y)
+    else:
+        st = domain.scatter(w, cfg.box.L_x, cfg.box.L_y)
     return Start(st, init.n_mobile, init.n_bed, RunState(pile=init.pile), False)
 
 

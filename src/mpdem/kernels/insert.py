@@ -68,22 +68,23 @@ def rsa_cells(obstacles, n_want, box, z_lo, z_hi):
 
 
 @njit(cache=True)
-def rsa_batch(cand, out, n_done, head, nxt, pos, m, geo, box, z_lo, z_hi):
+def rsa_batch(cand, out, n_done, head, nxt, pos, m, geo, box, lo, span):
     """Accept the candidate centres of one batch that overlap nothing placed so far.
 
     Parameters
     ----------
     cand : (B, 3) float64
-        Uniform numbers in [0, 1), scaled to the box here.
+        Uniform numbers in [0, 1), scaled to the region ``lo + cand * span`` here.
     out : (N, 3) float64, in/out
         Accepted centres; rows ``0..n_done-1`` are already placed.
     n_done : int
     head, nxt, pos, m, geo
         The cell lists of ``rsa_cells``, in/out (``m``: spheres in them).
     box : Box
-        The periodic box [d]: centres go in [0, L_x) x [0, L_y).
-    z_lo, z_hi : float
-        Centres go in [z_lo, z_hi] [d].
+        The periodic box [d] (of the cells and the minimum image).
+    lo, span : (3,) float64
+        Centres go in [lo, lo + span] [d], within the box in x and y: (0, 0, z_lo) and
+        (L_x, L_y, z_hi - z_lo) for the whole box.
 
     Returns
     -------
@@ -100,9 +101,9 @@ def rsa_batch(cand, out, n_done, head, nxt, pos, m, geo, box, z_lo, z_hi):
     for k in range(cand.shape[0]):
         if n_done >= n_want:
             break
-        px = cand[k, 0] * L_x
-        py = cand[k, 1] * L_y
-        pz = z_lo + cand[k, 2] * (z_hi - z_lo)
+        px = lo[0] + cand[k, 0] * span[0]
+        py = lo[1] + cand[k, 1] * span[1]
+        pz = lo[2] + cand[k, 2] * span[2]
         ix = min(int(px / cx), nx - 1)
         iy = min(int(py / cy), ny - 1)
         iz = int((pz - z0) // 1.0)
