@@ -139,7 +139,8 @@ def traffic(comm, tiles, grid):
         write_tiles(path, tiles)
     comm.Barrier()
     cfg = config.load(None, ["run.max_steps=600", f"box.L_x={6.0 * tiles}", "box.L_y=6.0", f'run.initial_file="{path}"',
-                             "output.progress_every=100000", "integration.skin=0.05", f"decomp.grid={list(grid)}"])
+                             "output.progress_every=100000", "integration.skin=0.05", f"decomp.grid={list(grid)}",
+                             "output.bulk_at_end=false"])
     r = Run.new(cfg, os.path.join(base, "run"), comm, quiet=True)
     before = r.domain.sent
     r.run()
@@ -148,7 +149,10 @@ def traffic(comm, tiles, grid):
     out = dict(refresh=sent["refresh"] / 600, reductions=sent["reductions"] / 600,
                exchanges=sent["exchanges"] / rebuilds, pickled=sent["pickled"] / rebuilds, rows=r.state.n_rows,
                memory=r.engine.memory_bytes())
+    before = r.domain.sent
     r.finish()
+    # the end: the digest by chunks of ids (each rank's rows once a field), no gather of the pile
+    out["end"] = sum(r.domain.sent.values()) - sum(before.values())
     return {k: comm.allreduce(v, op=MPI.MAX) for k, v in out.items()}
 
 
@@ -157,7 +161,8 @@ def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm):
     against two stacks side by side on 4 (4 x 1 x 1): each rank holds the same box of the same stack, so
     its refresh, reductions, rebuild exchanges, rows and arrays stay put, within what the rank count itself
     adds (the all-to-all of counts and the balance's per-rank numbers); an all-to-all of the rows, a gather
-    of every height or a halo of the whole bed would double them."""
+    of every height or a halo of the whole bed would double them. So do the end's messages without the
+    bulk measurement (the digest by chunks of ids, ``checkpoint.digest_parts``)."""
     if comm.Get_size() != 4:
         return
     half = comm.Split(comm.Get_rank() // 2, comm.Get_rank())
@@ -169,8 +174,9 @@ def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm):
     assert small["refresh"] > 0 and small["exchanges"] > 0 and small["pickled"] > 0
     for k in ("refresh", "reductions", "rows", "memory"):
         assert 0.8 <= large[k] / small[k] <= 1.25, (k, small[k], large[k])
-    # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds)
-    for k in ("exchanges", "pickled"):
+    # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds); the end's
+    # (``output.bulk_at_end = false``): the rank's own rows and the ids' histogram
+    for k in ("exchanges", "pickled", "end"):
         assert large[k] <= 1.25 * small[k] + 64 * comm.Get_size(), (k, small[k], large[k])
 
 

@@ -65,9 +65,12 @@ def test_the_estimate_bounds_a_small_runs_measured_peak(tmp_path):
     cfg = mpdem.load_config(**{"pour.N": n, "box.L_x": 10.0, "box.L_y": 10.0, "run.max_steps": 1})
     est = footprint.of_config(cfg, 1).rank0() - footprint.BASE
     # the estimate is a settled pile's (full lists, every contact slot); a fresh pour's are fewer: the
-    # arrays' part within a factor 2 above what the run grew by, never below it (the process before them,
-    # BASE, is some 230 MB with numba's cache warm and 410 MB where the kernels were just compiled)
-    assert grown <= est <= 2 * grown, (grown, est)
+    # arrays' part within a factor 2.5 above what the run grew by, never below it (the process before them,
+    # BASE, is some 230 MB with numba's cache warm and 410 MB where the kernels were just compiled). The
+    # factor was 2 while the end held a second copy of the whole state (the fresh pour's peak was there,
+    # 64 MB and more); since the end keeps only the positions, the peak is the run's, 62 MB against the
+    # settled pile's 127 MB
+    assert grown <= est <= 2.5 * grown, (grown, est)
     # the log says it first
     first = (tmp_path / "run" / "log.txt").read_text().splitlines()[0]
     assert first.startswith(f"memory: pour.N = {n} spheres (+ bed) on 1 rank(s) need about")

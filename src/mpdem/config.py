@@ -242,6 +242,11 @@ SCHEMA = (
     _k("output", "snapshot_every", 0,
        "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only "
        "the final state", int, restart=True, physics=False),
+    _k("output", "bulk_at_end", True,
+       "measure the bulk (z, phi) at the run's end for summary.json, on rank 0 from the final positions gathered "
+       "there (some 250 bytes a sphere of the whole pile with the contact search); false: no bulk measurement in "
+       "the summary (`mpdem analyze RUN` makes it from final.h5 later), so that no rank holds the whole pile at "
+       "the end", bool, restart=True, physics=False),
     _k("analysis", "margin_bottom", -1.0,
        "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 "
        "(h - z_bed), 3, 10)", restart=True, physics=False),

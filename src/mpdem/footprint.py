@@ -12,8 +12,10 @@ times counts from the pile's geometry, in three phases whose largest sets the ne
   of the tiles and holds its share of the rows, and the whole bed;
 - the run: the rank's rows and ghosts with their lists, contact slots, near lists and the pair
   store of a settled pile, and the copy of its rows a state file is written from;
-- the end (rank 0): the whole final state gathered for the summary (``Domain.gather_arrays``:
-  the parts, their concatenation and the rows sorted by id) and the bulk's contact search.
+- the end (rank 0): the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``)
+  and, with ``output.bulk_at_end``, the whole pile's positions gathered for the bulk measurement
+  (``Domain.gather_arrays``: the parts, their concatenation and the rows sorted by id) and its
+  contact search.
 
 List entries and contacts per sphere are those of the densest packing of equal spheres,
 PHI_MAX = 0.74, within the list's reach r: 8 PHI_MAX r^3 neighbours (a settled pile of the paper
@@ -129,7 +131,7 @@ class Estimate:
 
 
 def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_height=0.0, from_file=False,
-             tile_cells=None):
+             tile_cells=None, bulk_at_end=True):
     """The memory of a run of ``n_mobile`` + ``n_bed`` spheres on ``ranks`` ranks.
 
     Parameters
@@ -149,6 +151,9 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
         A tiled pour (``pour.insertion = "tiles"``): the cells of the insertion's cell lists of its
         largest tile; each rank fills its share of the tiles and keeps its share of the rows, beside
         the whole bed. None: every rank inserts the whole pour.
+    bulk_at_end : bool
+        Rank 0 gathers the whole pile's positions at the end for the bulk measurement
+        (``output.bulk_at_end``).
 
     Returns
     -------
@@ -198,12 +203,21 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
     # a state file is written from a copy of the rank's rows sorted by id, with its slots
     write = own * (stored + contacts * slot)
     run = rows * row + lists + kept_pairs + slots + write
-    # -- the end on rank 0: the whole final state, gathered (the parts, joined, sorted) and searched
-    # for contacts (a pair of ids, a separation and a distance a contact, and the search's cells)
-    whole_final = n * (stored + contacts * slot)
-    # (on one rank the rows are the final state: no copies)
-    copies = 3 if P > 1 else 1
-    end = rows * row + lists + copies * whole_final + n * (contacts / 2 * (2 * 8 + 4 * f8) + 6 * 8)
+    # -- the end on rank 0: the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``:
+    # the chunk's rows with their slots, received, then put in order); with the bulk measurement
+    # (``bulk_at_end``) the whole pile's ids, positions and flags, gathered (the parts, joined, sorted), and
+    # searched for contacts (a pair of ids, a separation and a distance a contact, and the search's cells)
+    from .io.checkpoint import DIGEST_CHUNK
+    # a field of a chunk at a time: the largest per row is a contact slot's Delta s, with the rows' ids and counts
+    chunk = min(n, DIGEST_CHUNK) * 3 * (16 + contacts * 3 * f8) if P > 1 else 0.0
+    # the rank's rows sorted by id for the digest, then the final state file written from a copy of them
+    then = max(own * (stored + contacts * slot) + chunk, write)
+    if bulk_at_end:
+        placed = field_bytes([state.FIELD[k] for k in ("id", "x", "fixed")])
+        # (on one rank the rows are the final state: no copies), then the contact search
+        gathered = (3 if P > 1 else 1) * n * placed
+        then = max(then, gathered + write, gathered + n * (contacts / 2 * (2 * 8 + 4 * f8) + 6 * 8))
+    end = rows * row + lists + then
     return Estimate(n, P, float(setup), float(run), float(end))
 
 
@@ -229,8 +243,9 @@ def of_config(cfg, ranks, n_file=None):
     of about ``bed.density_max`` per d^2), or ``n_file`` spheres of an initial file (None: a pour)."""
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     skin, near_skin = cfg.integration.skin, cfg.integration.near_skin
+    at_end = cfg.output.bulk_at_end
     if n_file is not None:
-        return estimate(n_file, 0, ranks, L_x, L_y, skin, near_skin, from_file=True)
+        return estimate(n_file, 0, ranks, L_x, L_y, skin, near_skin, from_file=True, bulk_at_end=at_end)
     from .build import insertion_height, pour_tiles
     n_bed = int(math.ceil(cfg.bed.density_max * L_x * L_y))
     if cfg.pour.insertion == "tiles":
@@ -238,9 +253,9 @@ def of_config(cfg, ranks, n_file=None):
         wx, wy, wz = tiles.w
         cells = INSERT_CELLS * (wx + 1.0) * (wy + 1.0) * (wz + 5.0)
         return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=tiles.H,
-                        tile_cells=cells)
+                        tile_cells=cells, bulk_at_end=at_end)
     H = insertion_height(cfg.pour.N, L_x, L_y, cfg.pour.phi_i)
-    return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=H)
+    return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=H, bulk_at_end=at_end)
 
 
 def parse_bytes(text):

@@ -436,14 +436,21 @@ class Run:
         dict or None
             The summary on rank 0 (also in RUN/summary.json), None elsewhere.
         """
-        # collectives first, in the same order on every rank
-        arrays = self.domain.gather_arrays(checkpoint.gather_state(self.state))
+        # collectives first, in the same order on every rank: the digest by chunks of ids (no rank holds
+        # the whole state), the positions on rank 0 for the bulk measurement where it is made
+        part = checkpoint.gather_state(self.state)
+        digest = checkpoint.digest_parts(part, self.domain.net)
+        positions = None
+        if self.cfg.output.bulk_at_end:
+            positions = self.domain.gather_arrays({"id": part["id"], "x": part["x"], "fixed": part["fixed"]})
+        del part
         migrated, rebalances = self.counters()
         path = self.snapshots.write(final=True)
         try:
             if self.rank != 0:
                 return None
-            return summary.write(self.end(migrated, rebalances), arrays, self.cfg, self.out, path, self.log)
+            return summary.write(self.end(migrated, rebalances), digest, positions, self.cfg, self.out, path,
+                                 self.log)
         finally:
             self.log.close()
 

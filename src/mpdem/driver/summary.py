@@ -72,14 +72,17 @@ def finish(run):
     return run.finish()
 
 
-def write(end, arrays, cfg, out, final, log):
+def write(end, digest, positions, cfg, out, final, log):
     """Write summary.json and log the end and the bulk z and phi (rank 0).
 
     Parameters
     ----------
     end : End
-    arrays : dict of arrays
-        The whole final state, sorted by id (``Domain.gather_arrays``).
+    digest : str
+        ``checkpoint.digest`` of the whole final state (``checkpoint.digest_parts``).
+    positions : dict of arrays or None
+        The whole final state's ``x`` (n, 3) [d] and ``fixed`` (n,), for the bulk measurement; None
+        where ``output.bulk_at_end`` is off (no bulk measurement: ``mpdem analyze`` makes it later).
     cfg : Config
     out : str
         The run directory.
@@ -100,7 +103,7 @@ def write(end, arrays, cfg, out, final, log):
                "ns_per_particle_step": ns, "ranks": end.ranks,
                "comm_share": end.comm_seconds / max(end.wall, 1e-9),
                "migrated": end.migrated, "rebalances": end.rebalances,
-               "digest": checkpoint.digest(arrays)}
+               "digest": digest}
     par = ""
     if end.parallel:
         par = (f"; {end.ranks} ranks, communication {100 * summary['comm_share']:.0f}%, "
@@ -108,9 +111,16 @@ def write(end, arrays, cfg, out, final, log):
     log(f"end: {'converged' if end.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
         f"{steps} steps, t = {end.time:.4g}, E_k/N = {end.ek:.3e}, wall {end.wall:.1f} s "
         f"({ns:.0f} ns per particle-step{par})")
+    if positions is None:
+        log(f"bulk: not measured at the end (output.bulk_at_end = false): `python -m mpdem analyze {out}` "
+            f"measures it from the final state")
+        rundir.write_json(os.path.join(out, "summary.json"), summary)
+        log(f"wrote {final}")
+        _max_steps_line(end, cfg, out, log)
+        return summary
     try:
         a = cfg.analysis
-        bulk = analysis.bulk_summary(arrays["x"], arrays["fixed"], end.L_x, end.L_y, cfg.contact.mu,
+        bulk = analysis.bulk_summary(positions["x"], positions["fixed"], end.L_x, end.L_y, cfg.contact.mu,
                                      a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile,
                                      rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
                                      force_fraction=a.force_fraction, band_width=a.band_width,
@@ -124,12 +134,17 @@ def write(end, arrays, cfg, out, final, log):
         log.warn(f"no bulk measurement: {e}")
     rundir.write_json(os.path.join(out, "summary.json"), summary)
     log(f"wrote {final}")
+    _max_steps_line(end, cfg, out, log)
+    return summary
+
+
+def _max_steps_line(end, cfg, out, log):
+    """The closing line of a run that reached run.max_steps."""
     if not end.converged:
         # the exit code that follows is a result, not a crash (mpiexec reports it at length)
         log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
             f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
             f"--set run.max_steps=...`")
-    return summary
 
 
 def recover(out, final, status):

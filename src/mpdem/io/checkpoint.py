@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import math
 import os
 import re
 import signal
@@ -159,17 +160,106 @@ def digest(arrays):
     (little endian; narrow integers as int64).
     """
     h = hashlib.sha256()
-    for f in state.stored():
-        if f.per == state.PAIR or (f.optional and f.name not in arrays):
-            continue
-        a = np.ascontiguousarray(arrays[f.name])
-        if f.array_dtype != np.dtype(f.dtype):
-            a = a.astype(f.array_dtype)
-        a = a.astype(a.dtype.newbyteorder("<"), copy=False)
+    for f in _digest_fields(arrays):
+        a = _digest_bytes(f, arrays[f.name])
         h.update(f.name.encode())
         h.update(str(a.shape).encode())
         h.update(a.tobytes())
     return h.hexdigest()
+
+
+def _digest_fields(arrays):
+    """The fields ``digest`` hashes, in its order: the stored per-particle and per-contact ones (optional
+    ones when ``arrays`` has them)."""
+    return [f for f in state.stored() if f.per != state.PAIR and not (f.optional and f.name not in arrays)]
+
+
+def _digest_bytes(f, a):
+    """Field ``f``'s array ``a`` as ``digest`` hashes it: its stored dtype (narrow integers as int64),
+    little endian, contiguous."""
+    a = np.ascontiguousarray(a)
+    if f.array_dtype != np.dtype(f.dtype):
+        a = a.astype(f.array_dtype)
+    return a.astype(a.dtype.newbyteorder("<"), copy=False)
+
+
+# rows of the whole state that ``digest_parts`` brings to rank 0 at a time (about this many)
+DIGEST_CHUNK = 1 << 18
+# bins of the ids' histogram that cuts the ids into chunks (``digest_parts``)
+DIGEST_BINS = 1 << 15
+
+
+def digest_parts(part, net, chunk=DIGEST_CHUNK):
+    """``digest`` of the whole state held by the ranks of ``net`` in parts, without holding it anywhere
+    (collective): the hex digest on rank 0, None elsewhere.
+
+    ``part`` is this rank's rows sorted by id (``gather_state``); together the parts hold each row once.
+    The ids are cut into chunks of about ``chunk`` rows (a histogram of ``DIGEST_BINS`` equal ranges of
+    ids, summed exactly); for each field in ``digest``'s order, each chunk's rows come to rank 0 with
+    their ids (and slot counts), where they are put in id order and hashed, so rank 0 holds a chunk at a
+    time and every other rank sends each of its rows once a field. Every rank must hold the same fields.
+    """
+    if not net.parallel:
+        return digest(part)
+    ids = np.asarray(part["id"], np.int64)
+    n = len(ids)
+    counts = np.asarray(part["count"], np.int64) if "count" in part else np.zeros(n, np.int64)
+    N, M = (int(v) for v in net.sum_int(np.array([n, int(counts.sum())], np.int64)))
+    cuts = _id_chunks(ids, net, N, chunk)
+    rows = np.searchsorted(ids, cuts)             # each cut's first row here
+    slot0 = np.concatenate([[0], np.cumsum(counts)])
+    h = hashlib.sha256() if net.rank == 0 else None
+    for f in _digest_fields(part):
+        a = _digest_bytes(f, part[f.name])
+        per_row = f.per == state.PARTICLE
+        if h is not None:
+            h.update(f.name.encode())
+            h.update(str(((N if per_row else M),) + a.shape[1:]).encode())
+        for k in range(len(cuts) - 1):
+            r0, r1 = int(rows[k]), int(rows[k + 1])
+            piece = a[r0:r1] if per_row else a[slot0[r0]:slot0[r1]]
+            got = net.gather((ids[r0:r1], counts[r0:r1], piece), root=0)
+            if h is not None:
+                h.update(np.ascontiguousarray(_in_id_order(got, per_row)).tobytes())
+    return h.hexdigest() if h is not None else None
+
+
+def _id_chunks(ids, net, N, chunk):
+    """Increasing id bounds c_0 < c_1 < ... (one more than the chunks): chunk k holds the ids in
+    [c_k, c_k+1), about ``chunk`` rows of the ``N`` the ranks hold (a chunk is at least one histogram
+    bin, so a bin of more rows makes a larger chunk). Collective; the same bounds on every rank."""
+    if N == 0:
+        return np.zeros(1, np.int64)
+    ext = net.max_many(np.array([-float(ids.min()) if len(ids) else -math.inf,
+                                 float(ids.max()) if len(ids) else -math.inf]))
+    lo, hi = int(-ext[0]), int(ext[1])
+    width = -(-(hi - lo + 1) // DIGEST_BINS)        # ids per bin, rounded up (integer: no overflow)
+    hist = np.asarray(net.sum_int(np.bincount((ids - lo) // width, minlength=DIGEST_BINS).astype(np.int64)))
+    bounds, run = [lo], 0
+    for b, c in enumerate(hist):
+        run += int(c)
+        if run >= chunk and b < DIGEST_BINS - 1:
+            bounds.append(lo + (b + 1) * width)
+            run = 0
+    bounds.append(hi + 1)
+    return np.array(bounds, np.int64)
+
+
+def _in_id_order(got, per_row):
+    """The pieces of one chunk (each rank's ids, slot counts and field piece) as one array, its rows (or
+    its rows' slots, in row order) in id order."""
+    ids = np.concatenate([g[0] for g in got])
+    pieces = np.concatenate([g[2] for g in got])
+    order = np.argsort(ids, kind="stable")
+    if per_row:
+        return pieces[order]
+    counts = np.concatenate([g[1] for g in got])
+    start = np.concatenate([[0], np.cumsum(counts)])[:-1]
+    c = counts[order]
+    # each row's slots, rows in id order: start of its slots, repeated, plus the slot's place in its row
+    first = np.repeat(start[order], c)
+    within = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
+    return pieces[first + within]
 
 
 def gather_state(st):
