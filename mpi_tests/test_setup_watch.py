@@ -51,21 +51,23 @@ class LateSignal(Watch):
         return super().__call__(line, everywhere)
 
 
-def _tiled(monkeypatch):
+def _tiled(monkeypatch, tile=4):
     from mpdem import build, config
     # small batches, so that the ranks' runs of tiles take different numbers of rounds
     monkeypatch.setattr(build, "RSA_BATCH", 64)
     cfg = config.load(None, ["box.L_x=10", "box.L_y=10", "pour.N=400", "pour.phi_i=0.1", "pour.insertion=tiles",
-                             "pour.tile=4", "run.max_steps=1"])
+                             f"pour.tile={tile}", "run.max_steps=1"])
     return cfg, build.Bed(build.insert_random(build.rng(1, 9), 30, 10.0, 10.0, 0.5, 1.0))
 
 
-def test_the_ranks_fill_their_tiles_in_rounds_until_the_last_is_done(comm, monkeypatch):
+@pytest.mark.parametrize("tile", [4, 8])
+def test_the_ranks_fill_their_tiles_in_rounds_until_the_last_is_done(comm, monkeypatch, tile):
     """A tiled pour: each rank fills its own run of tiles a batch a round, every rank looking each round,
-    until the last rank is done (runs of different lengths: no rank leaves the others waiting)."""
+    until the last rank is done (runs of different lengths: no rank leaves the others waiting; with
+    tiles of 8 d, 2 tiles: on 3 and 4 ranks some rank fills none)."""
     from mpdem.initial import pour_tiled
     net = Channel(comm)
-    cfg, b = _tiled(monkeypatch)
+    cfg, b = _tiled(monkeypatch, tile)
     w = LateSignal(net, at=0)
     rows, _ = pour_tiled(cfg, b, net, lambda line: None, w)
     looks = comm.allgather(w.looks)

@@ -100,20 +100,28 @@ def test_without_parallel_hdf5_rank_0_writes_the_same_file(comm, landed, monkeyp
 
 @pytest.mark.parametrize("layout", ["blocks", "scattered", "one rank empty"])
 @pytest.mark.parametrize("chunk", [1, 7, 1 << 18])
-def test_the_digest_by_chunks_of_ids_is_the_whole_states(comm, layout, chunk):
-    """``checkpoint.digest_parts``: each rank's id-sorted rows with their contact slots, brought to rank 0 a
-    chunk of ids at a time, hash as ``digest`` of the whole state does (ids with gaps, rows of no slot,
-    chunks of one row, and a rank holding nothing)."""
+@pytest.mark.parametrize("spread", ["dense", "wide", "an outlier"])
+def test_the_digest_by_chunks_of_ids_is_the_whole_states(comm, layout, chunk, spread):
+    """``checkpoint.digest_parts``: each rank's id-sorted rows with their contact slots (and wall
+    histories), brought to rank 0 a chunk of ids at a time, hash as ``digest`` of the whole state does:
+    ids with gaps, ids spread wide (ranges of many ids), ids above 2^53 (no float can tell them apart),
+    rows of no slot, chunks of one row, and a rank holding nothing."""
     from mpdem.io import checkpoint
     from mpdem.parallel import Channel
     rng = np.random.default_rng(11)
     n = 50
-    ids = np.sort(rng.choice(10_000, n, replace=False)).astype(np.int64)
+    if spread == "dense":
+        ids = rng.choice(10_000, n, replace=False)
+    elif spread == "wide":
+        ids = rng.choice(10_000_000, n, replace=False)
+    else:
+        ids = np.r_[rng.choice(100, n - 2, replace=False), 2**53 + 1, 2**53 + 3]
+    ids = np.sort(ids).astype(np.int64)
     count = rng.integers(0, 4, n)
     whole = {"id": ids, "x": rng.random((n, 3)), "v": rng.random((n, 3)), "omega": rng.random((n, 3)),
              "f": rng.random((n, 3)), "torque": rng.random((n, 3)), "fixed": (rng.random(n) < 0.2).astype(np.uint8),
              "count": count.astype(np.int32), "partner": rng.integers(0, 10_000, count.sum()).astype(np.int64),
-             "ds": rng.random((count.sum(), 3))}
+             "ds": rng.random((count.sum(), 3)), "wall_ds": rng.random((n, 3))}
     P, r = comm.Get_size(), comm.Get_rank()
     if layout == "blocks":
         owner = np.arange(n) * P // n
@@ -125,6 +133,7 @@ def test_the_digest_by_chunks_of_ids_is_the_whole_states(comm, layout, chunk):
     part = select_rows(whole, np.flatnonzero(owner == r))
     got = checkpoint.digest_parts(part, Channel(comm), chunk=chunk)
     if r == 0:
+        assert "wall_ds" in [f.name for f in checkpoint._digest_fields(whole)]
         assert got == checkpoint.digest(whole)
     else:
         assert got is None

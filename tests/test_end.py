@@ -9,6 +9,7 @@ import os
 
 import mpdem
 from mpdem import config, footprint
+from mpdem.io import checkpoint
 
 SETS = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=120", "pour.phi_i=0.3", "run.max_steps=1500",
         "output.progress_every=100000"]
@@ -20,6 +21,8 @@ def test_without_the_bulk_at_the_end_the_summary_has_the_digest_and_says_how_to_
     sa = json.loads((tmp_path / "a" / "summary.json").read_text())
     sb = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert a.digest == b.digest == sa["digest"] == sb["digest"]
+    # the digest is the final state file's (written first, then the digest of the rows that it holds)
+    assert checkpoint.digest(checkpoint.read_state(str(tmp_path / "b" / "final.h5"))[0]) == sb["digest"]
     assert "bulk" in sa and "bulk" not in sb
     log = (tmp_path / "b" / "log.txt").read_text()
     said = "bulk: not measured at the end (output.bulk_at_end = false): `python -m mpdem analyze"

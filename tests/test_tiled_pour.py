@@ -10,7 +10,7 @@ import pytest
 
 from mpdem import build, config, footprint, initial
 from mpdem.analysis import find_contacts
-from mpdem.errors import ConfigError
+from mpdem.errors import ConfigError, InputError
 
 L, N = 11.0, 900
 
@@ -107,3 +107,17 @@ def test_a_tiled_pours_set_up_needs_a_share_of_the_pile_on_each_rank():
     assert setup("tiles", 2_000_000, 8) == pytest.approx(setup("tiles", 1_000_000, 4), rel=0.02)
     assert setup("whole", 2_000_000, 8) > 1.6 * setup("whole", 1_000_000, 4)
     assert setup("tiles", 2_000_000, 8) < 0.5 * setup("whole", 2_000_000, 8)
+
+
+def test_a_tile_that_cannot_be_filled_is_one_line_naming_the_pour(monkeypatch):
+    """A tile whose random insertion gives up (forced here: no candidate beyond the first batch) is one
+    error naming the choice and phi_i, said by every rank together (its ``agreed``)."""
+    b, real = bed(), build.rsa_batches
+
+    def giving_up(gen, out, box, lo, span, obstacles=None, max_tries=2000, batch=None):
+        return real(gen, out, box, lo, span, obstacles, 0, 4)
+    monkeypatch.setattr(build, "rsa_batches", giving_up)
+    with pytest.raises(InputError, match=r"^pour: a tile's random insertion could not place its spheres "
+                                         r"\(pour.insertion = 'tiles': 900 spheres in \d+ tiles at pour.phi_i = 0.2\); "
+                                         r"lower pour.phi_i$"):
+        initial.pour_tiled(cfg_of(), b, Share(0, 1), lambda line: None)

@@ -244,9 +244,10 @@ SCHEMA = (
        "the final state", int, restart=True, physics=False),
     _k("output", "bulk_at_end", True,
        "measure the bulk (z, phi) at the run's end for summary.json, on rank 0 from the final positions gathered "
-       "there (some 250 bytes a sphere of the whole pile with the contact search); false: no bulk measurement in "
-       "the summary (`mpdem analyze RUN` makes it from final.h5 later), so that no rank holds the whole pile at "
-       "the end", bool, restart=True, physics=False),
+       "there (33 bytes a sphere of the whole pile, some 250 with the contact search); false: no bulk measurement "
+       "in the summary (`mpdem analyze RUN` makes it from final.h5 later), so that no rank holds the whole pile "
+       "at the end (with parallel HDF5: without it rank 0 writes every state file for all)", bool, restart=True,
+       physics=False),
     _k("analysis", "margin_bottom", -1.0,
        "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 "
        "(h - z_bed), 3, 10)", restart=True, physics=False),
@@ -662,7 +663,8 @@ def resolve(raw):
         warns.append(f"pour.phi_i = {phi:g} is above the paper's range (0.02 to 0.3)")
     need("pour.N", vals["pour.N"] >= 1, "N >= 1")
     need("pour.K0", vals["pour.K0"] >= 0, "K0 >= 0")
-    need("pour.tile", vals["pour.tile"] >= 4, "tile >= 4 d (a tile's centres keep d/2 from its faces)")
+    if vals["pour.insertion"] == "tiles":
+        need("pour.tile", vals["pour.tile"] >= 4, "tile >= 4 d (a tile's centres keep d/2 from its faces)")
     need("run.max_steps", vals["run.max_steps"] > 0, "max_steps > 0")
     need("run.seed", vals["run.seed"] >= 0, "seed >= 0")
     need("box.gravity", vals["box.gravity"] >= 0, "gravity >= 0 (it points along -z, tilted by box.incline)")

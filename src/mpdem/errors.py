@@ -38,7 +38,11 @@ class SweepError(ConfigError):
 
 
 class InputError(MpdemError, ValueError):
-    """An initial configuration that cannot be run."""
+    """An initial configuration that cannot be run (``agreed``: raised by every rank together)."""
+
+    def __init__(self, message, agreed=False):
+        super().__init__(message)
+        self.agreed = agreed
 
 
 class StateFileError(MpdemError, ValueError):

@@ -106,16 +106,20 @@ class Estimate:
     setup, run, end : float
         Peak bytes of the set-up (every rank), the run (a rank of the settled pile) and the end
         (rank 0) [bytes].
+    through_root : float
+        Bytes rank 0 holds more while it writes a state file for every rank (several ranks without
+        parallel HDF5: ``checkpoint._write_through_root``), in the run and at the end [bytes].
     """
     n: int
     ranks: int
     setup: float
     run: float
     end: float
+    through_root: float = 0.0
 
     def rank0(self):
         """Bytes rank 0 needs at its peak, ``BASE`` included [bytes]."""
-        return BASE + max(self.setup, self.run, self.end)
+        return BASE + max(self.setup, self.run + self.through_root, self.end + self.through_root)
 
     def other(self):
         """Bytes another rank needs at its peak, ``BASE`` included [bytes]."""
@@ -123,7 +127,8 @@ class Estimate:
 
     def peak_phase(self):
         """The phase of rank 0's peak: "the set-up", "the run" or "the end"."""
-        return max((self.setup, "the set-up"), (self.run, "the run"), (self.end, "the end"))[1]
+        return max((self.setup, "the set-up"), (self.run + self.through_root, "the run"),
+                   (self.end + self.through_root, "the end"))[1]
 
     def node(self, local):
         """Bytes of ``local`` ranks of one node, rank 0 among them [bytes]."""
@@ -131,7 +136,7 @@ class Estimate:
 
 
 def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_height=0.0, from_file=False,
-             tile_cells=None, bulk_at_end=True):
+             tiles=None, bulk_at_end=True, parallel_files=True):
     """The memory of a run of ``n_mobile`` + ``n_bed`` spheres on ``ranks`` ranks.
 
     Parameters
@@ -147,13 +152,16 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
         Height of a pour's insertion region [d] (0: no insertion, a pile read from a file).
     from_file : bool
         The rows come from a state file with their contact slots (each rank reads a share).
-    tile_cells : float or None
-        A tiled pour (``pour.insertion = "tiles"``): the cells of the insertion's cell lists of its
-        largest tile; each rank fills its share of the tiles and keeps its share of the rows, beside
-        the whole bed. None: every rank inserts the whole pour.
+    tiles : (float, float, float) or None
+        A tiled pour (``pour.insertion = "tiles"``): the most mobile spheres a rank fills (its run of
+        tiles), the most a tile holds, and the cells of the insertion's cell lists of a tile; each rank
+        keeps its share of the rows, beside the whole bed. None: every rank inserts the whole pour.
     bulk_at_end : bool
         Rank 0 gathers the whole pile's positions at the end for the bulk measurement
         (``output.bulk_at_end``).
+    parallel_files : bool
+        h5py writes state files with parallel HDF5 (``checkpoint.parallel_hdf5``); without it rank 0
+        gathers every rank's rows to write each one.
 
     Returns
     -------
@@ -173,11 +181,12 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
     if from_file:
         # each rank reads its share with the slots, then the rows travel to their owners
         setup = 2 * own * (stored + contacts * slot) + CAPACITY * own * row
-    elif tile_cells is not None:
-        # the whole bed (its centres); this rank's share of new rows, the tile's cells, then the rows sent
+    elif tiles is not None:
+        # the whole bed (its centres); this rank's share of new rows, a tile's cells, then the rows sent
         # to their owners (the parts, the rows received, merged and sorted by id) and its State
-        share = n_mobile / P + n_bed / P
-        filling = n_bed * 3 * f8 + share * initial + n_mobile / P * (3 * f8 + 8) + tile_cells * 8
+        filled, per_tile, tile_cells = tiles
+        share = filled + n_bed / P
+        filling = n_bed * 3 * f8 + share * initial + per_tile * (3 * f8 + 8) + tile_cells * 8
         setup = n_bed * 3 * f8 + max(filling, 3 * share * initial + CAPACITY * own * row)
     else:
         whole = n * initial
@@ -218,7 +227,9 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
         gathered = (3 if P > 1 else 1) * n * placed
         then = max(then, gathered + write, gathered + n * (contacts / 2 * (2 * 8 + 4 * f8) + 6 * 8))
     end = rows * row + lists + then
-    return Estimate(n, P, float(setup), float(run), float(end))
+    # without parallel HDF5, rank 0 writes each state file for all: every rank's rows (the parts, joined)
+    through = 2 * n * (stored + contacts * slot) if P > 1 and not parallel_files else 0.0
+    return Estimate(n, P, float(setup), float(run), float(end), float(through))
 
 
 def initial_count(cfg, lammps_table=None):
@@ -243,19 +254,23 @@ def of_config(cfg, ranks, n_file=None):
     of about ``bed.density_max`` per d^2), or ``n_file`` spheres of an initial file (None: a pour)."""
     L_x, L_y = cfg.box.L_x, cfg.box.L_y
     skin, near_skin = cfg.integration.skin, cfg.integration.near_skin
-    at_end = cfg.output.bulk_at_end
+    from .io.checkpoint import parallel_hdf5
+    opts = dict(bulk_at_end=cfg.output.bulk_at_end, parallel_files=parallel_hdf5())
     if n_file is not None:
-        return estimate(n_file, 0, ranks, L_x, L_y, skin, near_skin, from_file=True, bulk_at_end=at_end)
+        return estimate(n_file, 0, ranks, L_x, L_y, skin, near_skin, from_file=True, **opts)
     from .build import insertion_height, pour_tiles
     n_bed = int(math.ceil(cfg.bed.density_max * L_x * L_y))
     if cfg.pour.insertion == "tiles":
-        tiles = pour_tiles(cfg.pour.N, L_x, L_y, 0.0, cfg.pour.phi_i, cfg.pour.tile)
-        wx, wy, wz = tiles.w
+        t = pour_tiles(cfg.pour.N, L_x, L_y, 0.0, cfg.pour.phi_i, cfg.pour.tile)
+        wx, wy, wz = t.w
+        most = int(t.counts.max())
+        # a rank's run of tiles: ceil(T / P) of them at most (initial.pour_tiled)
+        filled = min(cfg.pour.N, -(-len(t.counts) // max(1, int(ranks))) * most)
         cells = INSERT_CELLS * (wx + 1.0) * (wy + 1.0) * (wz + 5.0)
-        return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=tiles.H,
-                        tile_cells=cells, bulk_at_end=at_end)
+        return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=t.H,
+                        tiles=(filled, most, cells), **opts)
     H = insertion_height(cfg.pour.N, L_x, L_y, cfg.pour.phi_i)
-    return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=H, bulk_at_end=at_end)
+    return estimate(cfg.pour.N, n_bed, ranks, L_x, L_y, skin, near_skin, insert_height=H, **opts)
 
 
 def parse_bytes(text):

@@ -235,14 +235,21 @@ def pour_tiled(cfg, b, net, log, watch=None):
                 yield placed + done
             placed += int(tiles.counts[k])
 
-    work, placed, going = batches(), 0, True
+    work, placed, going, failed = batches(), 0, True, False
     while True:
         if going:
-            placed = next(work, None)
+            try:
+                placed = next(work, None)
+            except InputError:      # a tile that cannot hold its spheres: said on every rank together
+                failed, placed = True, None
             going = placed is not None
             placed = hi - lo if placed is None else placed
-        total = net.sum_int(np.array([int(going), placed])) if net is not None and net.parallel else (
-            np.array([int(going), placed]))
+        mine = np.array([int(going), placed, int(failed)])
+        total = net.sum_int(mine) if net is not None and net.parallel else mine
+        if total[2]:
+            raise InputError(f"pour: a tile's random insertion could not place its spheres (pour.insertion = "
+                             f"'tiles': {N} spheres in {T} tiles at pour.phi_i = {cfg.pour.phi_i:g}); lower "
+                             f"pour.phi_i", agreed=net is not None and net.parallel)
         watch(f"pour: {int(total[1])} of {N} spheres placed", everywhere=True)
         if not total[0]:
             break

@@ -436,8 +436,10 @@ class Run:
         dict or None
             The summary on rank 0 (also in RUN/summary.json), None elsewhere.
         """
-        # collectives first, in the same order on every rank: the digest by chunks of ids (no rank holds
-        # the whole state), the positions on rank 0 for the bulk measurement where it is made
+        # collectives first, in the same order on every rank: the final state file (first: what ends the
+        # process after it leaves the run whole), the digest by chunks of ids (no rank holds the whole
+        # state), the positions on rank 0 for the bulk measurement where it is made
+        path = self.snapshots.write(final=True)
         part = checkpoint.gather_state(self.state)
         digest = checkpoint.digest_parts(part, self.domain.net)
         positions = None
@@ -445,7 +447,6 @@ class Run:
             positions = self.domain.gather_arrays({"id": part["id"], "x": part["x"], "fixed": part["fixed"]})
         del part
         migrated, rebalances = self.counters()
-        path = self.snapshots.write(final=True)
         try:
             if self.rank != 0:
                 return None

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import errno
 import hashlib
-import math
 import os
 import re
 import signal
@@ -185,8 +184,9 @@ def _digest_bytes(f, a):
 
 # rows of the whole state that ``digest_parts`` brings to rank 0 at a time (about this many)
 DIGEST_CHUNK = 1 << 18
-# bins of the ids' histogram that cuts the ids into chunks (``digest_parts``)
-DIGEST_BINS = 1 << 15
+# ranges of the ids' first histogram that cuts the ids into chunks (``digest_parts``), and of each
+# later cut of a range that holds more than a chunk
+DIGEST_BINS, DIGEST_REFINE = 1 << 15, 64
 
 
 def digest_parts(part, net, chunk=DIGEST_CHUNK):
@@ -194,8 +194,8 @@ def digest_parts(part, net, chunk=DIGEST_CHUNK):
     (collective): the hex digest on rank 0, None elsewhere.
 
     ``part`` is this rank's rows sorted by id (``gather_state``); together the parts hold each row once.
-    The ids are cut into chunks of about ``chunk`` rows (a histogram of ``DIGEST_BINS`` equal ranges of
-    ids, summed exactly); for each field in ``digest``'s order, each chunk's rows come to rank 0 with
+    The ids are cut into chunks of at most ``chunk`` rows (histograms of ranges of ids, summed exactly:
+    ``_id_chunks``); for each field in ``digest``'s order, each chunk's rows come to rank 0 with
     their ids (and slot counts), where they are put in id order and hashed, so rank 0 holds a chunk at a
     time and every other rank sends each of its rows once a field. Every rank must hold the same fields.
     """
@@ -206,7 +206,8 @@ def digest_parts(part, net, chunk=DIGEST_CHUNK):
     counts = np.asarray(part["count"], np.int64) if "count" in part else np.zeros(n, np.int64)
     N, M = (int(v) for v in net.sum_int(np.array([n, int(counts.sum())], np.int64)))
     cuts = _id_chunks(ids, net, N, chunk)
-    rows = np.searchsorted(ids, cuts)             # each cut's first row here
+    # each cut's first row here (the last cut is past every id)
+    rows = np.append(np.searchsorted(ids, np.array(cuts[:-1], np.int64)), n).astype(np.int64)
     slot0 = np.concatenate([[0], np.cumsum(counts)])
     h = hashlib.sha256() if net.rank == 0 else None
     for f in _digest_fields(part):
@@ -226,23 +227,49 @@ def digest_parts(part, net, chunk=DIGEST_CHUNK):
 
 def _id_chunks(ids, net, N, chunk):
     """Increasing id bounds c_0 < c_1 < ... (one more than the chunks): chunk k holds the ids in
-    [c_k, c_k+1), about ``chunk`` rows of the ``N`` the ranks hold (a chunk is at least one histogram
-    bin, so a bin of more rows makes a larger chunk). Collective; the same bounds on every rank."""
+    [c_k, c_k+1), at most ``chunk`` rows of the ``N`` the ranks hold (``ids``: this rank's, sorted).
+    Collective; the same bounds on every rank.
+
+    The ids' range (exact integers, gathered) is cut into ``DIGEST_BINS`` equal ranges whose counts are
+    summed exactly; a range of more than ``chunk`` rows (ids clustered, an outlier far away) is cut again
+    into ``DIGEST_REFINE`` ranges, until none is; chunks are runs of whole ranges."""
     if N == 0:
-        return np.zeros(1, np.int64)
-    ext = net.max_many(np.array([-float(ids.min()) if len(ids) else -math.inf,
-                                 float(ids.max()) if len(ids) else -math.inf]))
-    lo, hi = int(-ext[0]), int(ext[1])
-    width = -(-(hi - lo + 1) // DIGEST_BINS)        # ids per bin, rounded up (integer: no overflow)
-    hist = np.asarray(net.sum_int(np.bincount((ids - lo) // width, minlength=DIGEST_BINS).astype(np.int64)))
+        return [0]
+    ends = [e for e in net.allgather((int(ids[0]), int(ids[-1])) if len(ids) else None) if e is not None]
+    lo, hi = min(e[0] for e in ends), max(e[1] for e in ends)
+    edges, counts, parts = [lo, hi + 1], [N], DIGEST_BINS
+    while True:
+        dense = [k for k, c in enumerate(counts) if c > chunk and edges[k + 1] - edges[k] > 1]
+        if not dense:
+            break
+        cut, local = {}, []
+        for k in dense:
+            a, b = edges[k], edges[k + 1]
+            w = -(-(b - a) // parts)                # ids a range, rounded up (integers: no overflow)
+            sub = list(range(a, b, w)) + [b]
+            cut[k] = sub
+            inside = ids[np.searchsorted(ids, a):np.searchsorted(ids, b - 1, side="right")]
+            local.append(np.bincount((inside - a) // w, minlength=len(sub) - 1).astype(np.int64))
+        total = np.asarray(net.sum_int(np.concatenate(local)))
+        new_edges, new_counts, at = [], [], 0
+        for k in range(len(counts)):
+            if k in cut:
+                m = len(cut[k]) - 1
+                new_edges += cut[k][:-1]
+                new_counts += [int(c) for c in total[at:at + m]]
+                at += m
+            else:
+                new_edges.append(edges[k])
+                new_counts.append(counts[k])
+        edges, counts, parts = new_edges + [hi + 1], new_counts, DIGEST_REFINE
     bounds, run = [lo], 0
-    for b, c in enumerate(hist):
-        run += int(c)
-        if run >= chunk and b < DIGEST_BINS - 1:
-            bounds.append(lo + (b + 1) * width)
+    for k, c in enumerate(counts):
+        if run and run + c > chunk:
+            bounds.append(edges[k])
             run = 0
+        run += c
     bounds.append(hi + 1)
-    return np.array(bounds, np.int64)
+    return bounds
 
 
 def _in_id_order(got, per_row):
