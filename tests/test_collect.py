@@ -452,6 +452,15 @@ def test_a_summary_from_before_a_key_existed_joins_the_set_of_its_default():
     assert _physics_key(old) != _physics_key(dict(old, **{"bed.wall": True}))
 
 
+def test_the_tiles_edge_parts_sets_of_tiled_pours_only():
+    from mpdem.campaign.collect import _physics_key
+    whole = {"contact.mu": 0.5, "pour.insertion": "whole"}
+    tiled = dict(whole, **{"pour.insertion": "tiles"})
+    assert _physics_key(dict(whole, **{"pour.tile": 30.0})) == _physics_key(whole)
+    assert _physics_key(dict(tiled, **{"pour.tile": 30.0})) != _physics_key(tiled)
+    assert _physics_key(tiled) != _physics_key(whole)
+
+
 def test_sets_that_differ_outside_the_params_are_separate_families(tmp_path):
     """A set run under another stop rule (stop.energy, not a PARAM_KEYS column) at the same mu
     is its own family: the z(mu) trend of the others does not step from mu = 0.5 to 0.5."""

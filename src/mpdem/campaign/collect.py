@@ -184,7 +184,15 @@ def _physics_key(physics):
     full = {k: spec.default for k, spec in KEYS.items()
             if spec.physics and spec.default is not REQUIRED and spec.default is not DERIVED}
     full.update(physics)
+    # keys that steer nothing under another key's choice (the tiles' edge of the whole insertion)
+    for key, (other, choice) in INERT.items():
+        if full.get(other) != choice:
+            full.pop(key, None)
     return tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in full.items()))
+
+
+# physics keys that count only where another key has one value: key -> (that key, its value)
+INERT = {"pour.tile": ("pour.insertion", "tiles")}
 
 
 def _extra(physics_key):
