@@ -244,8 +244,8 @@ def pour_tiled(cfg, b, net, log, watch=None):
                 failed, placed = True, None
             going = placed is not None
             placed = hi - lo if placed is None else placed
-        mine = np.array([int(going), placed, int(failed)])
-        total = net.sum_int(mine) if net is not None and net.parallel else mine
+        here = np.array([int(going), placed, int(failed)])
+        total = net.sum_int(here) if net is not None and net.parallel else here
         if total[2]:
             raise InputError(f"pour: a tile's random insertion could not place its spheres (pour.insertion = "
                              f"'tiles': {N} spheres in {T} tiles at pour.phi_i = {cfg.pour.phi_i:g}); lower "
@@ -265,7 +265,8 @@ def pour_tiled(cfg, b, net, log, watch=None):
 
 
 def initial_state(cfg, net, log, lammps_table=None, watch=None):
-    """A new run's initial state, checked (docs/model.md 8), identical on every rank.
+    """A new run's initial state, checked (docs/model.md 8), identical on every rank (a tiled pour's:
+    each rank's share, ``Initial.shared``).
 
     Parameters
     ----------
