@@ -196,8 +196,8 @@ def test_the_bed_made_by_every_rank_together_is_the_one_rank_bed(comm, monkeypat
 
 
 TILED = ["box.L_x=10.0", "box.L_y=10.0", "pour.N=200", "pour.phi_i=0.1", "pour.K0=5.0", "pour.insertion=tiles",
-         "pour.tile=4.0", "output.progress_every=100000", "stop.sample_interval=0.01", "run.max_steps=2000",
-         "contact.mu=0.5"]
+         "pour.tile=4.0", "output.progress_every=100000", "stop.sample_interval=0.01", "run.max_steps=600",
+         "contact.mu=0.5", "bed.settle_time=2"]
 
 
 @pytest.mark.parametrize("grid", [None, "columns"])

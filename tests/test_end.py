@@ -11,7 +11,7 @@ import mpdem
 from mpdem import config, footprint
 from mpdem.io import checkpoint
 
-SETS = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=120", "pour.phi_i=0.3", "run.max_steps=1500",
+SETS = ["box.L_x=5.0", "box.L_y=5.0", "pour.N=120", "pour.phi_i=0.3", "run.max_steps=600",
         "output.progress_every=100000"]
 
 
