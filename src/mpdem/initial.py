@@ -198,10 +198,16 @@ def pour(cfg, b, log, watch=None):
                              progress=lambda done, n: watch(lambda: f"pour: {done} of {n} spheres placed",
                                                             everywhere=True))
     vm = build.initial_velocities(build.rng(cfg.run.seed, build.STREAM_VELOCITY), N, cfg.pour.K0)
-    nb = len(b.x)
-    x = np.concatenate([xm, b.x])
-    return {"id": np.arange(N + nb, dtype=np.int64), "x": x, "v": np.concatenate([vm, np.zeros((nb, 3))]),
-            "omega": np.zeros_like(x), "fixed": np.concatenate([np.zeros(N, np.uint8), np.ones(nb, np.uint8)])}, H
+    return _poured_rows(np.arange(N + len(b.x), dtype=np.int64), xm, vm, b.x), H
+
+
+def _poured_rows(ids, xm, vm, xb):
+    """A state-array dict of a pour's rows: mobile centres ``xm`` and velocities ``vm`` (m, 3), then bed
+    centres ``xb`` (k, 3) at rest, with ids ``ids`` (m + k,); omega zero."""
+    m, k = len(xm), len(xb)
+    x = np.concatenate([xm, xb])
+    return {"id": ids, "x": x, "v": np.concatenate([vm, np.zeros((k, 3))]), "omega": np.zeros_like(x),
+            "fixed": np.concatenate([np.zeros(m, np.uint8), np.ones(k, np.uint8)])}
 
 
 def pour_tiled(cfg, b, net, log, watch=None):
@@ -255,13 +261,8 @@ def pour_tiled(cfg, b, net, log, watch=None):
             break
     nb = len(b.x)
     bed = range(nb * r // P, nb * (r + 1) // P)
-    xb = b.x[bed.start:bed.stop]
-    rows = {"id": np.concatenate([np.arange(lo, hi, dtype=np.int64), N + np.arange(bed.start, bed.stop,
-                                                                                     dtype=np.int64)]),
-            "x": np.concatenate([x, xb]), "v": np.concatenate([v, np.zeros_like(xb)]),
-            "omega": np.zeros((hi - lo + len(xb), 3)),
-            "fixed": np.concatenate([np.zeros(hi - lo, np.uint8), np.ones(len(xb), np.uint8)])}
-    return rows, tiles.H
+    ids = np.concatenate([np.arange(lo, hi, dtype=np.int64), N + np.arange(bed.start, bed.stop, dtype=np.int64)])
+    return _poured_rows(ids, x, v, b.x[bed.start:bed.stop]), tiles.H
 
 
 def initial_state(cfg, net, log, lammps_table=None, watch=None):

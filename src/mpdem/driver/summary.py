@@ -114,10 +114,20 @@ def write(end, digest, positions, cfg, out, final, log):
     if positions is None:
         log(f"bulk: not measured at the end (output.bulk_at_end = false): `python -m mpdem analyze {out}` "
             f"measures it from the final state")
-        rundir.write_json(os.path.join(out, "summary.json"), summary)
-        log(f"wrote {final}")
-        _max_steps_line(end, cfg, out, log)
-        return summary
+    else:
+        _bulk(summary, positions, end, cfg, log)
+    rundir.write_json(os.path.join(out, "summary.json"), summary)
+    log(f"wrote {final}")
+    if not end.converged:
+        # the exit code that follows is a result, not a crash (mpiexec reports it at length)
+        log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
+            f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
+            f"--set run.max_steps=...`")
+    return summary
+
+
+def _bulk(summary, positions, end, cfg, log):
+    """The bulk measurement of the final positions into ``summary["bulk"]``, and its log line."""
     try:
         a = cfg.analysis
         bulk = analysis.bulk_summary(positions["x"], positions["fixed"], end.L_x, end.L_y, cfg.contact.mu,
@@ -132,19 +142,6 @@ def write(end, digest, positions, cfg, out, final, log):
             f"surface h = {bulk['h']:.2f}")
     except ValueError as e:
         log.warn(f"no bulk measurement: {e}")
-    rundir.write_json(os.path.join(out, "summary.json"), summary)
-    log(f"wrote {final}")
-    _max_steps_line(end, cfg, out, log)
-    return summary
-
-
-def _max_steps_line(end, cfg, out, log):
-    """The closing line of a run that reached run.max_steps."""
-    if not end.converged:
-        # the exit code that follows is a result, not a crash (mpiexec reports it at length)
-        log(f"exit status 3: the run reached run.max_steps = {cfg.run.max_steps} before the stop rule held; "
-            f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
-            f"--set run.max_steps=...`")
 
 
 def recover(out, final, status):
