@@ -37,7 +37,7 @@ def faces_crossed(dom):
     seen, migrate = set(), dom._migrate
     grid = dom.grid
 
-    def recording(state):
+    def recording(state, keeper=None):
         x = state.x[:state.n_own]
         owner = dom.owner_of(x)
         mine = domains.coords(dom.rank, grid)
@@ -54,7 +54,7 @@ def faces_crossed(dom):
                 L, P = (dom.L_x, grid[0]) if axis == 0 else (dom.L_y, grid[1])
                 k = int(round(x[i, axis] / (L / P))) % P
                 seen.add((axis, k, b == k))
-        migrate(state)
+        migrate(state, keeper)
     dom._migrate = recording
     return seen
 

@@ -16,7 +16,7 @@ import pytest
 from helpers import mpdem, tight_lattice
 from mpdem.config import gamma_n_from_epsilon
 from mpdem.decomp import Domain
-from mpdem.engine import cpu, gpu
+from mpdem.engine import cpu, gpu, migrate
 from mpdem.engine.base import Physics
 from mpdem.errors import DeviceError
 from mpdem.io import checkpoint
@@ -454,6 +454,76 @@ def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[2, 1, 1]", n=2)
     assert "(grid 2 x 1 x 1)" in (tmp_path / "two" / "log.txt").read_text()
     assert summary_digest(tmp_path / "two") == cpu_pour
+    # two slabs whose rebuilds keep the history on the GPU (engine.gpu_migrate), rebalanced by counts at every
+    # rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances
+    pour(tmp_path / "across", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[1, 1, 2]",
+         "engine.gpu_migrate=device", "decomp.balance_by=count", "decomp.balance_tolerance=0.01",
+         "decomp.balance_damping=1.0", n=2)
+    end = [ln for ln in (tmp_path / "across" / "log.txt").read_text().splitlines() if ln.startswith("end:")][0]
+    assert int(end.split(" migrations")[0].split()[-1]) > 10, end
+    assert summary_digest(tmp_path / "across") == cpu_pour
+
+
+def _slot_state(counts, ids=None):
+    """A State of len(counts) rows whose row i holds counts[i] slots: partners 100 i + 1.., Delta s (i, k, 0)."""
+    n = len(counts)
+    st = State(np.arange(n) if ids is None else np.asarray(ids), np.zeros((n, 3)))
+    partner = np.concatenate([100 * i + 1 + np.arange(c) for i, c in enumerate(counts)]).astype(np.int64)
+    ds = np.array([[i, k, 0.0] for i, c in enumerate(counts) for k in range(c)]).reshape(-1, 3)
+    st.set_contacts(np.asarray(counts), partner, ds)
+    return st
+
+
+def test_slots_inserted_for_some_rows_keep_the_others_in_row_order():
+    st = _slot_state([0, 2, 0, 1, 0])
+    migrate.insert_slots(st, np.array([0, 2, 4]), [1, 0, 3], np.array([7, 9, 10, 11]),
+                         np.array([[-1.0, 0, 0], [4, 0, 0], [4, 1, 0], [4, 2, 0]]))
+    assert list(st.count[:5]) == [1, 2, 0, 1, 3]
+    assert list(st.slots_of(0)[0]) == [7] and st.slots_of(0)[1][0, 0] == -1.0
+    assert list(st.slots_of(1)[0]) == [101, 102] and list(st.slots_of(1)[1][:, 1]) == [0, 1]
+    assert list(st.slots_of(3)[0]) == [301]
+    assert list(st.slots_of(4)[0]) == [9, 10, 11]
+    with pytest.raises(RuntimeError, match="already holds slots"):
+        migrate.insert_slots(st, np.array([1]), [1], np.array([5]), np.zeros((1, 3)))
+
+
+def test_a_keeper_follows_each_row_to_its_gpu_row_through_migrations():
+    """Rows reordered, some leaving (their slots packed from their GPU rows as they go), others arriving
+    with theirs: ``origin`` names each final row's GPU row or its arrival, and only arrivals hold slots."""
+    st = _slot_state([0, 0, 0, 0, 0], ids=[10, 11, 12, 13, 14])
+    packed = []
+
+    def pack(rows):
+        packed.append(list(rows))
+        c = np.array([r % 2 + 1 for r in rows])
+        return c, np.concatenate([np.arange(k) + 50 for k in c]), np.ones((int(c.sum()), 3))
+
+    k = migrate.Keeper(5, pack)
+    order = np.array([4, 3, 2, 1, 0])
+    st.permute(order)
+    k.permute(order)
+    # host rows 1 and 3 (GPU rows 3 and 1) leave; one row arrives with two slots
+    k.leaving(st, np.array([1, 3]))
+    assert packed == [[3, 1]]
+    assert list(st.count[:5]) == [0, 2, 0, 2, 0]
+    part = st.take(np.array([1, 3]))
+    st.keep(np.array([0, 2, 4]))
+    arrival = _slot_state([2], ids=[99]).take(np.array([0]))
+    assert st.append([arrival]) == 1
+    k.moved(np.array([0, 2, 4]), 1)
+    assert list(k.origin) == [4, 2, 0, -1]
+    # a second round: the arrival leaves again (nothing to pack), GPU row 2 leaves; part comes back
+    k.leaving(st, np.array([1, 3]))
+    assert packed == [[3, 1], [2]]
+    st.keep(np.array([0, 2]))
+    assert st.append([part]) == 2
+    k.moved(np.array([0, 2]), 2)
+    origin, start, pid, ds = k.arrivals(st)
+    assert list(origin) == [4, 0, -1, -2] and origin.dtype == np.int32
+    assert list(st.id[:4]) == [14, 10, 13, 11]
+    # the two arrivals (ids 13, 11: GPU rows 3, 1) with the slots packed from them
+    assert list(start) == [0, 2, 4] and list(pid) == [50, 51, 50, 51]
+    assert not np.signbit(ds).any()
 
 
 def test_no_gpu_ends_a_run_in_one_line(tmp_path):

@@ -359,18 +359,22 @@ class Domain:
             self._plan = None
 
     # -- particle movement --
-    def rebuild(self, state, work=0.0):
+    def rebuild(self, state, work=0.0, keeper=None):
         """Migrate, rebalance the uneven columns, then build the halo (ghost rows).
 
         ``work``: this rank's compute seconds since the last rebuild [s] (the measure
         with ``by_work``; counts are balanced until every rank has measured some).
+        ``keeper``: where an engine keeps the contact history elsewhere (the GPU), an object
+        told of every migration (``_migrate``): ``leaving(state, rows)`` before owned rows
+        leave (it packs their slots into ``state``), ``moved(keep, arrived)`` after (the rows
+        kept, ascending, then ``arrived`` rows appended).
         """
         state.n_rows = state.n_own
         self._since_rebuild = 0
         self._drop_plan()
         if not self.parallel:
             return
-        self._migrate(state)
+        self._migrate(state, keeper)
         measure = self._owned_counts(state)
         works = None
         if self.by_work:
@@ -394,7 +398,7 @@ class Domain:
             self.n_rebalances += 1
         if any(uneven):
             self._share_bounds()
-            self._migrate(state)
+            self._migrate(state, keeper)
         self._halo(state)
 
     def _uneven(self, measure):
@@ -427,7 +431,7 @@ class Domain:
         self.n_balance_rebuilds += due
         return due
 
-    def _migrate(self, state):
+    def _migrate(self, state, keeper=None):
         """Send owned particles outside this domain, with their slots, to their owners.
 
         A particle may jump several domains when the bounds move, so every rank
@@ -441,6 +445,8 @@ class Domain:
         sends = {}
         if leave.any():
             rows = np.flatnonzero(leave)
+            if keeper is not None:
+                keeper.leaving(state, rows)
             for r in np.unique(owner[rows]):
                 part = state.take(rows[owner[rows] == r])
                 counts[r] = len(part["id"]), int(part["count"].sum())
@@ -453,7 +459,10 @@ class Domain:
             state.keep(keep)
         # arrivals in ascending rank order of their senders (the order changes no result)
         parts = [_unpack(*recvs[s], *got[s]) for s in sorted(recvs)]
-        self.n_migrated += state.append(parts)
+        arrived = state.append(parts)
+        self.n_migrated += arrived
+        if keeper is not None:
+            keeper.moved(keep, arrived)
 
     def boxes(self):
         """Every rank's box: (lo, hi), each (P, 3) float64 [d], the z bounds from ``zb`` (+-inf at the

@@ -11,7 +11,10 @@ steer the run), and ``run_quiet`` one for many steps. On one rank a list
 rebuild runs on the GPU, but every ``SORT_EVERY``-th; that one, and every
 rebuild on several ranks, brings the rows and the history to the host
 ``State``, where the domain migrates, balances and makes the ghosts as for
-the CPU engine and the lists are built, then all of it goes back. With
+the CPU engine and the lists are built, then all of it goes back; with
+``engine.gpu_migrate = "device"`` only the rows' fields make that trip, the
+history of the rows that leave is packed from the GPU as they go, and the
+lists are built and the history carried on the GPU (``_rebuild_across``). With
 several ranks the ghost refresh of a step goes through the host. A reader
 of the state (a checkpoint, a snapshot, a sample) has ``sync_state`` copy
 the rows and pack the history first, as ``State.sync``.
@@ -32,6 +35,7 @@ from ..kernels.integrate import kinetic_energy
 from ..kernels.neighbours import build_neighbours, cell_axis
 from ..state import ROW_FIELDS
 from .base import NO_FLAGS, EngineBase, StepInfo
+from . import migrate
 from .order import SORT_COLUMN, sort_rows
 
 # steps of one launch of ``run_quiet`` at most (the host sees signals and the wall clock between
@@ -49,6 +53,8 @@ DRIFTS = ("apart", "fused")
 REBUILDS = ("host", "device", "launch")
 # engine.gpu_sort
 SORTS = ("host", "device")
+# engine.gpu_migrate: where a list rebuild on several ranks keeps the contact history (``_rebuild_across``)
+MIGRATES = ("host", "device")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -167,6 +173,12 @@ class Engine(EngineBase):
         and the history carried by partner id; the permutation copied back, which the host's State takes
         at once); with ``rebuilds = "launch"`` inside ``run_quiet``'s launches (``kernels.gpu.lists.sort_phases``;
         the State takes the order after the launch, ``_take_moved``). No effect on results.
+    migrate : {"host", "device"}
+        Where a rebuild on several ranks keeps the contact history (``engine.gpu_migrate``): through the
+        host (rows and history down, the domain's migration and ghosts, the lists built, all up), or on
+        the GPU (``_rebuild_across``: the rows' fields down and up, the history of the rows that leave
+        packed from their entries, the lists built on the GPU over the ghosts, each survivor's history
+        carried from its old entries and each arrival's from its slots). No effect on results.
 
     Attributes
     ----------
@@ -178,7 +190,7 @@ class Engine(EngineBase):
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
                  reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0,
-                 sort="host"):
+                 sort="host", migrate="host"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -218,6 +230,10 @@ class Engine(EngineBase):
         # every SORT_EVERY-th rebuild's ordering of the rows on the GPU (``_rebuild_sorted``), and the spare
         # arrays of the permutation
         self.sort_on_gpu = sort == "device"
+        if migrate not in MIGRATES:
+            raise ValueError(f"migrate = {migrate!r}: accepted {', '.join(map(repr, MIGRATES))}")
+        # a rebuild on several ranks with the history kept on the GPU, the rows' fields only through the host
+        self.migrate_on_gpu = migrate == "device"
         self._spare = {}
         self._columns = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
@@ -361,10 +377,7 @@ class Engine(EngineBase):
     def _upload(self):
         """Every row, the lists and the history to the GPU (after a rebuild)."""
         s, d, cuda = self.state, self._dev, self.cuda
-        m = s.n_rows
-        for name in self._rows_of() + ("fixed", "id"):
-            d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
-        d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
+        self._upload_rows()
         d["start"] = cuda.to_device(self.nbr_start[:s.n_own + 1])
         k = max(len(self.nbr_list), 1)
         d["nbr"] = cuda.to_device(self.nbr_list[:k] if len(self.nbr_list) else np.zeros(1, np.int32))
@@ -372,6 +385,15 @@ class Engine(EngineBase):
         d["stamp"] = cuda.to_device(self._stamp[:k] if len(self._stamp) else np.zeros(1, np.uint32))
         d["pair"] = cuda.device_array((1, 6))
         self._entry_rows(None)
+        self._pairs_kept = False
+
+    def _upload_rows(self):
+        """Every row's fields (owned and ghost) to the GPU, x_ref = x, and the ghost refresh's sources."""
+        s, d, cuda = self.state, self._dev, self.cuda
+        m = s.n_rows
+        for name in self._rows_of() + ("fixed", "id"):
+            d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
+        d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
         # the owned rows the ghost refresh sends (several ranks), and room to gather them
         self._sources = self.domain.ghost_sources()
         m = max(len(self._sources), 1)
@@ -460,6 +482,11 @@ class Engine(EngineBase):
             self.timers["lists"] += time.perf_counter() - t
             return
         c0 = self.domain.comm_seconds
+        if self.has_lists and self.domain.parallel and self.migrate_on_gpu:
+            self._rebuild_across()
+            self.n_rebuilds += 1
+            self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
+            return
         s = self.state
         self.n_rebuilds_by_host += 1
         if self.has_lists:
@@ -504,23 +531,54 @@ class Engine(EngineBase):
         entry (``kernels.gpu.lists``); x_ref = x. One rank only (no ghosts, no migration)."""
         s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
         n = s.n_own
+        grid = self._grid(n)
+        start, nbr, k = self._build_lists(n, n)
+        hist = cuda.device_array((max(k, 1), 3))
+        stamp = cuda.device_array(max(k, 1), np.uint32)
+        stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
+        self._run(L.carry_history, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], start, nbr, hist,
+                                          stamp, stale))
+        self._take_lists(start, nbr, hist, stamp, k)
+
+    def _take_lists(self, start, nbr, hist, stamp, k):
+        """New lists of ``k`` entries built on the GPU the current ones; x_ref = x."""
+        s, d = self.state, self._dev
+        d["start"], d["nbr"], d["hist"], d["stamp"] = start, nbr, hist, stamp
+        self._k = k
+        grid = self._grid(s.n_own)
+        self._entry_rows(grid)
+        self._run(self.kl.copy_rows, grid, (s.n_own, d["x"], d["x_ref"]))
+        self._host_lists = False
+        self._pairs_kept = False
+        s.slots_current = False
+
+    def _build_lists(self, n, m):
+        """The lists of owned rows 0..n-1 over rows 0..m-1 (ghosts included) built on the GPU, sized by
+        the host (the rows' z range and the lists' length read back).
+
+        Returns
+        -------
+        start : device (n + 1,) int64, nbr : device (max(k, 1),) int32, k : int
+        """
+        s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
         grid, one = self._grid(n), (1, self.block)
         z = self._zr
         z.copy_to_device(np.array([math.inf, -math.inf]))
-        self._run(L.z_range, grid, (n, d["x"], z))
+        self._run(L.z_range, self._grid(m), (m, d["x"], z))
         zmin, zmax = (float(v) for v in z.copy_to_host())
         nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
         # z cells hashed above a bound of the grid, as the CPU's build (memory O(rows) whatever flies)
-        nz = min(int((zmax - zmin) / self.r_list) + 1, max(3, 4 * (n // (nx * ny)) + 8))
+        nz = min(int((zmax - zmin) / self.r_list) + 1, max(3, 4 * (m // (nx * ny)) + 8))
         ncell = nx * ny * nz
         count = self._buffer("cells", ncell + 1, np.int32)
         fill = self._buffer("fill", ncell + 1, np.int32)
-        cell, order = self._buffer("cell", n, np.int32), self._buffer("order", n, np.int32)
+        cell, order = self._buffer("cell", m, np.int32), self._buffer("order", m, np.int32)
         self._run(L.zero, self._grid(ncell + 1), (ncell + 1, count))
-        self._run(L.bin_rows, grid, (n, d["x"], nx, ny, nz, s.L_x / nx, s.L_y / ny, zmin, self.r_list, cell, count))
+        self._run(L.bin_rows, self._grid(m), (m, d["x"], nx, ny, nz, s.L_x / nx, s.L_y / ny, zmin, self.r_list, cell,
+                                              count))
         self._run(L.scan, one, (count, ncell))
         fill[:ncell + 1].copy_to_device(count[:ncell + 1])
-        self._run(L.fill_cells, grid, (n, cell, fill, order))
+        self._run(L.fill_cells, self._grid(m), (m, cell, fill, order))
         box = make_box(s.L_x, s.L_y)
         r2 = self.r_list * self.r_list
         cells = (d["x"], d["id"], d["fixed"], cell, count, order, nx, ny, nz, *box, r2)
@@ -529,19 +587,71 @@ class Engine(EngineBase):
         self._run(L.scan, one, (start, n))
         k = int(start[n:n + 1].copy_to_host()[0])
         nbr = cuda.device_array(max(k, 1), np.int32)
+        self._run(L.write_partners, grid, (n, *cells, start, nbr))
+        return start, nbr, k
+
+    def _rebuild_across(self):
+        """A rebuild on several ranks with the contact history kept on the GPU (``engine.gpu_migrate =
+        "device"``, ``engine.migrate``): the rows' fields down (not their history), the rows ordered and
+        the domain's migration, balance and ghosts on the host State as ever, the rows that leave packed
+        into slots from their GPU entries as they go (``migrate.Keeper``); then every row up, the lists
+        built on the GPU over the ghosts, each survivor's history carried by partner id from its old
+        entries, each arrival's from the slots it brought (``kernels.gpu.lists.carry_history_migrated``).
+        The same lists and history as the host's path."""
+        s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
+        self.complete()
+        n = s.n_own
+        self._download_rows(self._rows_of(), n)
+        # no slots on the host: a leaving row's are packed as it leaves, an arriving row brings its own
+        s.count[:n] = 0
+        s.drop_slots()
+        s.slots_current = True
+        keeper = migrate.Keeper(n, self._pack_contacts)
+        keeper.permute(sort_rows(s, self.r_list))
+        spent = sum(self.timers.values())
+        self.domain.rebuild(s, self.work_since_rebuild(), keeper)
+        self._work_mark = spent
+        origin, arr_start, arr_id, arr_ds = keeper.arrivals(s)
+        if self.law.mu == 0.0:
+            arr_ds[:] = 0.0
+        old_ids, old = d["id"], (d["start"], d["nbr"], d["hist"], d["stamp"])
+        n = s.n_own
+        if len(self.nbr_start) < n + 1:
+            self.nbr_start = np.zeros(s.capacity + 1, np.int64)
+        self._upload_rows()
+        start, nbr, k = self._build_lists(n, s.n_rows)
         hist = cuda.device_array((max(k, 1), 3))
         stamp = cuda.device_array(max(k, 1), np.uint32)
-        self._run(L.write_partners, grid, (n, *cells, start, nbr))
         stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
-        self._run(L.carry_history, grid, (n, d["id"], d["start"], d["nbr"], d["hist"], d["stamp"], start, nbr, hist,
-                                          stamp, stale))
-        d["start"], d["nbr"], d["hist"], d["stamp"] = start, nbr, hist, stamp
-        self._k = k
-        self._entry_rows(grid)
-        self._run(L.copy_rows, grid, (n, d["x"], d["x_ref"]))
-        self._host_lists = False
-        self._pairs_kept = False
-        s.slots_current = False
+        now = np.uint32(self._epoch & 0xFFFFFFFF)
+        up = self._up
+        self._run(L.carry_history_migrated, self._grid(n),
+                  (n, up(origin, 1), old_ids, d["id"], *old, cuda.to_device(arr_start), up(arr_id, 1),
+                   up(arr_ds, (1, 3)), start, nbr, hist, stamp, stale, now))
+        self._take_lists(start, nbr, hist, stamp, k)
+        s.drop_slots()
+
+    def _up(self, a, empty):
+        """``a`` on the GPU, or zeros of shape ``empty`` (its dtype) where it has no element."""
+        return self.cuda.to_device(np.ascontiguousarray(a) if len(a) else np.zeros(empty, a.dtype))
+
+    def _pack_contacts(self, rows):
+        """GPU rows ``rows``' entries in contact as compact slots (``migrate.Keeper``'s ``pack``): counts
+        (m,) int64, partner ids (M,) int64 and Delta s (M, 3) [d]."""
+        d, cuda, L = self._dev, self.cuda, self.kl
+        m = len(rows)
+        g = cuda.to_device(np.ascontiguousarray(rows, np.intp))
+        counts = cuda.device_array(m, np.int64)
+        now = np.uint32(self._epoch & 0xFFFFFFFF)
+        self._run(L.count_contacts_of, self._grid(m), (g, d["start"], d["stamp"], now, counts))
+        c = counts.copy_to_host()
+        first = np.zeros(m + 1, np.int64)
+        np.cumsum(c, out=first[1:])
+        total = int(first[-1])
+        sid, sds = cuda.device_array(max(total, 1), np.int64), cuda.device_array((max(total, 1), 3))
+        self._run(L.pack_contacts_of, self._grid(m), (g, cuda.to_device(first[:m]), d["id"], d["start"], d["nbr"],
+                                                      d["hist"], d["stamp"], now, sid, sds))
+        return c, sid.copy_to_host()[:total], sds.copy_to_host()[:total]
 
     def _rebuild_in_place(self):
         """``_rebuild_on_gpu`` with no round trip through the host and no allocation once sized

@@ -14,10 +14,15 @@ def sort_rows(s, r_list):
 
     Sums run in partner-id order, so row order changes no result bit
     (docs/computing.md, "The force sum: two passes per row").
+
+    Returns
+    -------
+    (n_own,) int64 or None
+        The order applied (new row i was row order[i]); None for fewer than two rows (none).
     """
     n = s.n_own
     if n < 2:
-        return
+        return None
     c = r_list
     x = s.x[:n]
     # the cells of the list build (neighbours._bin): nx x ny across the box, c tall
@@ -34,4 +39,6 @@ def sort_rows(s, r_list):
     column = (iy * cy // ny) * cx + ix * cx // nx
     nz = int(iz.max()) + 1
     key = ((column * nz + iz) * ny + iy) * nx + ix
-    s.permute(np.argsort(key, kind="stable"))
+    order = np.argsort(key, kind="stable")
+    s.permute(order)
+    return order

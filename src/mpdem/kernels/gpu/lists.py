@@ -351,6 +351,65 @@ def gather_rows(rows, x, v, omega, out):
 
 
 @cuda.jit
+def count_contacts_of(rows, start, stamp, now, counts):
+    """counts[t]: the entries of row rows[t] in contact at the last evaluation (stamp ``now``): the
+    compact slots ``kernels.history.count_contacts`` gives the rows that leave at a migration."""
+    for t in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[t]
+        m = 0
+        for k in range(start[i], start[i + 1]):
+            if stamp[k] == now:
+                m += 1
+        counts[t] = m
+
+
+@cuda.jit
+def pack_contacts_of(rows, offsets, ids, start, nbr, hist, stamp, now, slot_id, slot_ds):
+    """Row rows[t]'s entries in contact as compact slots from offsets[t] on (partner ids ascending, Delta s
+    [d] in the row's view): ``kernels.history.entries_to_slots`` for some rows (entry k is slot k here)."""
+    for t in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[t]
+        p = offsets[t]
+        for k in range(start[i], start[i + 1]):
+            if stamp[k] == now:
+                slot_id[p] = ids[nbr[k]]
+                for a in range(3):
+                    slot_ds[p, a] = hist[k, a]
+                p += 1
+
+
+@cuda.jit
+def carry_history_migrated(n_own, origin, old_ids, ids, old_start, old_nbr, old_hist, old_stamp, arr_start, arr_id,
+                           arr_ds, new_start, new_nbr, new_hist, new_stamp, stale, now):
+    """Each new entry's Delta s and stamp after a migration: new row i was old row origin[i] (>= 0), whose
+    entries it merges with by partner id (``carry_history_moved``), or arrived from another rank as
+    arrival a = -1 - origin[i], whose compact slots (arr_id ascending, arr_ds +0.0 for zero, from
+    arr_start[a]) it merges with as ``kernels.history.slots_to_entries`` does: a slot's partner in the new
+    list gets it and the stamp ``now``; any other entry zeros and ``stale``."""
+    for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
+        o = origin[i]
+        if o >= 0:
+            _carry_row_moved(i, origin, old_ids, ids, old_start, old_nbr, old_hist, old_stamp, new_start, new_nbr,
+                             new_hist, new_stamp, stale)
+            continue
+        a = -1 - o
+        p = arr_start[a]
+        pe = arr_start[a + 1]
+        for k in range(new_start[i], new_start[i + 1]):
+            jid = ids[new_nbr[k]]
+            while p < pe and arr_id[p] < jid:
+                p += 1
+            if p < pe and arr_id[p] == jid:
+                for c in range(3):
+                    new_hist[k, c] = arr_ds[p, c]
+                new_stamp[k] = now
+            else:
+                for c in range(3):
+                    new_hist[k, c] = 0.0
+                new_stamp[k] = stale
+
+
+@cuda.jit
 def entry_rows(n_own, start, row):
     """row[e] = i for every entry e of row i's list (``start``: the lists' (n_own + 1,) offsets)."""
     for i in range(cuda.grid(1), n_own, cuda.gridsize(1)):
