@@ -454,8 +454,8 @@ def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[2, 1, 1]", n=2)
     assert "(grid 2 x 1 x 1)" in (tmp_path / "two" / "log.txt").read_text()
     assert summary_digest(tmp_path / "two") == cpu_pour
-    # two slabs whose rebuilds keep the history on the GPU (engine.gpu_migrate), rebalanced by counts at every
-    # rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances
+    # two slabs whose rebuilds keep the rows and the history on the GPU (engine.gpu_migrate), rebalanced by counts
+    # at every rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances
     pour(tmp_path / "across", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[1, 1, 2]",
          "engine.gpu_migrate=device", "decomp.balance_by=count", "decomp.balance_tolerance=0.01",
          "decomp.balance_damping=1.0", n=2)
@@ -488,33 +488,43 @@ def test_slots_inserted_for_some_rows_keep_the_others_in_row_order():
 
 
 def test_a_keeper_follows_each_row_to_its_gpu_row_through_migrations():
-    """Rows reordered, some leaving (their slots packed from their GPU rows as they go), others arriving
-    with theirs: ``origin`` names each final row's GPU row or its arrival, and only arrivals hold slots."""
+    """Rows reordered, some leaving (their fields and slots brought from their GPU rows as they go), others
+    arriving with theirs, ghosts' sources sent: ``origin`` names each final row's GPU row or its arrival,
+    only arrivals hold slots, and only rows that leave or are sent were asked of the GPU."""
     st = _slot_state([0, 0, 0, 0, 0], ids=[10, 11, 12, 13, 14])
-    packed = []
+    packed, fetched = [], []
 
     def pack(rows):
         packed.append(list(rows))
         c = np.array([r % 2 + 1 for r in rows])
         return c, np.concatenate([np.arange(k) + 50 for k in c]), np.ones((int(c.sum()), 3))
 
-    k = migrate.Keeper(5, pack)
+    def fetch(rows, names):
+        fetched.append((list(rows), tuple(names)))
+        # GPU row g's field: (g, index of the field, 7)
+        return {name: np.array([[g, j, 7.0] for g in rows]) for j, name in enumerate(names)}
+
+    k = migrate.Keeper(5, pack, fetch, ("v", "omega", "f", "torque"))
     order = np.array([4, 3, 2, 1, 0])
     st.permute(order)
     k.permute(order)
     # host rows 1 and 3 (GPU rows 3 and 1) leave; one row arrives with two slots
     k.leaving(st, np.array([1, 3]))
-    assert packed == [[3, 1]]
+    assert packed == [[3, 1]] and fetched == [([3, 1], ("v", "omega", "f", "torque"))]
     assert list(st.count[:5]) == [0, 2, 0, 2, 0]
+    assert list(st.torque[1]) == [3, 3, 7] and list(st.v[3]) == [1, 0, 7]
     part = st.take(np.array([1, 3]))
     st.keep(np.array([0, 2, 4]))
     arrival = _slot_state([2], ids=[99]).take(np.array([0]))
     assert st.append([arrival]) == 1
     k.moved(np.array([0, 2, 4]), 1)
     assert list(k.origin) == [4, 2, 0, -1]
+    # the ghosts' sources: GPU row 4 and the arrival (nothing to ask for it)
+    k.sending(st, np.array([0, 3]))
+    assert fetched[-1] == ([4], ("v", "omega")) and list(st.omega[0]) == [4, 1, 7]
     # a second round: the arrival leaves again (nothing to pack), GPU row 2 leaves; part comes back
     k.leaving(st, np.array([1, 3]))
-    assert packed == [[3, 1], [2]]
+    assert packed == [[3, 1], [2]] and fetched[-1][0] == [2]
     st.keep(np.array([0, 2]))
     assert st.append([part]) == 2
     k.moved(np.array([0, 2]), 2)

@@ -160,6 +160,8 @@ def cases():
         "lists.count_contacts_of": (lists.count_contacts_of, (ids, start, stamp, np.uint32(3), ids)),
         "lists.pack_contacts_of": (lists.pack_contacts_of, (ids, ids, ids, start, nbr, hist, stamp, np.uint32(3), ids,
                                                             hist)),
+        "lists.permute_kept3": (lists.permute_kept3, (n, cells, x, x)),
+        "lists.scatter_rows3": (lists.scatter_rows3, (ids, x, x)),
         "lists.carry_history_migrated": (lists.carry_history_migrated, (n, cells, ids, ids, start, nbr, hist, stamp,
                                                                         start, ids, hist, start, nbr, hist, stamp,
                                                                         np.uint32(3), np.uint32(4))),

@@ -210,9 +210,10 @@ SCHEMA = (
        restart=True, physics=False),
     _k("engine", "gpu_migrate", "host",
        "where the GPU engine keeps the contact history at a list rebuild on several ranks: 'host' (rows and history "
-       "copied down, the migration, the ghosts and the lists made there, all copied back) or 'device' (the rows' "
-       "fields copied down and up, the history of the particles that leave packed from the GPU as they go, the "
-       "lists built on the GPU over the ghosts, the history carried there by partner id); no effect on results",
+       "copied down, the migration, the ghosts and the lists made there, all copied back) or 'device' (the positions "
+       "copied down, the particles that leave or are sent as ghosts brought down with their history as they go, "
+       "the arrivals and the ghosts copied up, the rows placed, the lists built and the history carried by "
+       "partner id on the GPU); no effect on results",
        str, ("host", "device"), restart=True, physics=False),
     _k("decomp", "grid", (),
        "the ranks' grid of domains [Px, Py, Pz]: Px x Py columns of equal widths in x and y, each cut into Pz "

@@ -366,8 +366,9 @@ class Domain:
         with ``by_work``; counts are balanced until every rank has measured some).
         ``keeper``: where an engine keeps the contact history elsewhere (the GPU), an object
         told of every migration (``_migrate``): ``leaving(state, rows)`` before owned rows
-        leave (it packs their slots into ``state``), ``moved(keep, arrived)`` after (the rows
-        kept, ascending, then ``arrived`` rows appended).
+        leave (it brings their fields and slots current in ``state``), ``moved(keep, arrived)``
+        after (the rows kept, ascending, then ``arrived`` rows appended); and of the ghosts'
+        sources (``_halo``): ``sending(state, rows)`` before their x, v and omega are sent.
         """
         state.n_rows = state.n_own
         self._since_rebuild = 0
@@ -399,7 +400,7 @@ class Domain:
         if any(uneven):
             self._share_bounds()
             self._migrate(state, keeper)
-        self._halo(state)
+        self._halo(state, keeper)
 
     def _uneven(self, measure):
         """Per column, whether max/mean of ``measure`` (one value a rank, (P,)) over its ranks > 1 + tolerance."""
@@ -521,7 +522,7 @@ class Domain:
                     mask &= domains.in_periodic(x[:, axis], lo[axis] - r, hi[axis] + r, L)
         return mask
 
-    def _halo(self, state):
+    def _halo(self, state, keeper=None):
         """Send the ranks in reach the owned rows within r_list of their domains; append ghosts.
 
         Counts go to every rank in reach, rows only where there are some. The
@@ -556,6 +557,8 @@ class Domain:
                           TAG_HALO_ROWS)
         state.n_rows = k
         self._plan = self.net.ghost_plan(send, recv)
+        if keeper is not None and send:
+            keeper.sending(state, np.unique(np.concatenate(list(send.values()))))
         self._plan.run((state.x, state.v, state.omega))
 
     def refresh(self, state):

@@ -12,9 +12,10 @@ rebuild runs on the GPU, but every ``SORT_EVERY``-th; that one, and every
 rebuild on several ranks, brings the rows and the history to the host
 ``State``, where the domain migrates, balances and makes the ghosts as for
 the CPU engine and the lists are built, then all of it goes back; with
-``engine.gpu_migrate = "device"`` only the rows' fields make that trip, the
-history of the rows that leave is packed from the GPU as they go, and the
-lists are built and the history carried on the GPU (``_rebuild_across``). With
+``engine.gpu_migrate = "device"`` only the positions come down, the rows
+that leave or are sent as ghosts are brought current as they go, and the
+rows are placed, the lists built and the history carried on the GPU
+(``_rebuild_across``). With
 several ranks the ghost refresh of a step goes through the host. A reader
 of the state (a checkpoint, a snapshot, a sample) has ``sync_state`` copy
 the rows and pack the history first, as ``State.sync``.
@@ -174,11 +175,13 @@ class Engine(EngineBase):
         at once); with ``rebuilds = "launch"`` inside ``run_quiet``'s launches (``kernels.gpu.lists.sort_phases``;
         the State takes the order after the launch, ``_take_moved``). No effect on results.
     migrate : {"host", "device"}
-        Where a rebuild on several ranks keeps the contact history (``engine.gpu_migrate``): through the
-        host (rows and history down, the domain's migration and ghosts, the lists built, all up), or on
-        the GPU (``_rebuild_across``: the rows' fields down and up, the history of the rows that leave
-        packed from their entries, the lists built on the GPU over the ghosts, each survivor's history
-        carried from its old entries and each arrival's from its slots). No effect on results.
+        Where a rebuild on several ranks keeps the rows and the contact history (``engine.gpu_migrate``):
+        through the host (rows and history down, the domain's migration and ghosts, the lists built, all
+        up), or on the GPU (``_rebuild_across``: the positions down, the rows that leave or are sent as
+        ghosts brought down as they go, the history of those that leave packed from their entries; the
+        survivors placed on the GPU, the arrivals and ghosts up, the lists built over the ghosts, each
+        survivor's history carried from its old entries and each arrival's from its slots). No effect
+        on results.
 
     Attributes
     ----------
@@ -394,7 +397,11 @@ class Engine(EngineBase):
         for name in self._rows_of() + ("fixed", "id"):
             d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
         d["x_ref"] = cuda.to_device(np.ascontiguousarray(s.x[:max(s.n_own, 1)]))
-        # the owned rows the ghost refresh sends (several ranks), and room to gather them
+        self._ghost_sources()
+
+    def _ghost_sources(self):
+        """The owned rows the ghost refresh sends (several ranks) on the GPU, and room to gather them."""
+        d, cuda = self._dev, self.cuda
         self._sources = self.domain.ghost_sources()
         m = max(len(self._sources), 1)
         d["sources"] = cuda.to_device(np.ascontiguousarray(self._sources[:m] if len(self._sources) else [0], np.intp))
@@ -591,22 +598,24 @@ class Engine(EngineBase):
         return start, nbr, k
 
     def _rebuild_across(self):
-        """A rebuild on several ranks with the contact history kept on the GPU (``engine.gpu_migrate =
-        "device"``, ``engine.migrate``): the rows' fields down (not their history), the rows ordered and
-        the domain's migration, balance and ghosts on the host State as ever, the rows that leave packed
-        into slots from their GPU entries as they go (``migrate.Keeper``); then every row up, the lists
-        built on the GPU over the ghosts, each survivor's history carried by partner id from its old
-        entries, each arrival's from the slots it brought (``kernels.gpu.lists.carry_history_migrated``).
-        The same lists and history as the host's path."""
+        """A rebuild on several ranks with the rows and the contact history kept on the GPU
+        (``engine.gpu_migrate = "device"``, ``engine.migrate``): the owned rows' positions down, the rows
+        ordered and the domain's migration, balance and ghosts on the host State as ever, the rows that
+        leave brought current (fields and slots) from the GPU as they go and the ghosts' sources as they are
+        sent (``migrate.Keeper``); then the survivors' rows moved into their new places on the GPU, the
+        arrivals' and the ghosts' copied up, the lists built on the GPU over the ghosts, each survivor's
+        history carried by partner id from its old entries, each arrival's from the slots it brought
+        (``kernels.gpu.lists.carry_history_migrated``). The same rows, lists and history as the host's
+        path; the host's copy of the survivors' other fields stays stale (``sync_state`` brings it)."""
         s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
         self.complete()
         n = s.n_own
-        self._download_rows(self._rows_of(), n)
+        self._download_rows(("x",), n)
         # no slots on the host: a leaving row's are packed as it leaves, an arriving row brings its own
         s.count[:n] = 0
         s.drop_slots()
         s.slots_current = True
-        keeper = migrate.Keeper(n, self._pack_contacts)
+        keeper = migrate.Keeper(n, self._pack_contacts, self._fetch_rows, self._rows_of()[1:])
         keeper.permute(sort_rows(s, self.r_list))
         spent = sum(self.timers.values())
         self.domain.rebuild(s, self.work_since_rebuild(), keeper)
@@ -615,11 +624,11 @@ class Engine(EngineBase):
         if self.law.mu == 0.0:
             arr_ds[:] = 0.0
         old_ids, old = d["id"], (d["start"], d["nbr"], d["hist"], d["stamp"])
-        n = s.n_own
+        n, m = s.n_own, s.n_rows
         if len(self.nbr_start) < n + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        self._upload_rows()
-        start, nbr, k = self._build_lists(n, s.n_rows)
+        self._place_rows(origin)
+        start, nbr, k = self._build_lists(n, m)
         hist = cuda.device_array((max(k, 1), 3))
         stamp = cuda.device_array(max(k, 1), np.uint32)
         stale = np.uint32((self._epoch - 1) & 0xFFFFFFFF)
@@ -630,6 +639,43 @@ class Engine(EngineBase):
                    up(arr_ds, (1, 3)), start, nbr, hist, stamp, stale, now))
         self._take_lists(start, nbr, hist, stamp, k)
         s.drop_slots()
+
+    def _place_rows(self, origin):
+        """The GPU's rows in the host State's new order after a migration (``_rebuild_across``): owned row i
+        from old GPU row origin[i] where that is >= 0 (``permute_kept3``), the arrivals (origin < 0) from the
+        host (``scatter_rows3``), the ghosts' x, v and omega from the host; ids and flags all from the host."""
+        s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
+        n, m = s.n_own, s.n_rows
+        arrived = np.flatnonzero(origin < 0)
+        at = self._up(arrived.astype(np.intp), 1)
+        keep = self._up(origin, 1)
+        for name in self._rows_of():
+            new = cuda.device_array((max(m, 1), 3))
+            self._run(L.permute_kept3, self._grid(n), (n, keep, d[name], new))
+            if len(arrived):
+                self._run(L.scatter_rows3, self._grid(len(arrived)),
+                          (at, cuda.to_device(np.ascontiguousarray(getattr(s, name)[arrived])), new))
+            if m > n and name in ("x", "v", "omega"):
+                new[n:m].copy_to_device(np.ascontiguousarray(getattr(s, name)[n:m]))
+            d[name] = new
+        for name in ("fixed", "id"):
+            d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
+        d["x_ref"] = cuda.device_array((max(n, 1), 3))
+        self._ghost_sources()
+
+    def _fetch_rows(self, rows, names):
+        """GPU rows ``rows``' fields ``names`` (each (n, 3)) as host arrays (``migrate.Keeper``'s ``fetch``)."""
+        d, cuda = self._dev, self.cuda
+        m = len(rows)
+        g = cuda.to_device(np.ascontiguousarray(rows, np.intp))
+        out = cuda.device_array((3, m, 3))
+        got = {}
+        for part in (names[i:i + 3] for i in range(0, len(names), 3)):
+            fields = [d[name] for name in part] + [d[part[0]]] * (3 - len(part))
+            self._run(self.kl.gather_rows, self._grid(m), (g, *fields, out))
+            host = out.copy_to_host()
+            got.update({name: host[j] for j, name in enumerate(part)})
+        return got
 
     def _up(self, a, empty):
         """``a`` on the GPU, or zeros of shape ``empty`` (its dtype) where it has no element."""

@@ -1,12 +1,14 @@
 """A list rebuild on several ranks that keeps the contact history on the GPU (engine.gpu_migrate = "device").
 
 The domain migrates, rebalances and makes the ghosts on the host ``State`` (``decomp.Domain.rebuild``) as
-ever; the GPU engine copies down the rows' fields but not their history. A ``Keeper`` follows each owned
-host row back to the GPU row it was (``origin``) through the domain's migrations: the rows that leave get
-their compact slots packed from their GPU entries just before they go (``leaving``), the rows that arrive
-bring theirs. The GPU then builds the lists and carries each survivor's history from its old entries and
-each arrival's from its slots (``kernels.gpu.lists.carry_history_migrated``): the history crosses to the
-host only with the rows that leave, and none of it goes back up.
+ever; the GPU engine copies down the rows' positions alone, which is all the domain's choices read. A
+``Keeper`` follows each owned host row back to the GPU row it was (``origin``) through the domain's
+migrations: the rows that leave get their other fields and their compact slots from the GPU just before
+they go (``leaving``), the ghosts' sources their velocities before they are sent (``sending``), and the
+rows that arrive bring everything. The GPU then moves its survivors' rows into their new places, takes
+the arrivals' and the ghosts' from the host, builds the lists and carries each survivor's history from its
+old entries and each arrival's from its slots (``kernels.gpu.lists.carry_history_migrated``): rows and
+history cross to the host only where they leave the rank or are sent as ghosts.
 """
 import numpy as np
 
@@ -65,12 +67,16 @@ class Keeper:
     pack : callable
         ``pack(gpu_rows)`` -> (counts, partner, ds): those GPU rows' entries in contact as compact slots
         (``kernels.gpu.lists.pack_contacts_of``).
+    fetch : callable
+        ``fetch(gpu_rows, names)`` -> {name: (m, 3) array}: those GPU rows' fields ``names``.
+    fields : tuple of str
+        The fields besides x a leaving row takes from the GPU (v, omega, f, torque and, with a wall, wall_ds).
     """
 
-    def __init__(self, n, pack):
+    def __init__(self, n, pack, fetch, fields):
         # origin[i]: the GPU row host row i was (>= 0), or -1 for a row that arrived (on the host, with its slots)
         self.origin = np.arange(n, dtype=np.int64)
-        self._pack = pack
+        self._pack, self._fetch, self._fields = pack, fetch, tuple(fields)
 
     def permute(self, order):
         """The host's rows reordered (new row i was row order[i]; None: not reordered)."""
@@ -78,12 +84,25 @@ class Keeper:
             self.origin = self.origin[order]
 
     def leaving(self, state, rows):
-        """Owned rows about to leave: those that were GPU rows get their slots from the GPU."""
+        """Owned rows about to leave: those that were GPU rows get their fields and slots from the GPU."""
+        self._bring(state, rows, self._fields)
         g = self.origin[rows]
         mine = g >= 0
         if mine.any():
             counts, partner, ds = self._pack(g[mine])
             insert_slots(state, rows[mine], counts, partner, ds)
+
+    def sending(self, state, rows):
+        """Owned rows whose x, v and omega are about to be sent as ghosts: v and omega from the GPU."""
+        self._bring(state, rows, ("v", "omega"))
+
+    def _bring(self, state, rows, names):
+        g = self.origin[rows]
+        mine = g >= 0
+        if mine.any():
+            got = self._fetch(g[mine], names)
+            for name in names:
+                getattr(state, name)[rows[mine]] = got[name]
 
     def moved(self, keep, arrived):
         """The domain kept rows ``keep`` (ascending) and appended ``arrived`` rows."""

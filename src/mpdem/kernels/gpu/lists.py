@@ -379,6 +379,26 @@ def pack_contacts_of(rows, offsets, ids, start, nbr, hist, stamp, now, slot_id, 
 
 
 @cuda.jit
+def permute_kept3(n_rows, origin, src, dst):
+    """dst[i, :] = src[origin[i], :] for the rows with origin[i] >= 0 ((n, 3) arrays; the others are the
+    rows that arrived at a migration, which the host fills: ``scatter_rows3``)."""
+    for i in range(cuda.grid(1), n_rows, cuda.gridsize(1)):
+        j = origin[i]
+        if j >= 0:
+            for a in range(3):
+                dst[i, a] = src[j, a]
+
+
+@cuda.jit
+def scatter_rows3(rows, src, dst):
+    """dst[rows[k], :] = src[k, :] for (n, 3) arrays (the rows that arrived at a migration, from the host)."""
+    for k in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[k]
+        for a in range(3):
+            dst[i, a] = src[k, a]
+
+
+@cuda.jit
 def carry_history_migrated(n_own, origin, old_ids, ids, old_start, old_nbr, old_hist, old_stamp, arr_start, arr_id,
                            arr_ds, new_start, new_nbr, new_hist, new_stamp, stale, now):
     """Each new entry's Delta s and stamp after a migration: new row i was old row origin[i] (>= 0), whose
