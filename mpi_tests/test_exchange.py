@@ -5,6 +5,7 @@ widths thick, so each rank talks only to the next ones; rows moved, slots
 carried, ghosts exact copies after a refresh.
 """
 import numpy as np
+import pytest
 
 from mpdem.decomp import Domain, merge_sorted
 from mpdem.state import FIELDS, MOVE_FIELDS, ROW, SLOT
@@ -70,6 +71,41 @@ def test_halo_talks_to_slabs_in_reach_and_refresh_copies_exactly(comm):
         assert dom.comm_seconds > t or P == 1
         assert np.array_equal(st.id[st.n_own:st.n_rows], ghosts)
         check_ghosts(comm, dom, st, members=False)
+
+
+def test_a_refresh_packed_by_the_plans_layout_is_the_plans_own(comm):
+    """``GhostPlan.layout`` names every sent and received row's place in the flat buffers: rows packed
+    there by hand (as the GPU's ``pack_ghosts`` packs them), exchanged (``exchange``) and unpacked by hand
+    give the ghosts ``run`` gives."""
+    dom = Domain(comm, r_list=1.2)
+    st = dom.scatter(column(), 5.0, 5.0)
+    dom.rebuild(st)
+    if comm.Get_size() == 1:
+        # one rank has no ghosts and no plan
+        with pytest.raises(RuntimeError, match="before the first rebuild"):
+            dom.plan
+        return
+    n, m = st.n_own, st.n_rows
+    st.x[:n] += 1e-3 * np.cos(st.id[:n, None] * [1.0, 2.0, 3.0])
+    st.v[:n] *= -2.0
+    dom.refresh(st)
+    want = [a[n:m].copy() for a in (st.x, st.v, st.omega)]
+    plan = dom.plan
+    sr, sa, ss, rr, ra, rs = plan.layout()
+    assert len(sr) == sum(len(rows) for rows, _ in plan.sends) and list(rr) == list(range(n, m))
+    for a in (st.x, st.v, st.omega):
+        a[n:m] = np.nan
+    for f, a in enumerate((st.x, st.v, st.omega)):
+        for k in range(3):
+            plan.send_buf[sa + f * ss + k] = a[sr, k]
+    t = dom.comm_seconds
+    plan.exchange()
+    assert dom.comm_seconds > t
+    for f, a in enumerate((st.x, st.v, st.omega)):
+        for k in range(3):
+            a[rr, k] = plan.recv_buf[ra + f * rs + k]
+    for got, w in zip((st.x, st.v, st.omega), want):
+        assert np.array_equal(got[n:m], w)
 
 
 def test_migration_moves_rows_with_their_slots(comm):

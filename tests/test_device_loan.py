@@ -10,6 +10,8 @@ import sys
 import tarfile
 from pathlib import Path
 
+from helpers import MPIEXEC, settled_table
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -102,3 +104,21 @@ def test_a_call_times_a_pour_from_nothing_and_says_how_it_ended(tmp_path):
     log = (out / "loan.log").read_text()
     line = next(ln for ln in log.splitlines() if ln.startswith("pour: exit status"))
     assert "max_steps at step 300" in line and "digest" in line, log[-2000:]
+
+
+def test_a_call_times_two_ranks_with_each_way_of_exchanging_rows(tmp_path):
+    """EXCHANGE=S: the bench's table on two ranks with engine.gpu_exchange = host, then device (here the CPU
+    engine, which takes neither, on a small settled table), each run's exit status and bench lines in
+    loan.log."""
+    repo = checkout(tmp_path)
+    settled_table(tmp_path / "t.txt")
+    out = repo / "out"
+    out.mkdir()
+    p = loan(repo, "call", OUT=str(out), PROBE_BUDGET="0", SCALING_RANKS="none", EXCHANGE="400", EXCHANGE_DEVICE="cpu",
+             EXCHANGE_STEPS="20", EXCHANGE_TABLE=str(tmp_path / "t.txt"), EXCHANGE_MPIEXEC=str(MPIEXEC),
+             EXCHANGE_SETS="--set box.L_x=6.0 --set box.L_y=6.0")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    log = (out / "loan.log").read_text()
+    for x in ("host", "device"):
+        assert f"exchange {x}: exit status 0" in log, log[-3000:]
+        assert f"exchange {x}: bench: 2 rank(s)" in log and f"exchange {x}: ns_per_atom_step=" in log, log[-3000:]

@@ -454,10 +454,10 @@ def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     pour(tmp_path / "two", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[2, 1, 1]", n=2)
     assert "(grid 2 x 1 x 1)" in (tmp_path / "two" / "log.txt").read_text()
     assert summary_digest(tmp_path / "two") == cpu_pour
-    # two slabs whose rebuilds keep the rows and the history on the GPU (engine.gpu_migrate), rebalanced by counts
+    # two slabs whose rebuilds keep the rows and the history on the GPU (engine.gpu_exchange), rebalanced by counts
     # at every rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances
     pour(tmp_path / "across", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[1, 1, 2]",
-         "engine.gpu_migrate=device", "decomp.balance_by=count", "decomp.balance_tolerance=0.01",
+         "engine.gpu_exchange=device", "decomp.balance_by=count", "decomp.balance_tolerance=0.01",
          "decomp.balance_damping=1.0", n=2)
     end = [ln for ln in (tmp_path / "across" / "log.txt").read_text().splitlines() if ln.startswith("end:")][0]
     assert int(end.split(" migrations")[0].split()[-1]) > 10, end

@@ -20,7 +20,10 @@
 # (POUR_CONFIG, default analysis/sweeps/paper/size.toml: the paper's size; POUR_SETS="key=value ...", default
 # "run.max_steps=2e7";
 # POUR_DEVICE=gpu), its steps, status and wall time in loan.log
-# (tests/test_device_loan.py). MPICH and mpi4py come from .whl/ (carried) for the scaling's ranks.
+# (tests/test_device_loan.py). EXCHANGE=S (s, default 0: none) then times two ranks on the one GPU, the bench's
+# table with engine.gpu_exchange = "host" and "device" (EXCHANGE_STEPS=2000; EXCHANGE_TABLE, EXCHANGE_DEVICE,
+# EXCHANGE_MPIEXEC and EXCHANGE_SETS="--set k=v ..." for a try without a GPU), their bench lines in loan.log.
+# MPICH and mpi4py come from .whl/ (carried) for the scaling's ranks and the exchange's.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 RUNS_ROOT=${RUNS_ROOT:-analysis/results/paper/runs}
@@ -110,6 +113,31 @@ pour() {  # S: a pour from nothing to its stop rule, at most S seconds, timed (t
     tail -n 3 /tmp/pour/log.txt 2>/dev/null
 }
 
+exchange() {  # S: two ranks on the one GPU, the bench's table with engine.gpu_exchange = host then device, at most S s
+    (
+        local t=$SECONDS mpi=${EXCHANGE_MPIEXEC:-} x left
+        if [ -z "$mpi" ]; then
+            python3 -m pip install -q --no-index --no-deps --no-compile --prefix /tmp/mp .whl/mpich-*.whl &&
+            python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site .whl/mpi4py-*.whl ||
+                { echo "exchange: no MPI (.whl/ carried?)"; exit 0; }
+            export PATH=/tmp/mp/bin:$PATH LD_LIBRARY_PATH=/tmp/mp/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH} \
+                PYTHONPATH=/tmp/site:$PYTHONPATH
+            mpi=/tmp/mp/bin/mpiexec
+        fi
+        for x in host device; do
+            left=$(($1 - (SECONDS - t)))
+            [ "$left" -gt 20 ] || { echo "exchange $x: no time left"; break; }
+            echo "exchange $x: $(date -u +%T) 2 ranks, ${EXCHANGE_DEVICE:-gpu}, ${EXCHANGE_STEPS:-2000} steps, at most $left s"
+            # python3 by its path: a launcher may start the ranks with another PATH
+            timeout -s TERM "$left" "$mpi" -n 2 "$(command -v python3)" -m mpdem bench --table "${EXCHANGE_TABLE:-.devdata/landed20k.txt.gz}" \
+                --device "${EXCHANGE_DEVICE:-gpu}" --steps "${EXCHANGE_STEPS:-2000}" --set engine.gpu_exchange=$x \
+                ${EXCHANGE_SETS:-} > "/tmp/exchange-$x.log" 2>&1
+            echo "exchange $x: exit status $? after $((SECONDS - t)) s"
+            grep -E "^bench: (2 rank|phase|steps)|^ns_per_atom_step" "/tmp/exchange-$x.log" | sed "s/^/exchange $x: /"
+        done
+    )
+}
+
 call() {
     : "${OUT:?OUT: the folder that comes back}"
     local until=${UNTIL:-530} t0=$SECONDS
@@ -124,6 +152,7 @@ call() {
     echo "probe: exit status $? after $((SECONDS - t0)) s"
     [ -d "$OUT/probe" ] && tar czf "$OUT/probe.tgz" -C "$OUT" probe && rm -rf "$OUT/probe"
     [ "${POUR:-0}" = 0 ] || pour "$POUR"
+    [ "${EXCHANGE:-0}" = 0 ] || exchange "$EXCHANGE"
     # the CPU engine's scaling beside the rungs (cores 0-14), with MPICH from the carried wheels
     (
         [ "${SCALING_RANKS:-}" = none ] && exit 0

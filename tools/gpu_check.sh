@@ -168,13 +168,13 @@ if has switch; then
         dt=$(digest "$w/two")
         v=DIFFER; [ -n "$dt" ] && [ "$dt" = "$ref" ] && v=equal
         say "digest 2 ranks on the gpu: ${dt:0:16} against 1 cpu rank ${ref:0:16}: $v"
-        # the same with the history kept on the GPU at every rebuild (engine.gpu_migrate = "device"), both timed
+        # the same with the history kept on the GPU at every rebuild (engine.gpu_exchange = "device"), both timed
         mpiexec -n 2 $PY -m mpdem run --out "$w/two-migrate" --force --quiet --device gpu --set run.max_steps=$EXSTEPS \
-            "${EX[@]}" --set contact.mu=0.5 --set engine.gpu_migrate=device > "$w/two-migrate.log" 2>&1
+            "${EX[@]}" --set contact.mu=0.5 --set engine.gpu_exchange=device > "$w/two-migrate.log" 2>&1
         dm=$(digest "$w/two-migrate")
         v=DIFFER; [ -n "$dm" ] && [ "$dm" = "$ref" ] && v=equal
         wall() { grep -h '^end:' "$1/log.txt" 2>/dev/null | grep -o 'wall [0-9.]* s' | cut -d' ' -f2; }
-        say "digest 2 ranks on the gpu, engine.gpu_migrate = device: ${dm:0:16} against 1 cpu rank ${ref:0:16}: $v" \
+        say "digest 2 ranks on the gpu, engine.gpu_exchange = device: ${dm:0:16} against 1 cpu rank ${ref:0:16}: $v" \
             "(stepping: host $(wall "$w/two") s, device $(wall "$w/two-migrate") s)"
     else
         say "digest 2 ranks on the gpu: no mpiexec here"

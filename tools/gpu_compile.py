@@ -156,7 +156,9 @@ def cases():
         "lists.copy_rows": (lists.copy_rows, (n, x, x)),
         "lists.entry_rows": (lists.entry_rows, (n, start, nbr)),
         "lists.gather_rows": (lists.gather_rows, (ids, x, x, x, np.zeros((3, n, 3)))),
-        # a migration on several ranks with the history kept on the GPU (engine.gpu_migrate = "device")
+        # a migration on several ranks with the history kept on the GPU (engine.gpu_exchange = "device")
+        "lists.pack_ghosts": (lists.pack_ghosts, (ids, ids, ids, x, x, x, np.zeros(9 * n))),
+        "lists.unpack_ghosts": (lists.unpack_ghosts, (ids, ids, ids, np.zeros(9 * n), x, x, x)),
         "lists.count_contacts_of": (lists.count_contacts_of, (ids, start, stamp, np.uint32(3), ids)),
         "lists.pack_contacts_of": (lists.pack_contacts_of, (ids, ids, ids, start, nbr, hist, stamp, np.uint32(3), ids,
                                                             hist)),

@@ -208,12 +208,14 @@ SCHEMA = (
        "or 'device' (a counting sort by the same cells on the GPU, the rows permuted and the history carried by "
        "partner id there, the permutation copied back); no effect on results", str, ("host", "device"),
        restart=True, physics=False),
-    _k("engine", "gpu_migrate", "host",
-       "where the GPU engine keeps the contact history at a list rebuild on several ranks: 'host' (rows and history "
-       "copied down, the migration, the ghosts and the lists made there, all copied back) or 'device' (the positions "
-       "copied down, the particles that leave or are sent as ghosts brought down with their history as they go, "
-       "the arrivals and the ghosts copied up, the rows placed, the lists built and the history carried by "
-       "partner id on the GPU); no effect on results",
+    _k("engine", "gpu_exchange", "host",
+       "how the GPU engine on several ranks exchanges particles with the other ranks: 'host' (at a list rebuild "
+       "every row and its contact history copied down, the migration, the ghosts and the lists made there, all "
+       "copied back; at every step the ghosts' sources gathered on the GPU, sent from the host's rows, the ghosts "
+       "copied up field by field) or 'device' (at a rebuild the positions copied down, the particles that leave "
+       "or are sent as ghosts brought down with their history as they go, the arrivals and the ghosts copied up, "
+       "the rows placed, the lists built and the history carried by partner id on the GPU; at every step the "
+       "messages packed and unpacked on the GPU, one copy each way); no effect on results",
        str, ("host", "device"), restart=True, physics=False),
     _k("decomp", "grid", (),
        "the ranks' grid of domains [Px, Py, Pz]: Px x Py columns of equal widths in x and y, each cut into Pz "

@@ -569,6 +569,13 @@ class Domain:
             raise RuntimeError("Domain.refresh before the first rebuild")
         self._plan.run((state.x, state.v, state.omega))
 
+    @property
+    def plan(self):
+        """The ghost refresh's plan of the last rebuild (``parallel.GhostPlan``)."""
+        if self._plan is None:
+            raise RuntimeError("Domain.plan before the first rebuild")
+        return self._plan
+
     def ghost_sources(self):
         """The owned rows the ghost refresh sends to other ranks, ascending, (m,) intp (none on one
         rank): an engine that keeps the rows elsewhere (the GPU) brings these current before

@@ -438,13 +438,40 @@ class GhostPlan:
         # one kernel pass per peer (numpy's take and slice copies, one per field, took twice as long)
         for rows, block in self.sends:
             self._gather(fields, rows, block)
-        if self.requests:
-            self._startall(self.requests)
-            self._waitall(self.requests)
+        self.channel.seconds += time.perf_counter() - t
+        self.exchange()
+        t = time.perf_counter()
         for start, block in self.recvs:
             self._scatter(fields, start, block)
         self.channel.seconds += time.perf_counter() - t
+
+    def exchange(self):
+        """Send ``send_buf`` and receive ``recv_buf`` as they stand: the messages of ``run`` alone, for an
+        engine that packs and unpacks the rows itself (the GPU's, by ``layout``)."""
+        t = time.perf_counter()
+        if self.requests:
+            self._startall(self.requests)
+            self._waitall(self.requests)
+        self.channel.seconds += time.perf_counter() - t
         self.channel.sent["refresh"] += self.send_buf.nbytes
+
+    def layout(self):
+        """Where each row's fields sit in the flat buffers: a sent row's field f at ``at + f * stride`` of
+        ``send_buf`` (its peer's block is (fields, m, 3), field-major), and likewise a ghost row's in
+        ``recv_buf``.
+
+        Returns
+        -------
+        send_rows, send_at, send_stride : (S,) int64
+            The owned rows sent, peer after peer (a row sent to two peers twice), their first element and
+            the stride between their fields.
+        recv_rows, recv_at, recv_stride : (R,) int64
+            The ghost rows received (ascending: peer after peer), the same.
+        """
+        sent = _places([rows for rows, _ in self.sends], [block for _, block in self.sends])
+        got = _places([start + np.arange(block.shape[1]) for start, block in self.recvs],
+                      [block for _, block in self.recvs])
+        return sent + got
 
     def free(self):
         """Release the persistent requests (the plan cannot run afterwards)."""
@@ -452,6 +479,17 @@ class GhostPlan:
             r.Free()
         self.requests, self.sends, self.recvs = [], [], []
         _LIVE_PLANS.discard(self)
+
+
+def _places(rows, blocks):
+    """``GhostPlan.layout``'s (rows, at, stride) of consecutive blocks of a flat buffer, each (fields, m, 3)."""
+    at, stride, off = [], [], 0
+    for block in blocks:
+        m = block.shape[1]
+        at.append(off + 3 * np.arange(m))
+        stride.append(np.full(m, 3 * m))
+        off += block.size
+    return tuple(np.concatenate(p).astype(np.int64) if p else np.zeros(0, np.int64) for p in (rows, at, stride))
 
 
 # plans not yet freed: their persistent requests are released at exit, before mpi4py finalizes MPI

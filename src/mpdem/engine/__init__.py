@@ -55,7 +55,7 @@ def require(device):
 
 def make_engine(state, physics, domain, device="cpu", gpu_block=256, gpu_threads="row", gpu_max_registers=0,
                 gpu_reductions="fused", gpu_samples="device", gpu_drift="fused", gpu_pinned=True,
-                gpu_rebuild="launch", gpu_sort="host", gpu_migrate="host"):
+                gpu_rebuild="launch", gpu_sort="host", gpu_exchange="host"):
     """An engine of ``device`` for ``state`` under ``physics`` over ``domain``; the ``gpu_*`` keywords: the
     GPU engine's threads per block, its threads of the forces, its kernels' register cap, its fused
     steps' reductions, where the stop rule's samples are summed, where its launches of many steps drift,
@@ -66,7 +66,7 @@ def make_engine(state, physics, domain, device="cpu", gpu_block=256, gpu_threads
         return engine_class(device)(state, physics, domain, block=gpu_block, threads=gpu_threads,
                                     max_registers=gpu_max_registers, reductions=gpu_reductions, samples=gpu_samples,
                                     drift=gpu_drift, pinned=gpu_pinned, rebuilds=gpu_rebuild, sort=gpu_sort,
-                                    migrate=gpu_migrate)
+                                    exchange=gpu_exchange)
     return engine_class(device)(state, physics, domain)
 
 
@@ -76,4 +76,4 @@ def gpu_options(engine):
             "gpu_max_registers": engine.gpu_max_registers, "gpu_reductions": engine.gpu_reductions,
             "gpu_samples": engine.gpu_samples, "gpu_drift": engine.gpu_drift, "gpu_pinned": engine.gpu_pinned,
             "gpu_rebuild": engine.gpu_rebuild, "gpu_sort": engine.gpu_sort,
-            "gpu_migrate": engine.gpu_migrate}
+            "gpu_exchange": engine.gpu_exchange}

@@ -12,11 +12,11 @@ rebuild runs on the GPU, but every ``SORT_EVERY``-th; that one, and every
 rebuild on several ranks, brings the rows and the history to the host
 ``State``, where the domain migrates, balances and makes the ghosts as for
 the CPU engine and the lists are built, then all of it goes back; with
-``engine.gpu_migrate = "device"`` only the positions come down, the rows
+``engine.gpu_exchange = "device"`` only the positions come down, the rows
 that leave or are sent as ghosts are brought current as they go, and the
 rows are placed, the lists built and the history carried on the GPU
-(``_rebuild_across``). With
-several ranks the ghost refresh of a step goes through the host. A reader
+(``_rebuild_across``). With several ranks the ghost refresh of a step goes
+through the host (with "device", only its messages, packed on the GPU). A reader
 of the state (a checkpoint, a snapshot, a sample) has ``sync_state`` copy
 the rows and pack the history first, as ``State.sync``.
 """
@@ -54,8 +54,8 @@ DRIFTS = ("apart", "fused")
 REBUILDS = ("host", "device", "launch")
 # engine.gpu_sort
 SORTS = ("host", "device")
-# engine.gpu_migrate: where a list rebuild on several ranks keeps the contact history (``_rebuild_across``)
-MIGRATES = ("host", "device")
+# engine.gpu_exchange: how the rows meet other ranks' (``_rebuild_across``, ``_refresh``)
+EXCHANGES = ("host", "device")
 # every this many list rebuilds on one rank go through the host, which orders the rows by cell
 # (neighbours near in memory); the others are built on the GPU
 SORT_EVERY = 20
@@ -174,14 +174,15 @@ class Engine(EngineBase):
         and the history carried by partner id; the permutation copied back, which the host's State takes
         at once); with ``rebuilds = "launch"`` inside ``run_quiet``'s launches (``kernels.gpu.lists.sort_phases``;
         the State takes the order after the launch, ``_take_moved``). No effect on results.
-    migrate : {"host", "device"}
-        Where a rebuild on several ranks keeps the rows and the contact history (``engine.gpu_migrate``):
-        through the host (rows and history down, the domain's migration and ghosts, the lists built, all
-        up), or on the GPU (``_rebuild_across``: the positions down, the rows that leave or are sent as
-        ghosts brought down as they go, the history of those that leave packed from their entries; the
-        survivors placed on the GPU, the arrivals and ghosts up, the lists built over the ghosts, each
-        survivor's history carried from its old entries and each arrival's from its slots). No effect
-        on results.
+    exchange : {"host", "device"}
+        How the rows meet the other ranks' on several ranks (``engine.gpu_exchange``): through the host
+        (at a rebuild rows and history down, the domain's migration and ghosts, the lists built, all up; at
+        a step the ghosts' sources down into the host's rows, the ghosts up), or on the GPU (``_rebuild_across``:
+        the positions down, the rows that leave or are sent as ghosts brought down as they go, the history
+        of those that leave packed from their entries; the survivors placed on the GPU, the arrivals and
+        ghosts up, the lists built over the ghosts, each survivor's history carried from its old entries
+        and each arrival's from its slots; ``_refresh``: the refresh's messages packed and unpacked on the
+        GPU, ``parallel.GhostPlan.layout``). No effect on results.
 
     Attributes
     ----------
@@ -193,7 +194,7 @@ class Engine(EngineBase):
 
     def __init__(self, state, physics, domain, block=128, blocks=None, threads="row", max_registers=0,
                  reductions="tree", samples="host", drift="apart", pinned=False, rebuilds="host", list_capacity=0,
-                 sort="host", migrate="host"):
+                 sort="host", exchange="host"):
         runtime, self.k, self.kl = _kernels()
         if not (max_registers == 0 or 32 <= max_registers <= 255):
             raise ValueError(f"max_registers = {max_registers}: accepted 0 (the compiler's choice) or 32 to 255")
@@ -233,10 +234,10 @@ class Engine(EngineBase):
         # every SORT_EVERY-th rebuild's ordering of the rows on the GPU (``_rebuild_sorted``), and the spare
         # arrays of the permutation
         self.sort_on_gpu = sort == "device"
-        if migrate not in MIGRATES:
-            raise ValueError(f"migrate = {migrate!r}: accepted {', '.join(map(repr, MIGRATES))}")
+        if exchange not in EXCHANGES:
+            raise ValueError(f"exchange = {exchange!r}: accepted {', '.join(map(repr, EXCHANGES))}")
         # a rebuild on several ranks with the history kept on the GPU, the rows' fields only through the host
-        self.migrate_on_gpu = migrate == "device"
+        self.exchange_on_gpu = exchange == "device"
         self._spare = {}
         self._columns = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
@@ -279,6 +280,7 @@ class Engine(EngineBase):
         self._k = 0               # list entries
         self._host_lists = True   # the host's copy of the lists is current (``_lists``)
         self._buffers = {}        # the GPU list build's scratch (``_buffer``)
+        self._halo = None         # the ghost refresh's layout on the GPU (``_halo_layout``)
         self.has_lists = False
         self._epoch = 0           # force evaluations so far (the contacts' stamps count them)
         self._kick_due = False
@@ -409,6 +411,7 @@ class Engine(EngineBase):
         self._sent_host = cuda.pinned_array((3, m, 3))
         if "wall_ds" not in d:
             d["wall_ds"] = cuda.device_array((1, 3))
+        self._halo = self._halo_layout()
         self._pairs_kept = False
 
     def _device_planes(self):
@@ -489,7 +492,7 @@ class Engine(EngineBase):
             self.timers["lists"] += time.perf_counter() - t
             return
         c0 = self.domain.comm_seconds
-        if self.has_lists and self.domain.parallel and self.migrate_on_gpu:
+        if self.has_lists and self.domain.parallel and self.exchange_on_gpu:
             self._rebuild_across()
             self.n_rebuilds += 1
             self.timers["lists"] += time.perf_counter() - t - (self.domain.comm_seconds - c0)
@@ -599,7 +602,7 @@ class Engine(EngineBase):
 
     def _rebuild_across(self):
         """A rebuild on several ranks with the rows and the contact history kept on the GPU
-        (``engine.gpu_migrate = "device"``, ``engine.migrate``): the owned rows' positions down, the rows
+        (``engine.gpu_exchange = "device"``): the owned rows' positions down, the rows
         ordered and the domain's migration, balance and ghosts on the host State as ever, the rows that
         leave brought current (fields and slots) from the GPU as they go and the ghosts' sources as they are
         sent (``migrate.Keeper``); then the survivors' rows moved into their new places on the GPU, the
@@ -953,6 +956,9 @@ class Engine(EngineBase):
         s, d = self.state, self._dev
         if not self.domain.parallel:
             return
+        if self._halo is not None:
+            self._refresh_on_gpu()
+            return
         rows = self._sources
         m = len(rows)
         if m:
@@ -963,6 +969,31 @@ class Engine(EngineBase):
         for name in ("x", "v", "omega"):
             if s.n_rows > s.n_own:
                 d[name][s.n_own:s.n_rows].copy_to_device(np.ascontiguousarray(getattr(s, name)[s.n_own:s.n_rows]))
+
+    def _refresh_on_gpu(self):
+        """The ghost refresh with its messages packed and unpacked on the GPU (``engine.gpu_exchange =
+        "device"``): the plan's send buffer filled by ``pack_ghosts`` and copied down, the messages
+        exchanged (``GhostPlan.exchange``), the receive buffer copied up and unpacked into the ghost rows.
+        The host's rows are not touched."""
+        d, L, plan = self._dev, self.kl, self.domain.plan
+        (s_rows, s_at, s_stride, n_sent), (r_rows, r_at, r_stride, n_got), send, recv = self._halo
+        if n_sent:
+            self._run(L.pack_ghosts, self._grid(n_sent), (s_rows, s_at, s_stride, d["x"], d["v"], d["omega"], send))
+            send[:plan.send_buf.size].copy_to_host(plan.send_buf)
+        plan.exchange()
+        if n_got:
+            recv[:plan.recv_buf.size].copy_to_device(plan.recv_buf)
+            self._run(L.unpack_ghosts, self._grid(n_got), (r_rows, r_at, r_stride, recv, d["x"], d["v"], d["omega"]))
+
+    def _halo_layout(self):
+        """The refresh plan's layout on the GPU (``_refresh_on_gpu``), after a rebuild; None without
+        ``exchange_on_gpu`` or on one rank."""
+        if not (self.exchange_on_gpu and self.domain.parallel):
+            return None
+        plan, up = self.domain.plan, self._up
+        sr, sa, ss, rr, ra, rs = plan.layout()
+        return ((up(sr, 1), up(sa, 1), up(ss, 1), len(sr)), (up(rr, 1), up(ra, 1), up(rs, 1), len(rr)),
+                self.cuda.device_array(max(plan.send_buf.size, 1)), self.cuda.device_array(max(plan.recv_buf.size, 1)))
 
     # -- forces --
     def forces(self, increment=True, keep_pairs=False):

@@ -1,4 +1,4 @@
-"""A list rebuild on several ranks that keeps the contact history on the GPU (engine.gpu_migrate = "device").
+"""A list rebuild on several ranks that keeps the contact history on the GPU (engine.gpu_exchange = "device").
 
 The domain migrates, rebalances and makes the ghosts on the host ``State`` (``decomp.Domain.rebuild``) as
 ever; the GPU engine copies down the rows' positions alone, which is all the domain's choices read. A

@@ -351,6 +351,33 @@ def gather_rows(rows, x, v, omega, out):
 
 
 @cuda.jit
+def pack_ghosts(rows, at, stride, x, v, omega, buf):
+    """The ghost refresh's send buffer on the GPU (``parallel.GhostPlan.layout``): row rows[t]'s x, v and
+    omega at buf[at[t] + f * stride[t] + a] for f = 0, 1, 2."""
+    for t in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[t]
+        b = at[t]
+        s = stride[t]
+        for a in range(3):
+            buf[b + a] = x[i, a]
+            buf[b + s + a] = v[i, a]
+            buf[b + 2 * s + a] = omega[i, a]
+
+
+@cuda.jit
+def unpack_ghosts(rows, at, stride, buf, x, v, omega):
+    """The ghost rows rows[t]'s x, v and omega from the refresh's receive buffer (``pack_ghosts``' layout)."""
+    for t in range(cuda.grid(1), rows.size, cuda.gridsize(1)):
+        i = rows[t]
+        b = at[t]
+        s = stride[t]
+        for a in range(3):
+            x[i, a] = buf[b + a]
+            v[i, a] = buf[b + s + a]
+            omega[i, a] = buf[b + 2 * s + a]
+
+
+@cuda.jit
 def count_contacts_of(rows, start, stamp, now, counts):
     """counts[t]: the entries of row rows[t] in contact at the last evaluation (stamp ``now``): the
     compact slots ``kernels.history.count_contacts`` gives the rows that leave at a migration."""
