@@ -9,12 +9,16 @@ through two contacts) in its simplest, exact form.
 import json
 
 import numpy as np
+import pytest
 
 from mpdem import config
 from mpdem.io import tables
 from mpdem.kernels.particle import HALF_I
 from mpdem.driver.schedule import StopRecord, StopRule
+from mpdem.decomp import Domain
+from mpdem.driver import spin
 from mpdem.driver.simulation import Run
+from mpdem.state import State
 
 from helpers import mpdem, settled_table
 
@@ -78,12 +82,29 @@ def test_a_spinning_sphere_holds_the_total_rule_but_not_the_translational_one(tm
     # the run says once, in its log, that rotation alone holds it, and how to stop it
     log = (tmp_path / "total" / "log.txt").read_text()
     assert log.count("rotation alone holds the run") == 1 and "stop.energy=translational" in log
+    # and which sphere: the spinner, on the sphere below it alone, with all of the rotational energy
+    assert f"100 % of the rotational energy is in sphere {top + 1} (1 contact, |omega| = 2 sqrt(g/d))" in log, log
 
     r2, status2, _ = run_pile(tmp_path, "trans", "translational")
     assert status2 == "converged" and r2.state.step < 60000
     s = json.loads((tmp_path / "trans" / "summary.json").read_text())
     assert s["converged"] and s["E_k_per_particle"] > e_rot
     assert "rotation alone" not in (tmp_path / "trans" / "log.txt").read_text()
+
+
+def test_the_spinners_are_the_spheres_of_the_largest_rotational_energy():
+    x = np.zeros((5, 3))
+    omega = np.array([[0, 0, 1.0], [3.0, 0, 0], [0, 2.0, 0], [0, 0, 9.0], [0, 0, 0]])
+    st = State(np.arange(10, 15), x, omega=omega, fixed=np.array([0, 0, 0, 1, 0], np.uint8))
+    st.set_contacts(np.array([1, 2, 0, 0, 3]), np.arange(6), np.zeros((6, 3)))
+    spheres, total = spin.spinners(st, Domain(None), top=2)
+    # the bed's sphere (id 13) spins fastest but is not mobile
+    assert spheres == [(HALF_I * 9.0, 11, 2, 3.0), (HALF_I * 4.0, 12, 0, 2.0)]
+    assert total == pytest.approx(HALF_I * 14.0, rel=1e-15)
+    text = spin.describe(spheres, total)
+    assert text.startswith("64.3 % of the rotational energy is in sphere 11 (2 contacts, |omega| = 3 sqrt(g/d))")
+    assert text.endswith("92.86 % in the 2 largest (ids 11, 12)")
+    assert spin.describe([], 0.0) == "no mobile sphere is spinning"
 
 
 def test_the_spinner_hint_needs_a_full_window_held_by_rotation_alone():

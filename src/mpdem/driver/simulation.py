@@ -25,7 +25,7 @@ from .. import flowarrest, initial, memory, stiffen, threads
 from ..watch import Watch
 from ..io import tables
 from ..io import checkpoint
-from . import summary
+from . import spin, summary
 from ..io import rundir
 from ..config import collision_time
 from ..decomp import Domain
@@ -375,7 +375,7 @@ class Run:
             return True
         hint = self.stop.spin_hint()
         if hint:
-            self.log.warn(hint)
+            self.log.warn(f"{hint}. {spin.describe(*spin.spinners(self.state, self.domain))}")
         return False
 
     def _interrupt(self, sig):
