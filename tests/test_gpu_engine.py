@@ -455,13 +455,37 @@ def test_a_pour_on_the_gpu_is_the_cpu_pour(cpu_pour, tmp_path):
     assert "(grid 2 x 1 x 1)" in (tmp_path / "two" / "log.txt").read_text()
     assert summary_digest(tmp_path / "two") == cpu_pour
     # two slabs whose rebuilds keep the rows and the history on the GPU (engine.gpu_exchange), rebalanced by counts
-    # at every rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances
+    # at every rebuild so that rows with contacts leave and arrive: 26 migrations, 12 rebalances; its snapshots'
+    # contact lists (whose pairs with a ghost read the ghost rows the GPU alone refreshes) are the CPU's
     pour(tmp_path / "across", "run.max_steps=200", "contact.mu=0.5", "engine.device=gpu", "decomp.grid=[1, 1, 2]",
          "engine.gpu_exchange=device", "decomp.balance_by=count", "decomp.balance_tolerance=0.01",
-         "decomp.balance_damping=1.0", n=2)
+         "decomp.balance_damping=1.0", "output.snapshot_every=20", n=2)
     end = [ln for ln in (tmp_path / "across" / "log.txt").read_text().splitlines() if ln.startswith("end:")][0]
     assert int(end.split(" migrations")[0].split()[-1]) > 10, end
     assert summary_digest(tmp_path / "across") == cpu_pour
+    pour(tmp_path / "cpu-snaps", "run.max_steps=200", "contact.mu=0.5", "output.snapshot_every=20")
+    snaps = sorted(p.name for p in (tmp_path / "cpu-snaps" / "snapshots").glob("snap-*.h5"))
+    assert len(snaps) == 10
+    for name in snaps:
+        want, got = (contact_list(tmp_path / run / "snapshots" / name) for run in ("cpu-snaps", "across"))
+        assert want.keys() == got.keys() and all(np.array_equal(want[k], got[k]) for k in want), name
+
+
+def contact_list(path):
+    """A state file's contact list (``pairs``), its pairs in (id_i, id_j) order."""
+    import h5py
+    with h5py.File(path, "r") as f:
+        g = f["pairs"]
+        order = np.lexsort((g["id_j"][:], g["id_i"][:]))
+        return {k: g[k][:][order] for k in g}
+
+
+def test_lists_of_a_rank_without_rows_are_empty():
+    """An empty slab's rebuild on the GPU (``engine.gpu_exchange = "device"``) builds lists of no row (no z
+    range to read)."""
+    eng, st = stepped(gpu.Engine, physics(), 2, GRIDS[0])
+    start, nbr, k = eng._build_lists(0, 0)
+    assert k == 0 and start.copy_to_host().tolist() == [0]
 
 
 def _slot_state(counts, ids=None):

@@ -402,17 +402,20 @@ class Engine(EngineBase):
         self._ghost_sources()
 
     def _ghost_sources(self):
-        """The owned rows the ghost refresh sends (several ranks) on the GPU, and room to gather them."""
+        """What the ghost refresh needs on the GPU after a rebuild: the plan's layout with
+        ``exchange_on_gpu`` (``_halo_layout``), else the owned rows it sends and room to gather them."""
         d, cuda = self._dev, self.cuda
+        if "wall_ds" not in d:
+            d["wall_ds"] = cuda.device_array((1, 3))
+        self._pairs_kept = False
+        self._halo = self._halo_layout()
+        if self._halo is not None:
+            return
         self._sources = self.domain.ghost_sources()
         m = max(len(self._sources), 1)
         d["sources"] = cuda.to_device(np.ascontiguousarray(self._sources[:m] if len(self._sources) else [0], np.intp))
         d["sent"] = cuda.device_array((3, m, 3))
         self._sent_host = cuda.pinned_array((3, m, 3))
-        if "wall_ds" not in d:
-            d["wall_ds"] = cuda.device_array((1, 3))
-        self._halo = self._halo_layout()
-        self._pairs_kept = False
 
     def _device_planes(self):
         """The planes' arrays on the GPU (``plane_arrays``), copied there again when they change."""
@@ -460,6 +463,10 @@ class Engine(EngineBase):
         if not self.has_lists or s.slots_current:
             return
         self._download_rows(self._rows_of(), s.n_own)
+        if self._halo is not None and s.n_rows > s.n_own:
+            # the ghost rows too: refreshed on the GPU alone (``_refresh_on_gpu``); a reader of the pairs reads them
+            for name in ("x", "v", "omega"):
+                self._dev[name][s.n_own:s.n_rows].copy_to_host(getattr(s, name)[s.n_own:s.n_rows])
         hist, stamp = self._download_history()
         slots = Slots(hist, stamp, np.zeros((0, 6)))
         n = s.n_own
@@ -575,9 +582,10 @@ class Engine(EngineBase):
         z = self._zr
         z.copy_to_device(np.array([math.inf, -math.inf]))
         self._run(L.z_range, self._grid(m), (m, d["x"], z))
-        zmin, zmax = (float(v) for v in z.copy_to_host())
+        zmin, zmax = (float(v) for v in z.copy_to_host()) if m else (0.0, 0.0)
         nx, ny = cell_axis(s.L_x, self.r_list), cell_axis(s.L_y, self.r_list)
-        # z cells hashed above a bound of the grid, as the CPU's build (memory O(rows) whatever flies)
+        # z cells hashed above a bound of the grid, as the CPU's build (memory O(rows) whatever flies); a rank
+        # with no row (an empty slab) has no z range
         nz = min(int((zmax - zmin) / self.r_list) + 1, max(3, 4 * (m // (nx * ny)) + 8))
         ncell = nx * ny * nz
         count = self._buffer("cells", ncell + 1, np.int32)
@@ -1258,10 +1266,12 @@ class Engine(EngineBase):
                                                              Slots(np.zeros((0, 3)), stamp, pair), self._epoch, 1)))
 
     def memory_bytes(self):
-        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch, the lists' second set and the
-        permutation's spares)."""
+        """Bytes of the GPU's arrays (rows, lists, history, the list build's scratch, the lists' second set, the
+        permutation's spares and the ghost refresh's layout and buffers)."""
         # the list sets and the permutation's spares not in use (those in use are ``_dev``'s)
         spare = [a for st in self._sets for a in st.values()] + list(self._spare.values())
         spare = {id(a): a for a in spare if not any(a is b for b in self._dev.values())}
+        halo = [] if self._halo is None else [*self._halo[0][:3], *self._halo[1][:3], *self._halo[2:]]
         return (sum(a.nbytes for a in self._dev.values()) + sum(a.nbytes for a in self._buffers.values())
-                + sum(a.nbytes for a in spare.values()) + self._red.nbytes + self._rec.nbytes)
+                + sum(a.nbytes for a in spare.values()) + sum(a.nbytes for a in halo) + self._red.nbytes
+                + self._rec.nbytes)
