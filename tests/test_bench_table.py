@@ -133,12 +133,13 @@ def test_warm_up_compiles_the_engine_the_loop_times(tmp_path, monkeypatch, capsy
     settled_table(tmp_path / "t.txt")
     sets = ["engine.gpu_block=64", "engine.gpu_threads=entry", "engine.gpu_max_registers=80",
             "engine.gpu_reductions=fused", "engine.gpu_samples=device", "engine.gpu_drift=fused",
-            "engine.gpu_pinned=true", "engine.gpu_rebuild=device", "engine.gpu_sort=device"]
+            "engine.gpu_pinned=true", "engine.gpu_rebuild=device", "engine.gpu_sort=device",
+            "engine.gpu_exchange=device"]
     args = argparse.Namespace(table=str(tmp_path / "t.txt"), steps=5, tile=(1, 1),
                               set=["box.L_x=6.0", "box.L_y=6.0", *sets])
     bench.run_table_bench(args, None)
     capsys.readouterr()
     want = {"gpu_block": 64, "gpu_threads": "entry", "gpu_max_registers": 80, "gpu_reductions": "fused",
             "gpu_samples": "device", "gpu_drift": "fused", "gpu_pinned": True,
-            "gpu_rebuild": "device", "gpu_sort": "device"}
+            "gpu_rebuild": "device", "gpu_sort": "device", "gpu_exchange": "device"}
     assert len(made) == 2 and made[0] == made[1] == ("cpu", want)
