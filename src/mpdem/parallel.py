@@ -258,9 +258,9 @@ class Channel:
         self.seconds += time.perf_counter() - t
         return Channel(comm)
 
-    def ghost_plan(self, send_rows, recv_rows, n_fields=3):
+    def ghost_plan(self, send_rows, recv_rows, n_fields=3, alloc=None):
         """A ``GhostPlan`` on this communicator (see there); freed at exit if still live."""
-        plan = GhostPlan(self, send_rows, recv_rows, n_fields)
+        plan = GhostPlan(self, send_rows, recv_rows, n_fields, alloc)
         _LIVE_PLANS.add(plan)
         return plan
 
@@ -389,16 +389,20 @@ class GhostPlan:
         (first ghost row, number of rows) received from each peer.
     n_fields : int
         Fields per run, each a (cap, 3) float64 array (x, v, omega: 3).
+    alloc : callable, optional
+        ``alloc(name, size)`` -> (size,) float64 array for the buffers "send" and "recv" (default: new
+        numpy arrays); the GPU engine gives them from page-locked memory it keeps between plans.
     """
 
-    def __init__(self, channel, send_rows, recv_rows, n_fields=3):
+    def __init__(self, channel, send_rows, recv_rows, n_fields=3, alloc=None):
         self.channel = channel
         comm = channel.comm
         n_send = sum(len(r) for r in send_rows.values())
         n_recv = sum(m for _, m in recv_rows.values())
         # one flat buffer each way; peer p's part is a contiguous (n_fields, m, 3) block
-        self.send_buf = np.empty(n_fields * 3 * n_send)
-        self.recv_buf = np.empty(n_fields * 3 * n_recv)
+        alloc = alloc or _new_buffer
+        self.send_buf = alloc("send", n_fields * 3 * n_send)
+        self.recv_buf = alloc("recv", n_fields * 3 * n_recv)
         self.sends, self.recvs, self.requests = [], [], []
         self._gather, self._scatter = Bound(gather_rows), Bound(scatter_rows)
         self._startall, self._waitall = channel.mpi.Prequest.Startall, channel.mpi.Request.Waitall
@@ -479,6 +483,11 @@ class GhostPlan:
             r.Free()
         self.requests, self.sends, self.recvs = [], [], []
         _LIVE_PLANS.discard(self)
+
+
+def _new_buffer(name, size):
+    """``GhostPlan``'s default ``alloc``: a new (size,) float64 array."""
+    return np.empty(size)
 
 
 def _places(rows, blocks):

@@ -238,6 +238,10 @@ class Engine(EngineBase):
             raise ValueError(f"exchange = {exchange!r}: accepted {', '.join(map(repr, EXCHANGES))}")
         # a rebuild on several ranks with the history kept on the GPU, the rows' fields only through the host
         self.exchange_on_gpu = exchange == "device"
+        # the ghost refresh's host buffers from page-locked memory kept between rebuilds (``_pinned``)
+        self._pinned_bufs = {}
+        if self.exchange_on_gpu:
+            domain.buffers = self._pinned
         self._spare = {}
         self._columns = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
@@ -992,6 +996,15 @@ class Engine(EngineBase):
         if n_got:
             recv[:plan.recv_buf.size].copy_to_device(plan.recv_buf)
             self._run(L.unpack_ghosts, self._grid(n_got), (r_rows, r_at, r_stride, recv, d["x"], d["v"], d["omega"]))
+
+    def _pinned(self, name, size):
+        """(size,) float64 of page-locked host memory for the ghost refresh's buffer ``name`` (``Domain.buffers``,
+        ``GhostPlan``'s ``alloc``): one array a name, grown by a quarter when too small, reused by every plan
+        (a rebuild frees the old plan before it makes the new)."""
+        a = self._pinned_bufs.get(name)
+        if a is None or a.size < size:
+            a = self._pinned_bufs[name] = self.cuda.pinned_array(int(size * 1.25) + 64)
+        return a[:size]
 
     def _halo_layout(self):
         """The refresh plan's layout on the GPU (``_refresh_on_gpu``), after a rebuild; None without
