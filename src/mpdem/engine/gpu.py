@@ -642,7 +642,7 @@ class Engine(EngineBase):
         n, m = s.n_own, s.n_rows
         if len(self.nbr_start) < n + 1:
             self.nbr_start = np.zeros(s.capacity + 1, np.int64)
-        self._place_rows(origin)
+        keep = self._place_rows(origin)
         start, nbr, k = self._build_lists(n, m)
         hist = cuda.device_array((max(k, 1), 3))
         stamp = cuda.device_array(max(k, 1), np.uint32)
@@ -650,7 +650,7 @@ class Engine(EngineBase):
         now = np.uint32(self._epoch & 0xFFFFFFFF)
         up = self._up
         self._run(L.carry_history_migrated, self._grid(n),
-                  (n, up(origin, 1), old_ids, d["id"], *old, cuda.to_device(arr_start), up(arr_id, 1),
+                  (n, keep, old_ids, d["id"], *old, cuda.to_device(arr_start), up(arr_id, 1),
                    up(arr_ds, (1, 3)), start, nbr, hist, stamp, stale, now))
         self._take_lists(start, nbr, hist, stamp, k)
         s.drop_slots()
@@ -658,7 +658,8 @@ class Engine(EngineBase):
     def _place_rows(self, origin):
         """The GPU's rows in the host State's new order after a migration (``_rebuild_across``): owned row i
         from old GPU row origin[i] where that is >= 0 (``permute_kept3``), the arrivals (origin < 0) from the
-        host (``scatter_rows3``), the ghosts' x, v and omega from the host; ids and flags all from the host."""
+        host (``scatter_rows3``), the ghosts' x, v and omega from the host; ids and flags all from the host.
+        Returns ``origin`` on the GPU."""
         s, d, cuda, L = self.state, self._dev, self.cuda, self.kl
         n, m = s.n_own, s.n_rows
         arrived = np.flatnonzero(origin < 0)
@@ -677,6 +678,7 @@ class Engine(EngineBase):
             d[name] = cuda.to_device(np.ascontiguousarray(getattr(s, name)[:max(m, 1)]))
         d["x_ref"] = cuda.device_array((max(n, 1), 3))
         self._ghost_sources()
+        return keep
 
     def _fetch_rows(self, rows, names):
         """GPU rows ``rows``' fields ``names`` (each (n, 3)) as host arrays (``migrate.Keeper``'s ``fetch``)."""
