@@ -105,7 +105,7 @@ class Domain:
         self.n_balance_rebuilds = 0     # rebuilds ``rebalance_due`` asked for
         self._plan = None
         # where the ghost refresh's flat buffers come from (``GhostPlan``'s ``alloc``; None: new numpy arrays)
-        self.buffers = None
+        self.buffer_alloc = None
         self.L_x = self.L_y = None
         self.auto = isinstance(grid, str) and grid == "auto"
         self.col_net = self.net
@@ -558,7 +558,7 @@ class Domain:
                           {s: [state.id[a:a + m], state.fixed[a:a + m]] for s, (a, m) in recv.items()},
                           TAG_HALO_ROWS)
         state.n_rows = k
-        self._plan = self.net.ghost_plan(send, recv, alloc=self.buffers)
+        self._plan = self.net.ghost_plan(send, recv, alloc=self.buffer_alloc)
         if keeper is not None and send:
             keeper.sending(state, np.unique(np.concatenate(list(send.values()))))
         self._plan.run((state.x, state.v, state.omega))

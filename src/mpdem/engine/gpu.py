@@ -241,7 +241,7 @@ class Engine(EngineBase):
         # the ghost refresh's host buffers from page-locked memory kept between rebuilds (``_pinned``)
         self._pinned_bufs = {}
         if self.exchange_on_gpu:
-            domain.buffers = self._pinned
+            domain.buffer_alloc = self._pinned
         self._spare = {}
         self._columns = None
         # rebuilds without the host that ran out of room and were built again (``_settle``, ``run_quiet``)
@@ -630,7 +630,7 @@ class Engine(EngineBase):
         s.count[:n] = 0
         s.drop_slots()
         s.slots_current = True
-        keeper = migrate.Keeper(n, self._pack_contacts, self._fetch_rows, self._rows_of()[1:])
+        keeper = migrate.Keeper(n, self._pack_contacts, self._fetch_rows, [f for f in self._rows_of() if f != "x"])
         keeper.permute(sort_rows(s, self.r_list))
         spent = sum(self.timers.values())
         self.domain.rebuild(s, self.work_since_rebuild(), keeper)
@@ -1000,7 +1000,7 @@ class Engine(EngineBase):
             self._run(L.unpack_ghosts, self._grid(n_got), (r_rows, r_at, r_stride, recv, d["x"], d["v"], d["omega"]))
 
     def _pinned(self, name, size):
-        """(size,) float64 of page-locked host memory for the ghost refresh's buffer ``name`` (``Domain.buffers``,
+        """(size,) float64 of page-locked host memory for the ghost refresh's buffer ``name`` (``Domain.buffer_alloc``,
         ``GhostPlan``'s ``alloc``): one array a name, grown by a quarter when too small, reused by every plan
         (a rebuild frees the old plan before it makes the new)."""
         a = self._pinned_bufs.get(name)
