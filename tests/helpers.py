@@ -96,8 +96,8 @@ def simple_cubic(nxy, nz, a):
     return (g + 0.5) * a, nxy * a
 
 
-def write_crystal(path, x, fixed, L, sets=(), converged=False):
-    """A state file of a hand-built packing, as a run would write it."""
+def write_crystal(path, x, fixed, L, sets=(), converged=False, step=7):
+    """A state file of a hand-built packing, as a run would write it (at ``step``)."""
     n = len(x)
     cfg = config.load(None, ["run.max_steps=1", f"box.L_x={L}", f"box.L_y={L}",
                              f"pour.N={int((fixed == 0).sum())}"] + list(sets))
@@ -110,7 +110,7 @@ def write_crystal(path, x, fixed, L, sets=(), converged=False):
     F_t = np.zeros((len(r), 3))
     F_t[:, 0] = 0.5 * cfg.contact.mu * F_n
     a.update(id_i=pairs[:, 0], id_j=pairs[:, 1], delta=1 - r, F_n=F_n, F_t=F_t, ds_i=np.zeros((len(r), 3)))
-    checkpoint.write(str(path), a, {"kind": "snapshot", "step": 7, "time": 0.7, "n": n, "L_x": L, "L_y": L,
+    checkpoint.write(str(path), a, {"kind": "snapshot", "step": step, "time": 0.1 * step, "n": n, "L_x": L, "L_y": L,
                                     "n_mobile": int((fixed == 0).sum()), "n_bed": int(fixed.sum()),
                                     "converged": converged, "config": cfg.to_toml()})
 

@@ -406,13 +406,24 @@ def test_a_run_analysed_again_keeps_its_analysis_settings(tmp_path):
     report.analyze(str(run), sets=["analysis.margin_bottom=4"], plots=False, log=lambda m: None)
     summ = run / "analysis" / "summary.json"
     t = os.path.getmtime(summ)
-    os.utime(run / "final.h5", (t + 10, t + 10))          # a restart wrote a newer final state
+    os.utime(run / "final.h5", (t + 10, t + 10))          # a fresh clone's order of files: not a newer state
     lines = []
     co.collect([str(tmp_path / "runs")], str(tmp_path / "out"), log=lines.append)
-    assert any("newer" in ln for ln in lines)
+    assert not any("analysing" in ln for ln in lines) and os.path.getmtime(summ) == t
+    write_crystal(run / "final.h5", x, fixed, L, ["contact.mu=0"], converged=True, step=9)  # a restart went on
+    lines = []
+    co.collect([str(tmp_path / "runs")], str(tmp_path / "out"), log=lines.append)
+    assert any("step 9" in ln and "step 7" in ln for ln in lines)
     again = json.loads(summ.read_text())
-    assert os.path.getmtime(summ) > t and again["margin_bottom"] == 4.0
+    assert again["step"] == 9 and again["margin_bottom"] == 4.0
     assert again["settings"]["analysis.margin_bottom"] == 4.0
+    assert again["measures_version"] == report.MEASURES_VERSION
+    del again["measures_version"]                                 # written before the measures had a version
+    summ.write_text(json.dumps(again))
+    lines = []
+    co.collect([str(tmp_path / "runs")], str(tmp_path / "out"), log=lines.append)
+    assert any("measures version 0" in ln for ln in lines)
+    assert json.loads(summ.read_text())["measures_version"] == report.MEASURES_VERSION
 
 
 def test_development_size_verdicts_figures_inline_and_notes(tmp_path):

@@ -37,6 +37,9 @@ from .measures import measure
 
 SUMMARY = "summary.json"
 PACKING = "packing.npz"     # a run's kept packing (``mpdem export --format packing``) when final.h5 is gone
+# The version of the measures a summary holds: raise it when a measure's definition or a summary's
+# keys change, so that ``mpdem collect`` analyses again every summary written before (0: unversioned).
+MEASURES_VERSION = 1
 # what a packing cannot measure again: the flow of the velocities it does not keep, and the steadiness of a
 # thermo table that is not kept beside it; analysed again, a run keeps these from its earlier analysis
 CARRIED = ("flow", "flow_steady")
@@ -158,7 +161,8 @@ def summarise(arrays, attrs, cfg, source):
         s, tables = measure(arrays, attrs, cfg)
     except ValueError as e:
         raise AnalysisError(f"{source}: {e}") from None
-    s = {"source": source, "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
+    s = {"source": source, "measures_version": MEASURES_VERSION,
+         "kind": attrs.get("kind"), "step": int(attrs.get("step", 0)),
          "time": float(attrs.get("time", 0.0)), "converged": bool(attrs.get("converged", False)),
          "written_by_ranks": int(attrs.get("ranks", 1)), "n": int(len(arrays["id"])),
          # the parameter set (config.PARAM_KEYS, what the across-runs tables group by) and the physics

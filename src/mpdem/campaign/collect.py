@@ -33,13 +33,14 @@ import warnings
 
 import numpy as np
 
-from ..io import rundir
+from ..errors import MpdemError
+from ..io import checkpoint, packing, rundir
 from ..config import PARAM_KEYS
 from ..analysis import fits
 from . import claims, claimtable, contrasts, depth, ladder, paper, pooled, ratio, samples, sources
 from .comparison import comparisons, write_readme
 from .figures import make_figures
-from ..analysis.report import PACKING, SUMMARY, AnalysisError
+from ..analysis.report import MEASURES_VERSION, PACKING, SUMMARY, AnalysisError
 from .runs import NAN, SHORT, AnalysedRun, Set, families, mean_sem
 
 SET_QUANTITIES = ("z", "z_no_rattlers", "phi", "alpha", "rattler_fraction", "mobilised_fraction",
@@ -125,6 +126,33 @@ def _analyse(path, why, log, settings=None):
     return None
 
 
+def _stale(final, summ):
+    """Why the analysis ``summ`` must be made again, or None: written by earlier measures
+    (``report.MEASURES_VERSION``), or not of the state ``final`` (a restart went on after it).
+
+    Decided by what the files say, not by their times: a clone's checkout gives every
+    file the time it was written out, in no particular order.
+    """
+    if not os.path.exists(final):
+        return None
+    try:
+        with open(summ) as fh:
+            old = json.load(fh)
+        done, version = old.get("step"), int(old.get("measures_version", 0))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None             # an unreadable summary is reported where it is read, not here
+    if version < MEASURES_VERSION:
+        return f"analysis/summary.json holds measures version {version}, this mpdem's is {MEASURES_VERSION}"
+    try:
+        attrs = packing.read_attrs(final) if packing.is_packing(final) else checkpoint.read_attrs(final)
+    except (OSError, MpdemError):
+        return None
+    step = attrs.get("step")
+    if step is None or done is None or int(step) == int(done):
+        return None
+    return f"{os.path.basename(final)} is at step {int(step)}, analysis/summary.json at step {int(done)}"
+
+
 def load_run(path, analyze_missing=True, log=print):
     """One run directory as a AnalysedRun, analysing it first if it needs it and may.
 
@@ -146,18 +174,18 @@ def load_run(path, analyze_missing=True, log=print):
         err = _analyse(path, "no analysis/summary.json", log)
         if err:
             return None, err
-    elif os.path.exists(final) and os.path.getmtime(final) > os.path.getmtime(summ):
+    elif (stale := _stale(final, summ)):
         if analyze_missing:
             try:
                 with open(summ) as fh:
                     settings = json.load(fh).get("settings")
             except (OSError, ValueError, AttributeError):
                 settings = None
-            err = _analyse(path, "final.h5 is newer than analysis/summary.json", log, settings)
+            err = _analyse(path, stale, log, settings)
             if err:
                 return None, err
         else:
-            log(f"collect: warning: {path}: final.h5 is newer than analysis/summary.json (--no-analyze: used as is)")
+            log(f"collect: warning: {path}: {stale} (--no-analyze: used as is)")
     try:
         with open(summ) as fh:
             s = json.load(fh)

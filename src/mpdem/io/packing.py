@@ -53,6 +53,23 @@ def write(path, arrays, attrs):
     return path
 
 
+def read_attrs(path):
+    """The attributes of a packing file (its step, config, ...), without its arrays.
+
+    Raises
+    ------
+    PackingFileError naming the file when it is not a packing file, or damaged.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            attrs = json.loads(str(z["attrs"])) if "attrs" in z.files else {}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as e:
+        raise PackingFileError(f"{path}: unreadable as a packing file ({e})") from None
+    if attrs.get("format") != FORMAT:
+        raise PackingFileError(f"{path}: not an mpdem packing file")
+    return attrs
+
+
 def read(path):
     """(arrays, attrs) of a packing file, in the form of ``checkpoint.read_state(..., pairs=True)``
     for the fields it keeps.
