@@ -277,10 +277,16 @@ CLAIMS = [
           ours=[Diff(S("S26"), S("S15"))],
           also=[Diff(Window("S26", "10-30"), Window("S15", "10-30"), "10–30 d"),
                 Diff(Window("S26", "5-15"), Window("S15", "5-15"), "5–15 d"),
+                Diff(Window("S31", "10-30"), Window("S15", "10-30"), "seed 2 (translational stop, S31), 10–30 d"),
+                Diff(Window("S31", "5-15"), Window("S15", "5-15"), "seed 2 (translational stop, S31), 5–15 d"),
+                Diff(Window("S32", "10-30"), Window("S15", "10-30"), "K0 20 (S32), 10–30 d"),
+                Diff(Window("S32", "5-15"), Window("S15", "5-15"), "K0 20 (S32), 5–15 d"),
                 Diff(S("S21"), S("S03"), "N 2000, K0 50"), Diff(S("S24"), S("S03"), "N 2000, K0 20"),
                 Diff(S("S25"), S("S03"), "N 2000, K0 100")],
           if_differs=("open", "a discrepancy of protocol: this project pours with K0 = 0 (its default), the "
-                              "paper's runs with K0 = 20–100 or 0; the paper-size contrast has one seed at K0 = 50")),
+                              "paper's runs with K0 = 20–100 or 0; at paper size a second K0 = 50 seed (S31, a set apart: it "
+                              "stopped on the translational energy) and one at K0 = 20 (S32) stand as far above "
+                              "(beside)")),
     Claim("34", "Hertzian contacts give the same picture: z(Hertz) − z(Hooke) at equal k_n, μ = 0", "the same "
           "(Sec. II)", "compare", 0.0, None, tolerance=NO_NUMBER.format(w="the same"),
           ours=[Diff(S("S23"), S("S02"))], note="N = 2000",
