@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# The paper campaign's unfinished runs as one queue, in the order they decide the README's open rows, run
+# JOBS at a time (default 2) on this machine's cores. Every job resumes where its runs stand (a ladder skips its
+# converged rungs and restarts one from its newest checkpoint; a sweep skips its finished rows), so the same
+# command goes on after any stop: a job whose work is done ends at once and the next one starts.
+#   bash analysis/sweeps/paper/queue.sh                      # JOBS=2, logs in /tmp/mpdem-queue/<job>.log
+#   JOBS=1 LOGS=DIR ONLY="flow ladder-mu0.5-s1" bash analysis/sweeps/paper/queue.sh
+#   bash analysis/sweeps/paper/queue.sh --list               # the jobs, in order, and what each decides
+# A job's entry may name one it waits for: the rungs of one ladder never run twice at once.
+# SIGTERM or SIGINT to the queue goes to every running job: each writes a checkpoint and stops (exit 75), and
+# the queue starts nothing more. Commit what the runs wrote as docs/running.md says (newest checkpoints with
+# `git add -f`, finished runs' summaries, analyses and packings; then `make collect-paper`).
+set -uo pipefail
+cd "$(dirname "$0")/../../.." || exit 2
+P=analysis/sweeps/paper R=analysis/results/paper/runs
+PY=${PY:-.venv/bin/python}
+JOBS=${JOBS:-2} LOGS=${LOGS:-/tmp/mpdem-queue}
+sweep() { nice -n 10 "$PY" -m mpdem sweep "$P/$1" --config "$P/$2" --out "$R/$3" --jobs 1 --no-collect; }
+ladder() { nice -n 10 bash "$P/ladder.sh" "$@"; }
+
+# name | what it decides | its function (below, with any words after it as arguments) | a job it waits for (one ladder's rungs are never run twice at once)
+JOB_LIST=(
+  "flow|row 38: the flow arrest kept on the incline (18 and 16 degrees), beside the levelled one|job_flow|"
+  "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
+  "ladder-mu0.5-s1|rows 23, 26: the mu = 0.5 ladder of seed 1 to 2e8 (its 2e7 rung first)|job_l05s1|"
+  "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2|job_stiff05|"
+  "ladder-mu0.5-s2|rows 23, 26: the second mu = 0.5 ladder (its pour at 2e5 first)|job_l05s2|"
+  "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung|job_l0s2_2e8|ladder-mu0-s2-2e7"
+  "strict|row 1: the stricter stop (E_stop = 1e-10) on seeds 2 and 3|job_strict|"
+)
+job_flow() { sweep flow-arrest-tilted.tsv chute.toml flow; }
+job_l05s1() { STOP_ENERGY=translational ladder 0.5 1 "$R/ladder-size/mu0.5_s1" 2e8; }
+from0s2() { FROM=$R/size/mu0_eps0.88_kn2e5_phi0.13_s2_max_steps2e7 ladder 0 2 "$R/ladder-size/mu0_s2" "$1"; }
+job_l0s2_2e7() { from0s2 2e7; }
+job_stiff05() { sweep size-stiff-friction.tsv size.toml size; }
+job_l05s2() { STOP_ENERGY=translational ladder 0.5 2 "$R/ladder-size/mu0.5_s2" 2e8; }
+job_l0s2_2e8() { from0s2 2e8; }
+job_strict() { sweep size-strict.tsv size.toml size; }
+
+# QUEUE_DEFS=FILE: a bash file read here, which may redefine JOB_LIST and the functions (a site's own jobs)
+if [ -n "${QUEUE_DEFS:-}" ]; then
+    # shellcheck source=/dev/null
+    source "$QUEUE_DEFS" || { echo "queue: QUEUE_DEFS=$QUEUE_DEFS: cannot be read"; exit 2; }
+fi
+if [ "${1:-}" = --list ]; then
+    for j in "${JOB_LIST[@]}"; do
+        IFS='|' read -r name what _ after <<< "$j"
+        printf '%-20s %s%s\n' "$name" "$what" "${after:+ (after $after)}"
+    done
+    exit 0
+fi
+[ -x "$PY" ] || { echo "queue: no $PY (run \`make setup\` first, or set PY)"; exit 2; }
+case "$JOBS" in ''|*[!0-9]*|0) echo "queue: JOBS=$JOBS: a positive whole number of jobs at once"; exit 2 ;; esac
+mkdir -p "$LOGS" || exit 2
+set -m      # each job in a process group of its own: a signal reaches its runs, not only its shell
+stopping=0
+declare -A pid=()
+running() { [ -n "${pid[$1]:-}" ] && kill -0 "${pid[$1]}" 2>/dev/null; }
+stop() {
+    stopping=1
+    echo "queue: stopping: SIGTERM to every running job (each run writes a checkpoint)"
+    for p in $(jobs -pr); do kill -TERM -- "-$p" 2>/dev/null; done
+}
+trap stop TERM INT
+todo=()
+for j in "${JOB_LIST[@]}"; do
+    IFS='|' read -r name _ _ _ <<< "$j"
+    if [ -z "${ONLY:-}" ] || [[ " $ONLY " == *" $name "* ]]; then todo+=("$j"); fi
+done
+while [ "$stopping" = 0 ] && [ "${#todo[@]}" -gt 0 ]; do
+    if [ "$(jobs -pr | wc -l)" -ge "$JOBS" ]; then wait -n; continue; fi
+    next=-1
+    for i in "${!todo[@]}"; do
+        IFS='|' read -r name what fn after <<< "${todo[$i]}"
+        if [ -z "$after" ] || ! running "$after"; then next=$i; break; fi
+    done
+    if [ "$next" = -1 ]; then wait -n; continue; fi     # each waits for a job still running
+    IFS='|' read -r name what fn after <<< "${todo[$next]}"
+    unset "todo[$next]"; todo=("${todo[@]}")
+    echo "queue: $(date '+%F %T') start $name ($what): log $LOGS/$name.log"
+    ( trap : TERM INT; $fn; rc=$?; echo "queue: $(date '+%F %T') $name ended with exit status $rc" ) \
+        >> "$LOGS/$name.log" 2>&1 &
+    pid[$name]=$!
+done
+while [ -n "$(jobs -pr)" ]; do wait -n; done
+echo "queue: $(date '+%F %T') nothing more to start$([ "$stopping" = 1 ] && echo ' (stopped by a signal)')"
