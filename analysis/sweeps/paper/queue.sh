@@ -8,8 +8,9 @@
 #   bash analysis/sweeps/paper/queue.sh --list               # the jobs, in order, and what each decides
 # A job's entry may name one it waits for: the rungs of one ladder never run twice at once.
 # SIGTERM or SIGINT to the queue goes to every running job: each writes a checkpoint and stops (exit 75), and
-# the queue starts nothing more. Commit what the runs wrote as docs/running.md says (newest checkpoints with
-# `git add -f`, finished runs' summaries, analyses and packings; then `make collect-paper`).
+# the queue starts nothing more. What the project keeps of the runs is committed by hand: an unfinished run's
+# newest checkpoint (`git add -f`; its older ones untracked), a finished run's config.toml, summary.json,
+# analysis/ and packing.npz (its checkpoints untracked); then `make collect-paper` and an entry in NOTES.md.
 set -uo pipefail
 cd "$(dirname "$0")/../../.." || exit 2
 P=analysis/sweeps/paper R=analysis/results/paper/runs
