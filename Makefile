@@ -123,7 +123,7 @@ reproduce-paper: setup
 	$(MAKE) collect-paper
 
 # The tables, fits and figures of analysis/results/paper from its committed files alone (summaries and
-# packings: a run whose analysis is older than its packing is analysed again): the poured piles, the
+# packings: a run whose analysis is not of its packing's step, or of older measures, is analysed again): the poured piles, the
 # flow-arrest ones and the converged rungs of the paper-size stiffening ladders (each rung a set apart from
 # the piles poured at its k_n; runs/ladder-dev has its own results, ladder-dev/; runs/hstop is a table of
 # verdicts, NOTES).

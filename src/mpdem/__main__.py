@@ -345,7 +345,9 @@ def parser():
     co.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories (or directories holding them)")
     co.add_argument("--out", default="paper", help="output directory (default ./paper)")
     co.add_argument("--no-analyze", action="store_true",
-                    help="use only runs that already have analysis/summary.json")
+                    help="use only runs that already have analysis/summary.json, as they are (without it a run "
+                         "is analysed when it has none, or when it is of another step of the run's state or of "
+                         "older measures than this mpdem's)")
     co.add_argument("--quiet", action="store_true", help="print nothing")
     co.add_argument("--figure-format", default="png", metavar="FMT[,FMT]",
                     help="figure formats: png (default), pdf, svg, several joined by commas")
