@@ -25,9 +25,11 @@ JOB_LIST=(
   "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
   "ladder-mu0.5-s1|rows 23, 26: the mu = 0.5 ladder of seed 1 to 2e8 (its 2e7 rung first)|job_l05s1|"
   "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2|job_stiff05|"
+  "friction-seeds|rows 7, 7b, 8, 12: second seeds of mu = 0.1 and 1|job_size_d|"
   "ladder-mu0.5-s2|rows 23, 26: the second mu = 0.5 ladder (its pour at 2e5 first)|job_l05s2|"
   "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung|job_l0s2_2e8|ladder-mu0-s2-2e7"
   "strict|row 1: the stricter stop (E_stop = 1e-10) on seeds 2 and 3|job_strict|"
+  "mu10-and-mu0-s4|rows 1, 9: a fourth mu = 0 seed, and mu = 10|job_size_c|"
 )
 job_flow() { sweep flow-arrest-tilted.tsv chute.toml flow; }
 job_l05s1() { STOP_ENERGY=translational ladder 0.5 1 "$R/ladder-size/mu0.5_s1" 2e8; }
@@ -37,6 +39,8 @@ job_stiff05() { sweep size-stiff-friction.tsv size.toml size; }
 job_l05s2() { STOP_ENERGY=translational ladder 0.5 2 "$R/ladder-size/mu0.5_s2" 2e8; }
 job_l0s2_2e8() { from0s2 2e8; }
 job_strict() { sweep size-strict.tsv size.toml size; }
+job_size_d() { sweep size-d.tsv size.toml size; }
+job_size_c() { sweep size-c.tsv size.toml size; }
 
 # QUEUE_DEFS=FILE: a bash file read here, which may redefine JOB_LIST and the functions (a site's own jobs)
 if [ -n "${QUEUE_DEFS:-}" ]; then
