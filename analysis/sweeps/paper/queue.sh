@@ -4,7 +4,7 @@
 # converged rungs and restarts one from its newest checkpoint; a sweep skips its finished rows), so the same
 # command goes on after any stop: a job whose work is done ends at once and the next one starts.
 #   bash analysis/sweeps/paper/queue.sh                      # JOBS=2, logs in /tmp/mpdem-queue/<job>.log
-#   JOBS=1 LOGS=DIR ONLY="flow ladder-mu0.5-s1" bash analysis/sweeps/paper/queue.sh
+#   JOBS=1 LOGS=DIR ONLY="flow ladder-mu0.5-s1" DEVICE=gpu bash analysis/sweeps/paper/queue.sh
 #   bash analysis/sweeps/paper/queue.sh --list               # the jobs, in order, and what each decides
 # A job's entry may name one it waits for: the rungs of one ladder never run twice at once.
 # SIGTERM or SIGINT to the queue goes to every running job: each writes a checkpoint and stops (exit 75), and
@@ -17,7 +17,8 @@ P=analysis/sweeps/paper R=analysis/results/paper/runs
 PY=${PY:-.venv/bin/python}
 JOBS=${JOBS:-2} LOGS=${LOGS:-/tmp/mpdem-queue}
 sweep() { nice -n 10 "$PY" -m mpdem sweep "$P/$1" --config "$P/$2" --out "$R/$3" --jobs 1 --no-collect; }
-ladder() { nice -n 10 bash "$P/ladder.sh" "$@"; }
+# DEVICE (default cpu) for every rung: a checkpoint written on a lent GPU keeps engine.device = "gpu"
+ladder() { DEVICE=${DEVICE:-cpu} nice -n 10 bash "$P/ladder.sh" "$@"; }
 
 # name | what it decides | its function (below, with any words after it as arguments) | a job it waits for (one ladder's rungs are never run twice at once)
 JOB_LIST=(
