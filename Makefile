@@ -63,7 +63,7 @@ test-pytest:
 # every MPI test on 2 ranks; on 3 and 4 those of the decomposition itself (slabs, ghosts, migration, the state
 # files' collective writes): the runs of a feature (API, flow arrest, stiffening) match one rank at 2 ranks
 MPI_MORE = mpi_tests/test_decomposition.py mpi_tests/test_exchange.py mpi_tests/test_state_files.py \
-  mpi_tests/test_mpi_basics.py mpi_tests/test_analysis_files.py mpi_tests/test_grid.py
+  mpi_tests/test_mpi_basics.py mpi_tests/test_analysis_files.py mpi_tests/test_grid.py mpi_tests/test_bulk_end.py
 # the one-rank references, computed by the 2-rank session and read by the 3- and 4-rank ones (mpi_helpers.py)
 MPI_REFERENCES = $(CURDIR)/build/mpi-references.json
 

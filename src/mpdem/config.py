@@ -252,10 +252,10 @@ SCHEMA = (
        "steps between snapshots for analysis (RUN/snapshots/snap-NNNNN.h5 with an XDMF sidecar); 0 = only "
        "the final state", int, restart=True, physics=False),
     _k("output", "bulk_at_end", True,
-       "measure the bulk (z, phi) at the run's end for summary.json, on rank 0 from the final positions gathered "
-       "there (33 bytes a sphere of the whole pile, some 250 with the contact search); false: no bulk measurement "
-       "in the summary (`mpdem analyze RUN` makes it from final.h5 later), so that no rank holds the whole pile "
-       "at the end (with parallel HDF5: without it rank 0 writes every state file for all)", bool, restart=True,
+       "measure the bulk (z, phi) at the run's end for summary.json, each rank on its own spheres and ghosts "
+       "with exact sums over the ranks (the same bits on any ranks and grid; some 200 bytes a contact of the "
+       "rank's rows for the time it takes); false: no bulk measurement in the summary (`mpdem analyze RUN` makes "
+       "it from final.h5 later)", bool, restart=True,
        physics=False),
     _k("analysis", "margin_bottom", -1.0,
        "bulk margin above the bed [d]; -1 = 10 for a pile at least analysis.tall_pile high, else clamp(0.2 "

@@ -571,6 +571,12 @@ class Domain:
             raise RuntimeError("Domain.refresh before the first rebuild")
         self._plan.run((state.x, state.v, state.omega))
 
+    def to_ghosts(self, field):
+        """Copy the owned rows of ``field`` ((rows, 3) float64) into its ghost rows, through the refresh's
+        plan (a collective; nothing on one rank): a per-row value the owners decide, for the ghosts."""
+        if self.parallel:
+            self.plan.run((field, field, field))
+
     @property
     def plan(self):
         """The ghost refresh's plan of the last rebuild (``parallel.GhostPlan``)."""

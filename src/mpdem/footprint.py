@@ -12,10 +12,9 @@ times counts from the pile's geometry, in three phases whose largest sets the ne
   of the tiles and holds its share of the rows, and the whole bed;
 - the run: the rank's rows and ghosts with their lists, contact slots, near lists and the pair
   store of a settled pile, and the copy of its rows a state file is written from;
-- the end (rank 0): the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``)
-  and, with ``output.bulk_at_end``, the whole pile's positions gathered for the bulk measurement
-  (``Domain.gather_arrays``: the parts, their concatenation and the rows sorted by id) and its
-  contact search.
+- the end: on rank 0 the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``);
+  with ``output.bulk_at_end`` on every rank the bulk measurement of its rows and ghosts
+  (``analysis.bulkpar``: their contacts with normals, forces and each sphere's list of them).
 
 List entries and contacts per sphere are those of the densest packing of equal spheres,
 PHI_MAX = 0.74, within the list's reach r: 8 PHI_MAX r^3 neighbours (a settled pile of the paper
@@ -212,20 +211,18 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
     # a state file is written from a copy of the rank's rows sorted by id, with its slots
     write = own * (stored + contacts * slot)
     run = rows * row + lists + kept_pairs + slots + write
-    # -- the end on rank 0: the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``:
+    # -- the end: on rank 0 the final state's digest a chunk of ids at a time (``checkpoint.digest_parts``:
     # the chunk's rows with their slots, received, then put in order); with the bulk measurement
-    # (``bulk_at_end``) the whole pile's ids, positions and flags, gathered (the parts, joined, sorted), and
-    # searched for contacts (a pair of ids, a separation and a distance a contact, and the search's cells)
+    # (``bulk_at_end``) each rank's rows and ghosts searched for contacts, each contact with its rows, branch,
+    # distance, normal, force and band, and twice in the spheres' lists of their contacts (some 200 bytes),
+    # each row with its flags and counts
     from .io.checkpoint import DIGEST_CHUNK
     # a field of a chunk at a time: the largest per row is a contact slot's Delta s, with the rows' ids and counts
     chunk = min(n, DIGEST_CHUNK) * 3 * (16 + contacts * 3 * f8) if P > 1 else 0.0
     # the rank's rows sorted by id for the digest, then the final state file written from a copy of them
     then = max(own * (stored + contacts * slot) + chunk, write)
     if bulk_at_end:
-        placed = field_bytes([state.FIELD[k] for k in ("id", "x", "fixed")])
-        # (on one rank the rows are the final state: no copies), then the contact search
-        gathered = (3 if P > 1 else 1) * n * placed
-        then = max(then, gathered + write, gathered + n * (contacts / 2 * (2 * 8 + 4 * f8) + 6 * 8))
+        then = max(then, rows * (contacts / 2 * 200 + 16 * 8))
     end = rows * row + lists + then
     # without parallel HDF5, rank 0 writes each state file for all: every rank's rows (the parts, joined)
     through = 2 * n * (stored + contacts * slot) if P > 1 and not parallel_files else 0.0

@@ -111,9 +111,16 @@ def bulk_region(zm, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0, profil
     """
     top = float(zm.max()) + 1.0
     edges, phi = phi_profile(zm, L_x, L_y, z_bed, top, profile_bin)
+    return region_of_profile(edges, phi, top, zm.size, z_bed, L_x, L_y, margin_bottom, margin_top, tall_pile)
+
+
+def region_of_profile(edges, phi, top, n_mobile, z_bed, L_x, L_y, margin_bottom=-1.0, margin_top=-1.0,
+                      tall_pile=40.0):
+    """``bulk_region`` from the pile's profile ``phi`` (nb,) on ``edges`` (nb + 1,) [d], its highest
+    centre plus one ``top`` [d] and its count of mobile spheres (``phi_profile``, made elsewhere)."""
     centres = 0.5 * (edges[:-1] + edges[1:])
     # plateau window of docs/model.md 6.1, shrunk for piles shorter than the paper's
-    h_nominal = zm.size * math.pi / 6 / (L_x * L_y * 0.6)
+    h_nominal = n_mobile * math.pi / 6 / (L_x * L_y * 0.6)
     lo, hi = z_bed + min(10.0, 0.25 * h_nominal), z_bed + min(30.0, 0.75 * h_nominal)
     win = (centres >= lo) & (centres <= hi)
     plateau = float(np.median(phi[win])) if win.any() else float(phi.max())

@@ -438,19 +438,17 @@ class Run:
         """
         # collectives first, in the same order on every rank: the final state file (first: what ends the
         # process after it leaves the run whole), the digest by chunks of ids (no rank holds the whole
-        # state), the positions on rank 0 for the bulk measurement where it is made
+        # state), the bulk measurement where it is made (each rank on its rows and ghosts)
         path = self.snapshots.write(final=True)
         part = checkpoint.gather_state(self.state)
         digest = checkpoint.digest_parts(part, self.domain.net)
-        positions = None
-        if self.cfg.output.bulk_at_end:
-            positions = self.domain.gather_arrays({"id": part["id"], "x": part["x"], "fixed": part["fixed"]})
         del part
+        bulk = summary.measure_bulk(self.state, self.domain, self.cfg) if self.cfg.output.bulk_at_end else None
         migrated, rebalances = self.counters()
         try:
             if self.rank != 0:
                 return None
-            return summary.write(self.end(migrated, rebalances), digest, positions, self.cfg, self.out, path,
+            return summary.write(self.end(migrated, rebalances), digest, bulk, self.cfg, self.out, path,
                                  self.log)
         finally:
             self.log.close()

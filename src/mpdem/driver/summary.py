@@ -72,7 +72,26 @@ def finish(run):
     return run.finish()
 
 
-def write(end, digest, positions, cfg, out, final, log):
+def measure_bulk(state, domain, cfg):
+    """The bulk measurement of the final state, each rank on its own rows and ghosts
+    (``analysis.bulkpar.measure``; a collective): the bulk dict, or why there is none (str).
+
+    The ghosts are refreshed first (the last step moved their owners)."""
+    from ..analysis import bulkpar
+    domain.refresh(state)
+    n = state.n_rows
+    a = cfg.analysis
+    try:
+        return bulkpar.measure(state.x[:n], state.fixed[:n], state.id[:n], state.n_own, state.L_x, state.L_y,
+                               cfg.contact.mu, domain, a.margin_bottom, a.margin_top, a.n_min, a.profile_bin,
+                               a.tall_pile, rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
+                               force_fraction=a.force_fraction, band_width=a.band_width,
+                               planes=planes.of_config(cfg))
+    except ValueError as e:      # decided by reduced numbers: alike on every rank
+        return str(e)
+
+
+def write(end, digest, bulk, cfg, out, final, log):
     """Write summary.json and log the end and the bulk z and phi (rank 0).
 
     Parameters
@@ -80,9 +99,9 @@ def write(end, digest, positions, cfg, out, final, log):
     end : End
     digest : str
         ``checkpoint.digest`` of the whole final state (``checkpoint.digest_parts``).
-    positions : dict of arrays or None
-        The whole final state's ``x`` (n, 3) [d] and ``fixed`` (n,), for the bulk measurement; None
-        where ``output.bulk_at_end`` is off (no bulk measurement: ``mpdem analyze`` makes it later).
+    bulk : dict, str or None
+        The bulk measurement of the final state (``measure_bulk``), why it could not be made, or None
+        where ``output.bulk_at_end`` is off (``mpdem analyze`` makes it later).
     cfg : Config
     out : str
         The run directory.
@@ -111,11 +130,17 @@ def write(end, digest, positions, cfg, out, final, log):
     log(f"end: {'converged' if end.converged else 'NOT CONVERGED (hit run.max_steps)'} after "
         f"{steps} steps, t = {end.time:.4g}, E_k/N = {end.ek:.3e}, wall {end.wall:.1f} s "
         f"({ns:.0f} ns per particle-step{par})")
-    if positions is None:
+    if bulk is None:
         log(f"bulk: not measured at the end (output.bulk_at_end = false): `python -m mpdem analyze {out}` "
             f"measures it from the final state")
+    elif isinstance(bulk, str):
+        log.warn(f"no bulk measurement: {bulk}")
     else:
-        _bulk(summary, positions, end, cfg, log)
+        summary["bulk"] = bulk
+        log(f"bulk: z = {bulk['z']:.3f} (without rattlers by the {bulk['rattlers']} rule "
+            f"{analysis.bulk.rattlers_text(bulk)}), phi = {bulk['phi']:.4f}, "
+            f"{bulk['n_bulk']} particles in z in [{bulk['z1']:.2f}, {bulk['z2']:.2f}], "
+            f"surface h = {bulk['h']:.2f}")
     rundir.write_json(os.path.join(out, "summary.json"), summary)
     log(f"wrote {final}")
     if not end.converged:
@@ -124,24 +149,6 @@ def write(end, digest, positions, cfg, out, final, log):
             f"not an error, and not used for comparisons. Go on with `python -m mpdem restart {out} "
             f"--set run.max_steps=...`")
     return summary
-
-
-def _bulk(summary, positions, end, cfg, log):
-    """The bulk measurement of the final positions into ``summary["bulk"]``, and its log line."""
-    try:
-        a = cfg.analysis
-        bulk = analysis.bulk_summary(positions["x"], positions["fixed"], end.L_x, end.L_y, cfg.contact.mu,
-                                     a.margin_bottom, a.margin_top, a.n_min, a.profile_bin, a.tall_pile,
-                                     rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
-                                     force_fraction=a.force_fraction, band_width=a.band_width,
-                                     planes=planes.of_config(cfg))
-        summary["bulk"] = bulk
-        log(f"bulk: z = {bulk['z']:.3f} (without rattlers by the {bulk['rattlers']} rule "
-            f"{analysis.bulk.rattlers_text(bulk)}), phi = {bulk['phi']:.4f}, "
-            f"{bulk['n_bulk']} particles in z in [{bulk['z1']:.2f}, {bulk['z2']:.2f}], "
-            f"surface h = {bulk['h']:.2f}")
-    except ValueError as e:
-        log.warn(f"no bulk measurement: {e}")
 
 
 def recover(out, final, status):
