@@ -128,19 +128,20 @@ def write_tiles(path, tiles, L=6.0, n=5, layers=6, seed=3):
     tables.write_table(path, np.arange(len(x)), x, np.zeros_like(x), fixed)
 
 
-def traffic(comm, tiles, grid):
+def traffic(comm, tiles, grid, bulk_at_end):
     """A rank's bytes a step of the ghost refresh and of the reductions, bytes a rebuild of its exchanges and
     of its pickled calls, its rows (owned and ghost) and its engine's arrays, the largest over ``comm``'s
-    ranks, in 600 steps of ``tiles`` stacks on ``grid``."""
+    ranks, in 600 steps of ``tiles`` stacks on ``grid``; then the end's bytes, with or without the bulk
+    measurement (``output.bulk_at_end``)."""
     from mpi4py import MPI
     base = shared_dir(comm)
     path = os.path.join(base, "tiles.txt")
     if comm.Get_rank() == 0:
-        write_tiles(path, tiles)
+        write_tiles(path, tiles, layers=16)         # tall enough for a bulk slab between its margins
     comm.Barrier()
     cfg = config.load(None, ["run.max_steps=600", f"box.L_x={6.0 * tiles}", "box.L_y=6.0", f'run.initial_file="{path}"',
                              "output.progress_every=100000", "integration.skin=0.05", f"decomp.grid={list(grid)}",
-                             "output.bulk_at_end=false"])
+                             f"output.bulk_at_end={str(bulk_at_end).lower()}"])
     r = Run.new(cfg, os.path.join(base, "run"), comm, quiet=True)
     before = r.domain.sent
     r.run()
@@ -150,32 +151,37 @@ def traffic(comm, tiles, grid):
                exchanges=sent["exchanges"] / rebuilds, pickled=sent["pickled"] / rebuilds, rows=r.state.n_rows,
                memory=r.engine.memory_bytes())
     before = r.domain.sent
-    r.finish()
-    # the end: the digest by chunks of ids (each rank's rows once a field), no gather of the pile
+    s = r.finish()
+    # the end: the digest by chunks of ids (each rank's rows once a field) and each rank's bulk measurement,
+    # no gather of the pile
     out["end"] = sum(r.domain.sent.values()) - sum(before.values())
+    if comm.Get_rank() == 0:
+        assert ("bulk" in s) == bulk_at_end
     return {k: comm.allreduce(v, op=MPI.MAX) for k, v in out.items()}
 
 
-def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm):
+@pytest.mark.parametrize("bulk_at_end", [True, False])
+def test_a_rank_s_messages_and_memory_do_not_grow_with_the_pile(comm, bulk_at_end):
     """Weak scaling at 4 ranks: one stack on 2 ranks (2 x 1 x 1; each half of COMM_WORLD runs its own)
     against two stacks side by side on 4 (4 x 1 x 1): each rank holds the same box of the same stack, so
     its refresh, reductions, rebuild exchanges, rows and arrays stay put, within what the rank count itself
     adds (the all-to-all of counts and the balance's per-rank numbers); an all-to-all of the rows, a gather
-    of every height or a halo of the whole bed would double them. So do the end's messages without the
-    bulk measurement (the digest by chunks of ids, ``checkpoint.digest_parts``)."""
+    of every height or a halo of the whole bed would double them. So do the end's messages, with the bulk
+    measurement (each rank's own, ``analysis.bulkpar``) and without (the digest by chunks of ids,
+    ``checkpoint.digest_parts``)."""
     if comm.Get_size() != 4:
         return
     half = comm.Split(comm.Get_rank() // 2, comm.Get_rank())
     try:
-        small = traffic(half, 1, (2, 1, 1))
+        small = traffic(half, 1, (2, 1, 1), bulk_at_end)
     finally:
         half.Free()
-    large = traffic(comm, 2, (4, 1, 1))
+    large = traffic(comm, 2, (4, 1, 1), bulk_at_end)
     assert small["refresh"] > 0 and small["exchanges"] > 0 and small["pickled"] > 0
     for k in ("refresh", "reductions", "rows", "memory"):
         assert 0.8 <= large[k] / small[k] <= 1.25, (k, small[k], large[k])
-    # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds); the end's
-    # (``output.bulk_at_end = false``): the rank's own rows and the ids' histogram
+    # a rebuild's messages: what the stack's rows need, plus some numbers a rank (counts, seconds); the end's:
+    # the rank's own rows and the ids' histogram, and the bulk's reductions and ghost flags
     for k in ("exchanges", "pickled", "end"):
         assert large[k] <= 1.25 * small[k] + 64 * comm.Get_size(), (k, small[k], large[k])
 
