@@ -46,9 +46,20 @@ def test_the_wall_holds_a_frictionless_pile_as_in_bulk_summary():
     assert lost["rattler_fraction"] == 1.0 and lost["rattler_note"] == bulk.NO_BACKBONE
 
 
+def test_a_sphere_flown_far_above_the_pile_changes_nothing_but_the_top():
+    # its profile bins travel only where filled: 2e5 empty bins between cost nothing
+    a, _ = packing.read(os.path.join(DEV, PILES[0.5], "packing.npz"))
+    x = np.concatenate([a["x"], [[5.0, 5.0, 1e5]]])
+    fixed, ids = np.r_[a["fixed"], 0], np.r_[a["id"], a["id"].max() + 1]
+    got = bulkpar.measure(x, fixed, ids, len(x), 10.0, 10.0, 0.5, rattlers="count")
+    old = bulk.bulk_summary(x, fixed, 10.0, 10.0, 0.5, rattlers="count")
+    assert got["h"] == old["h"] < 30 and got["z"] == old["z"] and got["phi"] == pytest.approx(old["phi"], rel=1e-12)
+
+
 @pytest.mark.parametrize("n", [1, 2, 7, 1000, 1001])
 def test_the_median_by_bits_is_numpy_s(n):
     v = np.random.default_rng(n).lognormal(-9.0, 2.0, n)
     v[: n // 3] = v[n // 2]                                   # ties
+    v[n // 3: n // 2] *= -1.0                                 # negatives order below (overlaps have none)
     assert bulkpar._median(bulkpar.ALONE, v) == float(np.median(v))
     assert bulkpar._median(bulkpar.ALONE, np.zeros(0)) == 0.0

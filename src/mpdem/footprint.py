@@ -156,8 +156,7 @@ def estimate(n_mobile, n_bed, ranks, L_x, L_y, skin=0.2, near_skin=0.03, insert_
         tiles), the most a tile holds, and the cells of the insertion's cell lists of a tile; each rank
         keeps its share of the rows, beside the whole bed. None: every rank inserts the whole pour.
     bulk_at_end : bool
-        Rank 0 gathers the whole pile's positions at the end for the bulk measurement
-        (``output.bulk_at_end``).
+        Each rank measures the bulk on its own rows and ghosts at the end (``output.bulk_at_end``).
     parallel_files : bool
         h5py writes state files with parallel HDF5 (``checkpoint.parallel_hdf5``); without it rank 0
         gathers every rank's rows to write each one.

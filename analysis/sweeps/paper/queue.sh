@@ -5,12 +5,15 @@
 # command goes on after any stop: a job whose work is done ends at once and the next one starts.
 #   bash analysis/sweeps/paper/queue.sh                      # JOBS=2, logs in /tmp/mpdem-queue/<job>.log
 #   JOBS=1 LOGS=DIR ONLY="flow ladder-mu0.5-s1" DEVICE=gpu bash analysis/sweeps/paper/queue.sh
+# DEVICE (default cpu) is the ladders' rungs' device; a sweep's rows run as their run directories' configs say
 #   bash analysis/sweeps/paper/queue.sh --list               # the jobs, in order, and what each decides
 # A job's entry may name one it waits for: the rungs of one ladder never run twice at once.
-# SIGTERM or SIGINT to the queue goes to every running job: each writes a checkpoint and stops (exit 75), and
-# the queue starts nothing more. What the project keeps of the runs is committed by hand: an unfinished run's
-# newest checkpoint (`git add -f`; its older ones untracked), a finished run's config.toml, summary.json,
-# analysis/ and packing.npz (its checkpoints untracked); then `make collect-paper` and an entry in NOTES.md.
+# SIGTERM or SIGINT to the queue goes to every running job's processes: each run writes a checkpoint and
+# stops; the queue starts nothing more and ends once all of them have ended (a ladder's shell ends at once,
+# its run when its checkpoint is written). What the project keeps of the runs is committed by hand: an
+# unfinished run's newest checkpoint (`git add -f`; its older ones untracked), a finished run's config.toml,
+# summary.json, analysis/ and packing.npz (its checkpoints untracked); then `make collect-paper` and an entry
+# in NOTES.md.
 set -uo pipefail
 cd "$(dirname "$0")/../../.." || exit 2
 P=analysis/sweeps/paper R=analysis/results/paper/runs
@@ -61,11 +64,12 @@ mkdir -p "$LOGS" || exit 2
 set -m      # each job in a process group of its own: a signal reaches its runs, not only its shell
 stopping=0
 declare -A pid=()
-running() { [ -n "${pid[$1]:-}" ] && kill -0 "${pid[$1]}" 2>/dev/null; }
+running() { [ -n "${pid[$1]:-}" ] && jobs -pr | grep -qx "${pid[$1]}"; }
+groups=()   # the process groups signalled: the queue ends once every process in them has
 stop() {
     stopping=1
     echo "queue: stopping: SIGTERM to every running job (each run writes a checkpoint)"
-    for p in $(jobs -pr); do kill -TERM -- "-$p" 2>/dev/null; done
+    for p in $(jobs -pr); do kill -TERM -- "-$p" 2>/dev/null; groups+=("$p"); done
 }
 trap stop TERM INT
 todo=()
@@ -87,6 +91,10 @@ while [ "$stopping" = 0 ] && [ "${#todo[@]}" -gt 0 ]; do
     ( trap : TERM INT; $fn; rc=$?; echo "queue: $(date '+%F %T') $name ended with exit status $rc" ) \
         >> "$LOGS/$name.log" 2>&1 &
     pid[$name]=$!
+    # a stop that came while this one was being started: it was not among the jobs signalled
+    if [ "$stopping" = 1 ]; then kill -TERM -- "-$!" 2>/dev/null; groups+=("$!"); fi
 done
 while [ -n "$(jobs -pr)" ]; do wait -n; done
+# a job's shell may end before its run (a ladder's bash dies at the signal): wait for the run's checkpoint
+for p in "${groups[@]}"; do while kill -0 -- "-$p" 2>/dev/null; do sleep 1; done; done
 echo "queue: $(date '+%F %T') nothing more to start$([ "$stopping" = 1 ] && echo ' (stopped by a signal)')"

@@ -13,6 +13,11 @@ from ..kernels.pairdist import close_pairs, separations
 from ..kernels.particle import R
 
 
+class NoBulk(ValueError):
+    """The pile has no bulk to measure (no mobile sphere, or too short for its margins): decided by
+    numbers every rank of a run holds alike."""
+
+
 def slab_volume(zc, a, b, radius=R):
     """Volume of spheres of centre height zc inside the slab a <= z <= b [d^3].
 
@@ -131,7 +136,7 @@ def region_of_profile(edges, phi, top, n_mobile, z_bed, L_x, L_y, margin_bottom=
     mt = mb if margin_top < 0 else margin_top
     z1, z2 = z_bed + mb, h - mt
     if not z2 > z1:
-        raise ValueError(f"pile too short for a bulk region: z_bed = {z_bed:.3g}, h = {h:.3g}, "
+        raise NoBulk(f"pile too short for a bulk region: z_bed = {z_bed:.3g}, h = {h:.3g}, "
                          f"margins {mb:.3g} and {mt:.3g}")
     return {"z1": z1, "z2": z2, "h": h, "z_bed": z_bed, "margin_bottom": mb, "margin_top": mt,
             "phi_plateau": plateau, "plateau_lo": lo, "plateau_hi": hi, "edges": edges, "phi_z": phi}
@@ -207,7 +212,7 @@ class Packing:
         self.fixed = np.asarray(fixed).astype(bool)
         self.mobile = ~self.fixed
         if not self.mobile.any():
-            raise ValueError("no mobile particles to analyse")
+            raise NoBulk("no mobile particles to analyse")
         self.L_x, self.L_y, self.mu = float(L_x), float(L_y), float(mu)
         zm = self.x[self.mobile, 2]
         self.z_bed = float(self.x[self.fixed, 2].max()) if self.fixed.any() else float(zm.min()) - R

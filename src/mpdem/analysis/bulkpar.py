@@ -26,7 +26,7 @@ from ..kernels.exactsum import NLIMBS, add_exact, to_float
 from ..kernels.pairdist import close_pairs, separations
 from ..kernels.particle import R
 from . import backbone as bb
-from .bulk import NO_BACKBONE, region_of_profile, slab_volume
+from .bulk import NO_BACKBONE, NoBulk, region_of_profile, slab_volume
 from .contacts import band_index, elastic_normal, n_bands
 
 
@@ -61,9 +61,19 @@ def _bin_limbs(bins, values, n_bins):
 
 
 def _sums(net, bins, values, n_bins):
-    """(n_bins,) float64: the exact sums over every rank of ``values`` by ``bins``, each rounded once."""
-    acc = net.sum_int(_bin_limbs(np.asarray(bins, np.int64), np.asarray(values, np.float64), n_bins))
-    return np.array([to_float(acc[b]) for b in range(n_bins)])
+    """(n_bins,) float64: the exact sums over every rank of ``values`` by ``bins``, each rounded once.
+
+    The limbs travel for the bins some rank fills only (a count a bin first): a sphere flown far above
+    the pile leaves thousands of empty bins between."""
+    bins = np.asarray(bins, np.int64)
+    filled = np.flatnonzero(_counts(net, bins, n_bins))
+    slot = np.full(n_bins, -1, np.int64)
+    slot[filled] = np.arange(len(filled))
+    acc = net.sum_int(_bin_limbs(slot[bins], np.asarray(values, np.float64), len(filled)))
+    out = np.zeros(n_bins)
+    for k, b in enumerate(filled):
+        out[b] = to_float(acc[k])
+    return out
 
 
 def _counts(net, values, n):
@@ -71,9 +81,14 @@ def _counts(net, values, n):
     return np.array(net.sum_int(np.bincount(np.asarray(values, np.int64), minlength=n)[:n]))
 
 
+SIGN = np.uint64(1 << 63)
+
+
 def _kth(net, values, k):
-    """The k-th smallest (0-based) of the non-negative doubles ``values`` of every rank, by their bits."""
-    bits = np.ascontiguousarray(values, np.float64).view(np.uint64)
+    """The k-th smallest (0-based) of the doubles ``values`` of every rank (no NaN), by their bits."""
+    raw = np.ascontiguousarray(values, np.float64).view(np.uint64)
+    # keys in the order of the values: a positive's bits with the sign bit set, a negative's bits inverted
+    bits = np.where(raw & SIGN, ~raw, raw | SIGN)
     prefix, mask = 0, 0
     for shift in range(56, -8, -8):            # a byte at a time, the most significant first
         mine = bits[(bits & np.uint64(mask)) == np.uint64(prefix)]
@@ -83,7 +98,8 @@ def _kth(net, values, k):
         k -= int(below[byte - 1]) if byte else 0
         prefix |= byte << shift
         mask |= 0xFF << shift
-    return float(np.array([prefix], np.uint64).view(np.float64)[0])
+    key = np.uint64(prefix)
+    return float(np.array([key & ~SIGN if key & SIGN else ~key], np.uint64).view(np.float64)[0])
 
 
 def _median(net, values):
@@ -172,7 +188,7 @@ def measure(x, fixed, ids, n_own, L_x, L_y, mu, net=ALONE, margin_bottom=-1.0, m
     zo, mo = x[:n_own, 2], mobile[:n_own]
     n_mobile = int(net.sum_int(np.array([np.count_nonzero(mo)]))[0])
     if n_mobile == 0:
-        raise ValueError("no mobile particles to analyse")
+        raise NoBulk("no mobile particles to analyse")
     inf = math.inf
     bed_top, top, neg_low = net.max_many([zo[~mo].max() if (~mo).any() else -inf,
                                           zo[mo].max() if mo.any() else -inf,

@@ -138,7 +138,7 @@ def _stale(final, summ):
     try:
         with open(summ) as fh:
             old = json.load(fh)
-        done, version = old.get("step"), int(old.get("measures_version", 0))
+        done, version = old.get("step"), int(old.get("measures_version") or 0)
     except (OSError, ValueError, TypeError, AttributeError):
         return None             # an unreadable summary is reported where it is read, not here
     if version < MEASURES_VERSION:
@@ -148,9 +148,16 @@ def _stale(final, summ):
     except (OSError, MpdemError):
         return None
     step = attrs.get("step")
-    if step is None or done is None or int(step) == int(done):
+    if step is None or done is None:
         return None
-    return f"{os.path.basename(final)} is at step {int(step)}, analysis/summary.json at step {int(done)}"
+    name = os.path.basename(final)
+    if int(step) != int(done):
+        return f"{name} is at step {int(step)}, analysis/summary.json at step {int(done)}"
+    # the same step, another state (a run made again with --force that stopped at that step)
+    for key in ("time", "n"):
+        if key in attrs and key in old and float(attrs[key]) != float(old[key]):
+            return f"{name} has {key} = {attrs[key]}, analysis/summary.json {old[key]}"
+    return None
 
 
 def load_run(path, analyze_missing=True, log=print):

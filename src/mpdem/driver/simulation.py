@@ -217,6 +217,7 @@ class Run:
         self.status = None          # "converged", "max_steps" or "interrupted"
         self.t0 = time.perf_counter()   # the loop's clock (started again when the loop starts)
         self.wall = 0.0             # the loop's wall time [s]
+        self.comm_seconds = 0.0     # the loop's seconds in communication [s]
         self.ek = math.nan          # E_k per mobile sphere at the end of the loop [m g d]
         self.force_ratio = math.nan  # the unbalanced-force ratio of the last sample (summary.json)
         self._describe()
@@ -324,6 +325,7 @@ class Run:
         self.status = self.status or "max_steps"
         eng.complete()
         self.wall = time.perf_counter() - self.t0
+        self.comm_seconds = self.domain.comm_seconds     # the loop's (not the end's collectives)
         et, er = eng.kinetic()
         self.ek = (et + er) / N
         # the last sample's (a checkpoint at the last step has freed the slot forces since)
@@ -458,7 +460,7 @@ class Run:
         st, dom = self.state, self.domain
         return summary.End(self.status, st.step, st.step - self.first_step, st.time, self.n_mobile, st.L_x, st.L_y,
                            self.ek, self.force_ratio, self.wall, self.wall_total(), self.history.segments, dom.size,
-                           dom.comm_seconds, dom.parallel, migrated, rebalances)
+                           self.comm_seconds, dom.parallel, migrated, rebalances)
 
 
 def resume_hint(out, failed):

@@ -76,8 +76,12 @@ def measure_bulk(state, domain, cfg):
     """The bulk measurement of the final state, each rank on its own rows and ghosts
     (``analysis.bulkpar.measure``; a collective): the bulk dict, or why there is none (str).
 
-    The ghosts are refreshed first (the last step moved their owners)."""
+    The rows are brought current first (an engine that holds them elsewhere, the GPU's, copies them
+    back), then the ghosts refreshed from them (the host's ghost rows need not be the engine's)."""
     from ..analysis import bulkpar
+    from ..analysis.bulk import NoBulk
+    if state.sync is not None:
+        state.sync()
     domain.refresh(state)
     n = state.n_rows
     a = cfg.analysis
@@ -87,7 +91,7 @@ def measure_bulk(state, domain, cfg):
                                a.tall_pile, rattlers=a.rattlers, k_n=cfg.contact.k_n, model=cfg.contact.model,
                                force_fraction=a.force_fraction, band_width=a.band_width,
                                planes=planes.of_config(cfg))
-    except ValueError as e:      # decided by reduced numbers: alike on every rank
+    except NoBulk as e:          # decided by reduced numbers: alike on every rank
         return str(e)
 
 
