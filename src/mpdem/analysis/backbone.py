@@ -153,11 +153,14 @@ def of_packing(pk, cf, h, band_width, force_fraction):
     -------
     dict: kept, live, counts, weak (as ``backbone``) and ref_force (M,) [m g]
     """
-    from .contacts import band_index, band_means, elastic_normal, n_bands
+    from ..kernels.exactsum import bin_sums
+    from .contacts import band_index, elastic_normal, n_bands
     B = n_bands(h, pk.z_bed, band_width)
     mid = 0.5 * (pk.x[pk.pairs[:, 0], 2] + pk.x[pk.pairs[:, 1], 2])
     band = band_index(mid, h, band_width, B)
-    means = band_means(cf.F_n, band, B)
+    # exact sums, as the ranks of a run make them at its end (``bulkpar``): the same bits in any order
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = bin_sums(band, cf.F_n, B) / np.bincount(band, minlength=B)
     ref = means[band]
     rows, nrm, delta = pk.plane_contacts()
     supports = None

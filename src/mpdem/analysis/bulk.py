@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from ..kernels.exactsum import bin_sums
 from ..kernels.pairdist import close_pairs, separations
 from ..kernels.particle import R
 
@@ -44,13 +45,16 @@ def phi_profile(z, L_x, L_y, z0, z1, width=0.5):
     """
     nb = max(1, int(math.ceil((z1 - z0) / width)))
     edges = z0 + width * np.arange(nb + 1)
-    vol = np.zeros(nb)
     base = np.floor((z - z0) / width).astype(np.int64)
     reach = int(math.ceil(R / width))
+    bins, vols = [], []
     for k in range(-reach, reach + 1):
         b = base + k
         ok = (b >= 0) & (b < nb)
-        np.add.at(vol, b[ok], slab_volume(z[ok], edges[b[ok]], edges[b[ok] + 1]))
+        bins.append(b[ok])
+        vols.append(slab_volume(z[ok], edges[b[ok]], edges[b[ok] + 1]))
+    # exact sums, as the ranks of a run make them at its end (``bulkpar``): the same bits in any order
+    vol = bin_sums(np.concatenate(bins), np.concatenate(vols), nb)
     return edges, vol / (L_x * L_y * width)
 
 
@@ -144,7 +148,8 @@ def region_of_profile(edges, phi, top, n_mobile, z_bed, L_x, L_y, margin_bottom=
 
 def packing_fraction(zm, L_x, L_y, z1, z2):
     """phi_f: volume of all mobile spheres inside the slab [z1, z2] over its volume (6.3)."""
-    return float(slab_volume(zm, z1, z2).sum() / (L_x * L_y * (z2 - z1)))
+    vol = bin_sums(np.zeros(len(zm), np.int64), slab_volume(zm, z1, z2), 1)[0]
+    return float(vol / (L_x * L_y * (z2 - z1)))
 
 
 def histogram_z(counts, top=12):

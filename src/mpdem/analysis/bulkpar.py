@@ -20,9 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
-
-from ..kernels.exactsum import NLIMBS, add_exact, to_float
+from ..kernels.exactsum import bin_limbs, to_float
 from ..kernels.pairdist import close_pairs, separations
 from ..kernels.particle import R
 from . import backbone as bb
@@ -49,17 +47,6 @@ class _Alone:
 ALONE = _Alone()
 
 
-@njit(cache=True)
-def _bin_limbs(bins, values, n_bins):
-    """(n_bins, NLIMBS) exact sums of ``values`` by ``bins`` (entries outside [0, n_bins) left out)."""
-    acc = np.zeros((n_bins, NLIMBS), np.int64)
-    for k in range(len(values)):
-        b = bins[k]
-        if 0 <= b < n_bins:
-            add_exact(acc[b], values[k])
-    return acc
-
-
 def _sums(net, bins, values, n_bins):
     """(n_bins,) float64: the exact sums over every rank of ``values`` by ``bins``, each rounded once.
 
@@ -69,7 +56,7 @@ def _sums(net, bins, values, n_bins):
     filled = np.flatnonzero(_counts(net, bins, n_bins))
     slot = np.full(n_bins, -1, np.int64)
     slot[filled] = np.arange(len(filled))
-    acc = net.sum_int(_bin_limbs(slot[bins], np.asarray(values, np.float64), len(filled)))
+    acc = net.sum_int(bin_limbs(slot[bins], np.asarray(values, np.float64), len(filled)))
     out = np.zeros(n_bins)
     for k, b in enumerate(filled):
         out[b] = to_float(acc[k])

@@ -49,3 +49,21 @@ def to_float(acc):
     for k in range(len(acc) - 1, -1, -1):
         total = (total << 32) + int(acc[k])
     return total / (1 << -EMIN) if total else 0.0
+
+
+@njit(cache=True)
+def bin_limbs(bins, values, n_bins):
+    """(n_bins, NLIMBS) accumulators of the exact sums of ``values`` by ``bins`` (entries outside
+    [0, n_bins) left out): sum them over ranks as integers, round each once (``to_float``)."""
+    acc = np.zeros((n_bins, NLIMBS), np.int64)
+    for k in range(len(values)):
+        b = bins[k]
+        if 0 <= b < n_bins:
+            add_exact(acc[b], values[k])
+    return acc
+
+
+def bin_sums(bins, values, n_bins):
+    """(n_bins,) float64: the exact sums of ``values`` by ``bins``, each rounded once (any order alike)."""
+    acc = bin_limbs(np.asarray(bins, np.int64), np.asarray(values, np.float64), n_bins)
+    return np.array([to_float(acc[b]) for b in range(n_bins)])
