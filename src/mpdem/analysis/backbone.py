@@ -69,6 +69,22 @@ def balances_weight(u, mu, up=UP):
     return res < BALANCE_TOL
 
 
+def directions(s, order, start, sign, which, live, nrm, s_start, s_nrm):
+    """(k, 3) unit normals into sphere ``s`` of its live contacts, then of its supports.
+
+    ``order[start[s]:start[s + 1]]`` index its entries in ``which`` (the contact) and ``sign`` (+1 where
+    ``s`` is the contact's first end, whose normal ``nrm`` points into it); ``live`` (M,) bool; its
+    supports' normals are ``s_nrm[s_start[s]:s_start[s + 1]]``.
+    """
+    mine = order[start[s]:start[s + 1]]
+    c = which[mine]
+    on = live[c]
+    u = sign[mine][on, None] * nrm[c[on]]
+    if s_start[s + 1] > s_start[s]:
+        u = np.concatenate([u, s_nrm[s_start[s]:s_start[s + 1]]])
+    return u
+
+
 def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0.01, up=UP, supports=None):
     """Spheres and contacts that carry the pile's weight.
 
@@ -118,12 +134,7 @@ def backbone(n_rows, pairs, nrm, F_n, ref_force, removable, mu, force_fraction=0
         for s in todo:
             if not kept[s]:
                 continue
-            mine = order[start[s]:start[s + 1]]
-            c = which[mine]
-            on = live[c]
-            u = sign[mine][on, None] * nrm[c[on]]
-            if s_start[s + 1] > s_start[s]:
-                u = np.concatenate([u, s_nrm[s_start[s]:s_start[s + 1]]])
+            u = directions(s, order, start, sign, which, live, nrm, s_start, s_nrm)
             if not balances_weight(u, mu, up):
                 drop.append(s)
         if not drop:

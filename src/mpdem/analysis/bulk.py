@@ -35,13 +35,15 @@ def slab_volume(zc, a, b, radius=R):
     return math.pi * ((radius ** 2 * ub - ub ** 3 / 3) - (radius ** 2 * ua - ua ** 3 / 3))
 
 
-def phi_profile(z, L_x, L_y, z0, z1, width=0.5):
+def phi_profile(z, L_x, L_y, z0, z1, width=0.5, sums=bin_sums):
     """Horizontally averaged packing fraction phi(z) of spheres at heights z.
 
     Returns
     -------
     edges : (nb + 1,) bin edges [d] from z0 to at least z1
     phi : (nb,) packing fraction per bin (exact sphere-slab volumes)
+
+    ``sums(bins, values, nb)``: the bins' exact sums (``exactsum.bin_sums``; over ranks: ``bulkpar``).
     """
     nb = max(1, int(math.ceil((z1 - z0) / width)))
     edges = z0 + width * np.arange(nb + 1)
@@ -54,7 +56,7 @@ def phi_profile(z, L_x, L_y, z0, z1, width=0.5):
         bins.append(b[ok])
         vols.append(slab_volume(z[ok], edges[b[ok]], edges[b[ok] + 1]))
     # exact sums, as the ranks of a run make them at its end (``bulkpar``): the same bits in any order
-    vol = bin_sums(np.concatenate(bins), np.concatenate(vols), nb)
+    vol = sums(np.concatenate(bins), np.concatenate(vols), nb)
     return edges, vol / (L_x * L_y * width)
 
 
@@ -146,9 +148,10 @@ def region_of_profile(edges, phi, top, n_mobile, z_bed, L_x, L_y, margin_bottom=
             "phi_plateau": plateau, "plateau_lo": lo, "plateau_hi": hi, "edges": edges, "phi_z": phi}
 
 
-def packing_fraction(zm, L_x, L_y, z1, z2):
-    """phi_f: volume of all mobile spheres inside the slab [z1, z2] over its volume (6.3)."""
-    vol = bin_sums(np.zeros(len(zm), np.int64), slab_volume(zm, z1, z2), 1)[0]
+def packing_fraction(zm, L_x, L_y, z1, z2, sums=bin_sums):
+    """phi_f: volume of all mobile spheres inside the slab [z1, z2] over its volume (6.3); ``sums`` as
+    ``phi_profile``'s."""
+    vol = sums(np.zeros(len(zm), np.int64), slab_volume(zm, z1, z2), 1)[0]
     return float(vol / (L_x * L_y * (z2 - z1)))
 
 

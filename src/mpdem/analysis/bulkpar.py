@@ -24,7 +24,7 @@ from ..kernels.exactsum import bin_limbs, to_float
 from ..kernels.pairdist import close_pairs, separations
 from ..kernels.particle import R
 from . import backbone as bb
-from .bulk import NO_BACKBONE, NoBulk, region_of_profile, slab_volume
+from .bulk import NO_BACKBONE, NoBulk, packing_fraction, phi_profile, region_of_profile
 from .contacts import band_index, elastic_normal, n_bands
 
 
@@ -99,22 +99,6 @@ def _median(net, values):
     return float(np.mean([_kth(net, values, n // 2 - 1), _kth(net, values, n // 2)]))
 
 
-def _profile(net, zm, z_bed, top, L_x, L_y, width):
-    """``bulk.phi_profile`` of the mobile heights of every rank, each bin's volume summed exactly."""
-    nb = max(1, int(math.ceil((top - z_bed) / width)))
-    edges = z_bed + width * np.arange(nb + 1)
-    base = np.floor((zm - z_bed) / width).astype(np.int64)
-    reach = int(math.ceil(R / width))
-    bins, vols = [], []
-    for k in range(-reach, reach + 1):
-        b = base + k
-        ok = (b >= 0) & (b < nb)
-        bins.append(b[ok])
-        vols.append(slab_volume(zm[ok], edges[b[ok]], edges[b[ok] + 1]))
-    vol = _sums(net, np.concatenate(bins), np.concatenate(vols), nb)
-    return edges, vol / (L_x * L_y * width)
-
-
 def _by_sphere(pairs, ids, rows):
     """Each row's contacts, (contact, +1 if the row is the pair's first end else -1), their partners' ids
     ascending: (order (2M,), start (rows + 1,), sign (2M,), which (2M,))."""
@@ -181,7 +165,10 @@ def measure(x, fixed, ids, n_own, L_x, L_y, mu, net=ALONE, margin_bottom=-1.0, m
                                           zo[mo].max() if mo.any() else -inf,
                                           -zo[mo].min() if mo.any() else -inf])
     z_bed = float(bed_top) if bed_top > -inf else float(-neg_low) - R
-    edges, phi_z = _profile(net, zo[mo], z_bed, float(top) + 1.0, L_x, L_y, profile_bin)
+    def sums(bins, values, n_bins):
+        return _sums(net, bins, values, n_bins)
+
+    edges, phi_z = phi_profile(zo[mo], L_x, L_y, z_bed, float(top) + 1.0, profile_bin, sums)
     reg = region_of_profile(edges, phi_z, float(top) + 1.0, n_mobile, z_bed, L_x, L_y, margin_bottom,
                             margin_top, tall_pile)
 
@@ -222,8 +209,7 @@ def measure(x, fixed, ids, n_own, L_x, L_y, mu, net=ALONE, margin_bottom=-1.0, m
                              "rattler_fraction": c["rattler_fraction"]}
         if out["n_bulk"] and not _any_kept(net, kept, bulk & own):
             out["rattler_note"] = NO_BACKBONE
-    vol = _sums(net, np.zeros(int(np.count_nonzero(mo)), np.int64), slab_volume(zo[mo], z1, z2), 1)[0]
-    out["phi"] = float(vol / (L_x * L_y * (z2 - z1)))
+    out["phi"] = packing_fraction(zo[mo], L_x, L_y, z1, z2, sums)
     overl = 1.0 - r[mine & (bulk[pairs[:, 0]] | bulk[pairs[:, 1]])]
     out["overlap_median"] = _median(net, overl)
     top_overlap = float(net.max_many([overl.max() if overl.size else -inf])[0])
@@ -290,12 +276,7 @@ def _backbone(net, x, mobile, ids, n_own, pairs, branch, r, mine, h, z_bed, mu, 
         for s in todo:
             if not mobile[s]:
                 continue
-            mine_c = order[start[s]:start[s + 1]]
-            c = which[mine_c]
-            on = live[c]
-            u = sign[mine_c][on, None] * nrm[c[on]]
-            if s_start[s + 1] > s_start[s]:
-                u = np.concatenate([u, s_nrm[s_start[s]:s_start[s + 1]]])
+            u = bb.directions(s, order, start, sign, which, live, nrm, s_start, s_nrm)
             if not bb.balances_weight(u, mu):
                 drop.append(s)
         return np.asarray(drop, np.int64)
