@@ -136,6 +136,61 @@ def test_a_one_run_side_of_a_difference_takes_the_other_sides_seed_scatter():
     assert math.isclose(m.err, math.hypot(sd, 0.005), rel_tol=1e-9)
 
 
+def test_the_count_of_a_difference_says_when_a_one_run_side_borrowed_its_error():
+    a, b = _set("S27", [6.048]), _set("S17", [6.043, 6.053])
+    m = src.Diff(src.S("S27"), src.S("S17")).resolve(src.Context([a, b], {}, []))
+    assert m.count == "1 + 2 runs" + src.LENT
+    both = src.Diff(src.S("S17"), src.S("S17")).resolve(src.Context([b], {}, []))
+    assert both.count == "2 + 2 runs"
+
+
+def _sign_claim(*sids):
+    return _claim(kind="sign", value=-1, paper="falls", ours=[src.S(s) for s in sids])
+
+
+def test_a_step_of_a_sign_with_a_one_seed_side_takes_the_other_sides_seed_scatter():
+    """4.85 +- 0.01 (sd 0.0173 over 3 seeds) to one seed at 4.84: a fall of 0.01 against an error of
+    0.0173 * sqrt(1 + 1/3) = 0.02 is within 2 sigma, so the claim is not resolved (by its sign alone it
+    was reproduced); a fall of 0.1 is."""
+    many = _set("S01", [4.84, 4.85, 4.86])
+    near, far = _set("S02", [4.84]), _set("S03", [4.75])
+    r = ct.row(_sign_claim("S01", "S02"), src.Context([many, near], {}, []))
+    assert r["verdict"].kind == "differs" and "within 2 σ" in r["verdict"].why
+    assert "other's seed scatter" in r["verdict"].why
+    r = ct.row(_sign_claim("S01", "S03"), src.Context([many, far], {}, []))
+    assert r["verdict"].kind == "reproduced" and "step 1: a side of 1 seed" in r["verdict"].why
+    # two sides of one seed: no error to borrow, judged by its sign and said so
+    r = ct.row(_sign_claim("S02", "S03"), src.Context([near, far], {}, []))
+    assert r["verdict"].kind == "reproduced" and "judged by sign" in r["verdict"].why
+
+
+def test_a_one_seed_value_beside_a_bound_is_judged_by_its_side_and_says_so():
+    c = _claim(kind="bound", value=4.0, paper="> 4", ours=[src.S("S02")], also=[src.S("S02")])
+    r = ct.row(c, src.Context([_set("S02", [5.47])], {}, []))
+    assert r["verdict"].kind == "reproduced" and "by its side of the bound alone" in r["verdict"].why
+    assert "beyond (1 seed, no error: by its side alone)" in r["context"]
+
+
+def test_frictional_excess_over_the_count_is_taken_run_by_run():
+    """z and 4 + n_m/3 of the same runs move together: their difference's error is the runs' scatter of
+    the difference, not the two scatters in quadrature, and its count is the runs once."""
+    runs = [AnalysedRun(f"r{i}", {"params": {"contact.mu": 0.5, "run.seed": i}, "z": z, "isostatic": {"n_m": nm}})
+            for i, (z, nm) in enumerate([(4.80, 0.9), (4.90, 1.2), (5.00, 1.5)])]
+    s = Set("S15", {"contact.mu": 0.5, "contact.k_n": 2e5}, runs)
+    c = next(c for c in claims.CLAIMS if c.id == "28")
+    ctx = src.Context([s], {}, [])
+    # z - (4 + n_m/3) = 0.5 in each run: (almost) no scatter, where z's own spread is 0.1
+    m = c.ours[0].resolve(ctx)
+    assert math.isclose(m.value, 0.5) and m.err < 1e-12
+    assert ct.row(c, ctx)["count"] == "3 runs"
+    assert claims._above_count({"z": 5.0, "isostatic": {"n_m": 3.0}}) == 0.0
+
+
+def test_the_rule_covers_one_seed_values_and_tests():
+    assert "one seed has no error of its own" in V.RULE and "p ≥ 0.0455" in V.RULE
+    assert math.isclose(V.P_K, 1 - math.erf(V.K / math.sqrt(2)), abs_tol=1e-5)
+
+
 def test_a_ladder_rung_reads_running_while_its_directory_has_no_converged_run(tmp_path):
     lad = tmp_path / "ladder-size" / "mu0_s1"
     (lad / "kn2e6").mkdir(parents=True)

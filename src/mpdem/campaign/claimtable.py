@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 
 from . import verdict as V
-from .runs import NAN, md_table
-from .sources import finite, missing
+from .runs import md_table
+from .sources import diff_error, finite, missing
 
 
 # ---------------------------------------------------------------- judging a claim
@@ -34,8 +34,8 @@ def judge(claim, m):
     if kind == "nonzero":
         return V.bound(abs(m.value), m.err, 0.0)
     if kind == "test":
-        # one curve: the test of equal means not rejected at two standard errors (two-sided p >= 0.0455)
-        return V.Verdict("reproduced" if m.value >= 0.0455 else "differs", why=f"p = {m.value:.2g}")
+        # one curve: the test of equal means not rejected at two standard errors (two-sided)
+        return V.Verdict("reproduced" if m.value >= V.P_K else "differs", why=f"p = {m.value:.2g}")
     raise ValueError(f"claim {claim.id}: unknown kind {kind!r}")
 
 
@@ -44,10 +44,15 @@ def _sign_verdict(claim, ctx):
     if not all(m.ok for m in ms):
         bad = next(m for m in ms if not m.ok)
         return ms, V.Verdict("not measured", why=f"{bad.where}: {bad.why}")
-    # a step with a side of one seed has no error: judged by its sign (``verdict.sign``)
-    steps = [(b.value - a.value, V.combined(a.err, b.err) if finite(a.err) and finite(b.err) else NAN)
-             for a, b in zip(ms, ms[1:])]
-    return ms, V.sign(steps, claim.value)
+    # a step's error as a difference's (``sources.diff_error``: a side of one seed takes the other's seed
+    # scatter); a step between two sides of one seed has none and is judged by its sign (``verdict.sign``)
+    steps = [(b.value - a.value, diff_error(b, a)[0]) for a, b in zip(ms, ms[1:])]
+    v = V.sign(steps, claim.value)
+    lent = [str(i + 1) for i, (a, b) in enumerate(zip(ms, ms[1:])) if diff_error(b, a)[1]]
+    if lent and v.kind in ("reproduced", "differs"):
+        v.why = "; ".join(w for w in (v.why, f"step{'s' if len(lent) > 1 else ''} {', '.join(lent)}: a side "
+                                              "of 1 seed with the other's seed scatter") if w)
+    return ms, v
 
 
 def row(claim, ctx):
@@ -103,7 +108,9 @@ def _short(v, kind="compare"):
         return f"{v.why}: " + ("not rejected" if v.kind == "reproduced" else "rejected")
     if v.kind not in ("reproduced", "differs"):
         return v.kind
-    n = f"{v.n_sigma:.1f} σ" if math.isfinite(v.n_sigma) else "1 seed, no error"
+    if kind in ("bound", "nonzero") and not math.isfinite(v.n_sigma):
+        return ("beyond" if v.kind == "reproduced" else "not beyond") + " (1 seed, no error: by its side alone)"
+    n = f"{v.n_sigma:.1f} σ"
     if kind in ("bound", "nonzero"):
         return f"beyond by {n}" if v.kind == "reproduced" else f"not beyond ({n})"
     return f"within 2 σ ({n})" if v.kind == "reproduced" else f"{n} away"

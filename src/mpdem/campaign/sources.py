@@ -121,8 +121,9 @@ class Window:
 
 @dataclass
 class Diff:
-    """``a`` minus ``b`` (two sources), errors in quadrature; two sets of a one-setting contrast
-    (``fits.json`` contrasts) take its pooled seed error instead, so one seed has an error too."""
+    """``a`` minus ``b`` (two sources), errors in quadrature (``diff_error``: a side of one run takes the
+    other's seed scatter, and the count says so); two sets of a one-setting contrast (``fits.json``
+    contrasts) take its pooled seed error instead."""
     a: object
     b: object
     label: str = ""
@@ -133,19 +134,29 @@ class Diff:
         if not (ma.ok and mb.ok):
             bad = ma if not ma.ok else mb
             return missing(where, bad.why, bad.status)
-        ea, eb = ma.err, mb.err
-        # a side of one run has no error of its own: it takes the other side's seed scatter (one run's
-        # standard deviation), as the pooled contrasts do
-        if not finite(ea) and ma.n == 1 and finite(eb) and mb.n >= 2:
-            ea = eb * math.sqrt(mb.n)
-        if not finite(eb) and mb.n == 1 and finite(ea) and ma.n >= 2:
-            eb = ea * math.sqrt(ma.n)
-        err = V.combined(ea, eb) if finite(ea) and finite(eb) else NAN
+        err, lent = diff_error(ma, mb)
         if isinstance(self.a, S) and isinstance(self.b, S):
             c = ctx.contrast(self.a.set, self.b.set, self.a.q)
             if c is not None and finite(c["err"]):
                 err = c["err"]
-        return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs", where, k_n=ma.k_n)
+        return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs" + lent, where, k_n=ma.k_n)
+
+
+LENT = "; its 1 run with the other's seed scatter"
+
+
+def diff_error(ma, mb):
+    """The error of ``ma - mb`` (two ``Measure``): theirs in quadrature. A side of one run has no error of
+    its own: it takes the other side's seed scatter (one run's standard deviation, the other's error times
+    the square root of its runs), as the pooled contrasts do. Returns (error, ``LENT`` or "": the count's
+    words when a side borrowed); nan when neither side has an error."""
+    ea, eb = ma.err, mb.err
+    lent = ""
+    if not finite(ea) and ma.n == 1 and finite(eb) and mb.n >= 2:
+        ea, lent = eb * math.sqrt(mb.n), LENT
+    if not finite(eb) and mb.n == 1 and finite(ea) and ma.n >= 2:
+        eb, lent = ea * math.sqrt(ma.n), LENT
+    return (V.combined(ea, eb) if finite(ea) and finite(eb) else NAN), lent
 
 
 @dataclass
@@ -233,8 +244,9 @@ class PerRun:
             return missing(self.set, f"set {self.set} not collected")
         m, e, n = mean_sem([self.fn(r.s) for r in s.runs])
         if not n:
-            return missing(self.set, "not in its summaries")
-        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), self.set, k_n=s.p("k_n"))
+            return missing(self.label or self.set, "not in its summaries")
+        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), self.label or self.set,
+                       k_n=s.p("k_n"))
 
 
 @dataclass
@@ -345,7 +357,7 @@ class Eq9Deviation:
         d = F.eq9(x, e["A"], e["B"], e["C"]) - paper.eq9_paper(x)
         i = int(np.argmax(np.abs(d)))
         n = sum(e.get("n_seeds") or [])
-        return Measure(float(d[i]), NAN, n, f"{len(x)} sets, {_runs(n)}",
+        return Measure(float(d[i]), NAN, n, f"{len(x)} sets, {_runs(n)}; a fit's curve, no error",
                        f"eq. 9 fit − paper, largest at φ_i = {x[i]:g} (φ_i {x.min():g}–{x.max():g})")
 
 

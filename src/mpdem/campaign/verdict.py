@@ -8,7 +8,10 @@ taken from the paper's own text (the precision it quotes the number to, or a sca
 given with its justification in the claim's row, never from this work's scatter. Otherwise the row
 **differs by X (Y sigma)**, and is marked explained (the cause is found) or open. A bound ("z_inf > 4")
 is reproduced when this work's value is beyond it by two errors, a range ("3-8e6 steps") when the
-value lies inside it or within two errors of it. A row with nothing measured reads "not measured", a
+value lies inside it or within two errors of it. A value of one seed (no error of its own) takes the
+other side's seed scatter in a difference (``sources.diff_error``), and alone is judged on the paper's
+error, or by its side of a bound or sign. A test's p value (one law, one curve) is reproduced at
+p >= 0.0455, the two-sided 2 sigma level. A row with nothing measured reads "not measured", a
 fit that cannot tell its parameters apart "not determined".
 
 Everything here is arithmetic on numbers already measured: nothing is tuned to a target.
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 
 NAN = float("nan")
 K = 2.0        # the rule's number of combined standard errors
+P_K = 0.0455   # a test's p at K standard errors, two-sided: 1 - erf(K / sqrt(2))
 
 RULE = (
     "**Reproduced**: this work's value lies within two combined standard errors of the paper's, "
@@ -29,11 +33,16 @@ RULE = (
     "quotes; never this work's scatter). Otherwise **differs by X (Y σ)**, then **explained** (the cause is "
     "found and stated) or **open**. A bound (\"> 4\") is reproduced when the value lies beyond it by 2σ; "
     "a range (\"3–8e6\") when the value lies in it or within 2σ of it; a sign (\"falls\") when every step "
-    "has the sign and lies 2σ from zero (a step with no error, from one seed, is judged by its sign and "
-    "says so). **not measured**: nothing of this work measures it (or the runs are still running); **not "
-    "determined**: a fit that cannot tell its parameters apart, or a value with no error against a "
-    "claim with no tolerance. A claim of a figure's shape, with no number, is judged by eye and says so "
-    "(**seen** / **not seen**). No method, window or default is chosen to land on the paper's number.")
+    "has the sign and lies 2σ from zero. A value of one seed has no error of its own: in a difference or a "
+    "step with a side of two or more seeds it takes that side's seed scatter (one run's standard deviation); "
+    "alone it is judged on the paper's error or tolerance alone, against a bound or a sign by its side "
+    "alone; each time the row says so. A claim that a family follows one law, or that sets collapse onto "
+    "one curve, tested by a fit's χ² or an analysis of variance, is reproduced when the test's p ≥ 0.0455 "
+    "(two-sided 2σ) and differs otherwise. **not measured**: nothing of this work measures it (or the runs "
+    "are still running); **not determined**: a fit that cannot tell its parameters apart, or a value with "
+    "no error against a claim with no tolerance. A claim of a figure's shape, with no number, is judged by "
+    "eye and says so (**seen** / **not seen**). No method, window or default is chosen to land on the "
+    "paper's number.")
 
 
 @dataclass
