@@ -6,6 +6,8 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+
 from mpdem.campaign import claims, claimtable as ct, ladder, sources as src, verdict as V
 from mpdem.campaign.runs import AnalysedRun, Set
 
@@ -226,7 +228,17 @@ def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
     assert got[0]["status"] == "not fitted" and "needs 4" in got[0]["reason"] and not calls
     rungs = [r6, st("S28", 2e7, [6.03], 2e6), st("S29", 2e8, [6.02], 2e7)]
     got = ladder.ladders([base, poured2e6, *rungs], lambda fam, m: calls.append(m) or {"status": "fitted"})
-    assert got[0]["status"] == "fitted" and [s.id for s in calls[0]] == ["S12", "S27", "S28", "S29"]
+    # four k_n, but one pile climbed: its offset cannot be told from its noise; the sets' means fitted beside
+    assert got[0]["status"] == "not fitted" and "two piles" in got[0]["reason"]
+    assert [s.id for s in calls[0]] == ["S12", "S27", "S28", "S29"] and got[0]["set_means"]["status"] == "fitted"
+    # two piles climb (seed 2 sits 0.004 below seed 1 at every rung): eq. 7 over the runs
+    z = lambda k, off: 6.0 + 0.13 * (k / 2e5) ** -0.5 + off     # noqa: E731
+    two = [st("S12", 2e5, [z(2e5, 0.002), z(2e5, -0.002) + 1e-4, z(2e5, 0.0)]),
+           st("S27", 2e6, [z(2e6, 0.002), z(2e6, -0.002) - 1e-4], 2e5),
+           st("S28", 2e7, [z(2e7, 0.002) - 1e-4, z(2e7, -0.002)], 2e6), st("S29", 2e8, [z(2e8, 0.002)], 2e7)]
+    got = ladder.ladders([*two, poured2e6], lambda fam, m: {"status": "fitted"})
+    assert got[0]["status"] == "fitted" and got[0]["n_piles"] == 3 and got[0]["n_points"] == 8
+    assert abs(got[0]["alpha_n"] - 0.5) < 0.01 and abs(got[0]["z_inf"] - 6.0) < 0.002
     # rungs stopped on the translational energy (a spinner) find the pile they were stiffened from, poured on the
     # default rule, when no poured set shares their rule; one that does is taken first
     tr = {"stop.energy": "translational"}
@@ -236,6 +248,63 @@ def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
     same_rule = Set("S40", base.params, base.runs, dict(tr))
     got = ladder.ladders([base, same_rule, poured2e6, *spun], lambda fam, m: {"status": "fitted"})
     assert got[0]["base"] == "S40"
+
+
+def test_eq7_over_the_runs_of_piles_follows_each_piles_change_not_its_offset():
+    """Two piles climb four rungs of an exact eq. 7 (alpha_n = 0.5), each with an offset of its own; a third
+    is poured at 2e5 only. Raising one pile's every run by 0.005 moves the fit of the runs hardly at all
+    (a pile's own offset), where the fit of the sets' means, which sees that pile at some k_n only, moves."""
+    from mpdem.analysis import fits
+    ks = [2e5, 2e6, 2e7, 2e8]
+    rng = np.random.default_rng(3)
+
+    def runs(lift):
+        k, z, pl = [], [], []
+        for pile, off in (("a", 0.003 + lift), ("b", -0.003)):
+            for kk in ks[: 4 if pile == "a" else 3]:
+                k.append(kk)
+                z.append(6.0 + 0.13 * (kk / 2e5) ** -0.5 + off + rng.normal(0, 1e-4))
+                pl.append(pile)
+        return k + [2e5], z + [6.0 + 0.13], pl + ["c"]
+
+    k, z, pl = runs(0.0)
+    f0 = fits.fit_eq7_piles(k, z, pl, 0.003, 1e-4)
+    assert abs(f0["alpha_n"] - 0.5) < 0.01 and f0["n_piles"] == 3 and f0["dof"] == 5
+    assert f0["alpha_n_err"] < 0.01 and f0["p_value"] > 0.001
+    k1, z1, _ = runs(0.005)
+    f1 = fits.fit_eq7_piles(k1, z1, pl, 0.003, 1e-4)
+    means = lambda kk, zz: [np.mean([v for q, v in zip(kk, zz) if q == x]) for x in ks]  # noqa: E731
+    m0, m1 = (fits.fit_eq7(ks, means(a, b), [0.003] * 4) for a, b in ((k, z), (k1, z1)))
+    assert abs(f1["alpha_n"] - f0["alpha_n"]) < 0.2 * abs(m1["alpha_n"] - m0["alpha_n"])
+    # the same pile's runs covary by its offset; a run has its noise of its own
+    C = fits.pile_covariance(["a", "a", "b"], 0.003, 1e-4)
+    assert np.isclose(C[0, 1], 0.003 ** 2 - 1e-8) and C[0, 2] == 0.0 and np.isclose(C[0, 0], 0.003 ** 2)
+
+
+def test_eq7_over_piles_widens_its_errors_when_the_noise_is_larger_than_said():
+    from mpdem.analysis import fits
+    k = [2e5, 2e6, 2e7, 2e8, 2e5, 2e6, 2e7]
+    pl = ["a"] * 4 + ["b"] * 3
+    noise = [3e-4, -3e-4, 3e-4, -3e-4, -3e-4, 3e-4, -3e-4]
+    z = [6.0 + 0.13 * (kk / 2e5) ** -0.5 + n + (0.003 if p == "a" else 0.0) for kk, n, p in zip(k, noise, pl)]
+    said = fits.fit_eq7_piles(k, z, pl, 0.003, 1e-4)
+    assert said["chi2"] > said["dof"] and math.isclose(said["scale"], math.sqrt(said["chi2"] / said["dof"]))
+    honest = fits.fit_eq7_piles(k, z, pl, 0.003, 3e-4)
+    assert honest["scale"] <= said["scale"] and said["alpha_n_err"] > 0
+    fixed = fits.fit_eq7_piles(k, z, pl, 0.003, 3e-4, alpha_n=0.5)
+    assert fixed["alpha_n_fixed"] and fixed["dof"] == 5 and abs(fixed["z_inf"] - 6.0015) < 0.002
+
+
+def test_within_pile_noise_is_the_residual_of_the_piles_on_their_common_rungs():
+    pts = [(2e5, 6.13, (1, 1)), (2e6, 6.05, (1, 1)), (2e7, 6.02, (1, 1)), (2e8, 6.01, (1, 1)),
+           (2e5, 6.126, (2, 2)), (2e6, 6.046, (2, 2)), (2e7, 6.017, (2, 2)), (2e5, 6.14, (3, 3))]
+    s, dof = ladder.within_pile_noise(pts)
+    # piles 1 and 2 share 2e5, 2e6, 2e7: differences 0.004, 0.004, 0.003 -> a 3 x 2 table, 2 dof
+    assert dof == 2 and 0 < s < 0.001
+    one, none = ladder.within_pile_noise(pts[:4] + pts[7:])      # one pile climbed: no noise to be had
+    assert math.isnan(one) and none == 0
+    tot, tdof = ladder.total_scatter(pts)
+    assert tdof == 2 and math.isclose(tot, float(np.std([6.13, 6.126, 6.14], ddof=1)))
 
 
 # ---------------------------------------------------------------- the claims themselves

@@ -172,6 +172,90 @@ def fit_eq7_fixed(k_n, z, sigma, alpha_n=0.5):
             "n_points": int(len(k_n)), "weighted": True}
 
 
+def pile_covariance(pile, s_total, s_within):
+    """The covariance of runs that may be the same pile again (a stiffening ladder's rungs are its base's
+    piles, stiffened): a pile keeps its own offset from rung to rung, so two runs of one pile share
+    s_b^2 = s_total^2 - s_within^2 of their scatter and each run has s_within^2 of its own.
+
+    Parameters
+    ----------
+    pile : (n,) the pile of each run (any hashable labels)
+    s_total : float, the scatter of one run about the mean of its k_n (independent piles' seed scatter)
+    s_within : float, the scatter of one pile's run about its own offset (its noise from rung to rung)
+
+    Returns
+    -------
+    (n, n) array: s_b^2 [pile_i == pile_j] + s_within^2 [i == j]
+    """
+    lab = {v: i for i, v in enumerate(dict.fromkeys(pile))}
+    g = np.array([lab[v] for v in pile])
+    s_b2 = max(float(s_total) ** 2 - float(s_within) ** 2, 0.0)
+    return s_b2 * (g[:, None] == g[None, :]) + float(s_within) ** 2 * np.eye(len(g))
+
+
+def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None):
+    """Eq. 7 over the runs of a stiffening ladder by generalized least squares (``pile_covariance``).
+
+    A ladder's rungs are the same piles again, each keeping its offset from the others (docs/model.md 6.6):
+    fitted as independent sets, their points would count each pile's offset again at every rung. Here every
+    run is a point, and two runs of one pile covary by its offset's variance: the exponent comes from how
+    each pile changes from rung to rung, the level from all the piles.
+
+    Parameters
+    ----------
+    k_n, z : (n,) each run's stiffness and z
+    pile : (n,) each run's pile
+    s_total, s_within : ``pile_covariance``'s
+    alpha_n : None (free: z_inf, a, alpha_n) or the fixed exponent (z_inf, a)
+
+    Returns
+    -------
+    dict: z_inf, a, alpha_n, a_tilde with errors, chi2 (r^T C^-1 r), dof, p_value, n_points, n_piles,
+    s_total, s_within, ``scale``: where chi2 / dof > 1 the errors are widened by sqrt(chi2 / dof) (the
+    noise s_within comes from a few degrees of freedom; a chi^2 above them says the fit or the noise is
+    off, and the errors never narrow for it), ``determined`` and ``correlation`` as ``fit_eq7``
+    """
+    k_n, z = np.asarray(k_n, float), np.asarray(z, float)
+    C = pile_covariance(list(pile), s_total, s_within)
+    L = np.linalg.cholesky(C)
+    free = alpha_n is None
+    if len(k_n) < (4 if free else 3):
+        raise ValueError(f"{len(k_n)} runs cannot fix eq. 7's {3 if free else 2} parameters with a chi^2")
+    if free:
+        lo = int(np.argmin(k_n))
+        z0 = float(z.min()) - 0.01
+        p, cov = curve_fit(eq7, k_n, z, p0=[z0, max(float(z[lo]) - z0, 1e-3), 0.5], sigma=C,
+                           absolute_sigma=True, maxfev=20000)
+        names = ("z_inf", "a", "alpha_n")
+    else:
+        X = np.stack([np.ones_like(k_n), (k_n / K_REF) ** (-alpha_n)], axis=1)
+        Xw, zw = np.linalg.solve(L, X), np.linalg.solve(L, z)
+        p = np.linalg.lstsq(Xw, zw, rcond=None)[0]
+        cov = np.linalg.inv(Xw.T @ Xw)
+        names = ("z_inf", "a")
+    model = eq7(k_n, *p) if free else eq7(k_n, p[0], p[1], alpha_n)
+    w = np.linalg.solve(L, z - model)
+    chi2, dof = float(w @ w), int(len(z) - len(p))
+    scale = math.sqrt(chi2 / dof) if dof >= 1 and chi2 > dof else 1.0
+    err = np.sqrt(np.diag(cov)) * scale if np.all(np.isfinite(cov)) else np.full(len(p), math.nan)
+    out = {n: float(v) for n, v in zip(names, p)}
+    out.update({f"{n}_err": float(e) for n, e in zip(names, err)})
+    if not free:
+        out.update(alpha_n=float(alpha_n), alpha_n_fixed=True)
+    a_exp = out["alpha_n"]
+    out["a_tilde"] = out["a"] * K_REF ** a_exp
+    if free and np.all(np.isfinite(cov)):
+        grad = np.array([K_REF ** a_exp, out["a_tilde"] * math.log(K_REF)])
+        out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) * scale
+    else:
+        out["a_tilde_err"] = out["a_err"] * K_REF ** a_exp
+    out.update(chi2=chi2, dof=dof, p_value=p_value(chi2, dof), scale=scale, n_points=int(len(z)),
+               n_piles=int(len(set(pile))), s_total=float(s_total), s_within=float(s_within), weighted=True,
+               covariance="piles", correlation=_largest_correlation(cov))
+    out["determined"] = bool(np.all(np.isfinite(err)) and out["correlation"] < 1.0 - 1e-9)
+    return out
+
+
 def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5, level=None):
     """z - z_c = A (delta / d)^exponent over depth bands of many runs (docs/model.md 6.6).
 

@@ -261,8 +261,21 @@ def _ladder_lines(e):
                       f"overlap {r['overlap_median']:.2g} d" for r in sorted(e["rungs"], key=lambda r: r["k_n"]))
     head = f"- μ = {f['mu']:g}, ε = {f['epsilon']:g}, N = {f['N']} [base {e['base'] or 'none'}]: {rungs}. "
     if e.get("status") in ("fitted",) and "z_inf" in e:
-        return head + f"Eq. 7: z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, α_n = " \
-                      f"{fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; χ² = {e['chi2']:.3g} for {e['dof']} dof"
+        widened = f", errors × {e['scale']:.3g} (√(χ²/dof))" if e.get("scale", 1.0) > 1.0 else ""
+        line = (head + f"Eq. 7 over its {e['n_points']} runs of {e['n_piles']} piles, a pile's runs covarying "
+                f"(piles' scatter {e['s_total']:.2g} from {e['s_total_dof']} dof, a pile's noise from rung to rung "
+                f"{e['s_within']:.2g} from {e['s_within_dof']}): z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, "
+                f"α_n = {fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; χ² = {e['chi2']:.3g} for {e['dof']} dof, "
+                f"p = {e['p_value']:.2g}{widened}")
+        fx = e.get("fixed") or {}
+        if "z_inf" in fx:
+            line += (f"; α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, χ² = "
+                     f"{fx['chi2']:.3g} for {fx['dof']} dof")
+        sm = e.get("set_means") or {}
+        if sm.get("status") == "fitted":
+            line += (f". The sets' means fitted as if independent: z∞ = {fmt_pm(sm['z_inf'], sm['z_inf_err'], 3)}, "
+                     f"α_n = {fmt_pm(sm['alpha_n'], sm['alpha_n_err'], 3)}; χ² = {sm['chi2']:.3g} for {sm['dof']} dof")
+        return line
     return head + f"Eq. 7: **{e.get('status')}** ({e.get('reason', '')})"
 
 

@@ -6,11 +6,22 @@ one family of ``runs.families`` (their rise k_n / k_n_from the same); its base i
 same parameters at the lowest rung's k_n_from. For each ladder: the rungs (k_n, z with its error and
 count, the overlaps, alpha, the 10-30 d window), and eq. 7 fitted with alpha_n free over the base and
 the rungs once they give 4 distinct k_n (3 parameters and one degree of freedom), else why not.
+
+The rungs are the base's piles again (``pile``), each keeping its offset from rung to rung, so eq. 7 is
+fitted over every run with the covariance of runs of one pile (``fits.fit_eq7_piles``): the scatter of
+independent piles (each pile's first run), and the noise of one pile from rung to rung (the residual of
+the piles that climbed the same rungs, ``within_pile_noise``). The fit of the sets' means as if they
+were independent is kept beside it (``set_means``) for comparison.
 """
 from __future__ import annotations
 
 import math
+import warnings
 
+import numpy as np
+
+from ..analysis import fits
+from . import paper
 from .runs import families
 
 K_FROM = "stiffen.k_n_from"
@@ -50,9 +61,76 @@ def _rung(s):
     return out
 
 
+def pile(run):
+    """A pile's identity along a ladder: its seed and its bed's seed (a rung is its base's pile stiffened)."""
+    return (run.params["run.seed"], run.bed_seed)
+
+
+def _points(members, q="z"):
+    """(k_n, value, pile) of every run of the ladder's sets with a finite ``q``."""
+    return [(s.p("k_n"), r.q[q], pile(r)) for s in members for r in s.runs if math.isfinite(r.q[q])]
+
+
+def total_scatter(points):
+    """The seed scatter of independent piles: each pile's run at its lowest k_n, pooled over the k_n
+    (``fits.pooled_scatter``); (s, dof)."""
+    first = {}
+    for k, v, p in sorted(points, key=lambda t: t[0]):
+        first.setdefault(p, (k, v))
+    groups = {}
+    for k, v in first.values():
+        groups.setdefault(k, []).append(v)
+    return fits.pooled_scatter(list(groups.values()))
+
+
+def within_pile_noise(points):
+    """A pile's noise from rung to rung: the residual scatter of the two-way table (k_n by pile) of the piles
+    measured at two k_n or more, over the k_n they all have (``fits.two_way_anova``); (s, dof), (nan, 0)
+    when fewer than two such piles share two k_n."""
+    by = {}
+    for k, v, p in points:
+        by.setdefault(p, {})[k] = v
+    climbed = [p for p, d in by.items() if len(d) >= 2]
+    common = sorted(set.intersection(*(set(by[p]) for p in climbed))) if climbed else []
+    if len(climbed) < 2 or len(common) < 2:
+        return math.nan, 0
+    a = fits.two_way_anova([[by[p][k] for p in climbed] for k in common])
+    return a["scatter"], a["dof"][1]
+
+
+def fit_piles(fam, points):
+    """Eq. 7 over a ladder's runs (``fits.fit_eq7_piles``), free and with the exponent fixed (1/2 at mu = 0, the
+    paper's 1/4 with friction), or status "not fitted" with why."""
+    s_tot, dof_tot = total_scatter(points)
+    s_w, dof_w = within_pile_noise(points)
+    e = {"s_total_dof": dof_tot, "s_within_dof": dof_w}
+    if not (math.isfinite(s_tot) and s_tot > 0):
+        return dict(e, status="not fitted", reason="no two independent piles at one k_n: no seed scatter")
+    if not (math.isfinite(s_w) and s_w > 0):
+        return dict(e, status="not fitted", reason="fewer than two piles climbed the same two rungs: a pile's "
+                                                   "own offset cannot be told from its noise")
+    k, z, pl = zip(*points)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            e.update(status="fitted", **fits.fit_eq7_piles(k, z, pl, s_tot, s_w))
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+            return dict(e, status="failed", reason=f"{type(err).__name__}: {err}")
+        fixed = 0.5 if fam["mu"] == 0 else paper.EQ7_FRICTIONAL_ALPHA_N
+        try:
+            e["fixed"] = fits.fit_eq7_piles(k, z, pl, s_tot, s_w, alpha_n=fixed)
+        except (ValueError, np.linalg.LinAlgError) as err:
+            e["fixed"] = {"status": "failed", "reason": str(err)}
+    if not e["determined"]:
+        e.update(status="not determined", reason=f"the points cannot tell the parameters apart (largest "
+                                                 f"parameter correlation {e['correlation']:.10g})")
+    return e
+
+
 def ladders(sets, fit_one):
-    """{'family', 'base', 'rungs', 'sets', 'status', ...} per ladder; ``fit_one(family, members)``: the eq. 7 fit
-    entry of a list of sets (``collect._fit_one``), merged in when there are enough k_n."""
+    """{'family', 'base', 'rungs', 'sets', 'status', ...} per ladder: with enough k_n, eq. 7 over its runs
+    (``fit_piles``), and ``set_means``: ``fit_one(family, members)``, the eq. 7 fit of the sets' means as if
+    independent (``collect._fit_one``), for comparison."""
     out = []
     stiff = [s for s in sets if K_FROM in s.extra]
     for fam, rungs in families(stiff, "contact.k_n"):
@@ -66,7 +144,11 @@ def ladders(sets, fit_one):
             e.update(status="not fitted", reason=f"{k} distinct k_n (the base and {len(rungs)} converged rung(s)); "
                                                  f"eq. 7 with alpha_n free needs {MIN_K_N}")
         else:
-            fit = fit_one(fam, members)
-            e.update({kk: v for kk, v in fit.items() if kk not in ("family", "sets")})
+            e.update(fit_piles(fam, _points(members)))
+            # the sets' means fitted as if independent, beside it
+            means = fit_one(fam, members)
+            e["set_means"] = {kk: means.get(kk) for kk in ("status", "reason", "z_inf", "z_inf_err", "alpha_n",
+                                                           "alpha_n_err", "chi2", "dof", "p_value")
+                              if kk in means}
         out.append(e)
     return out

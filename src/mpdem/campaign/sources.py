@@ -163,22 +163,29 @@ def diff_error(ma, mb):
 class Fit:
     """A parameter of a ``fits.json`` fit: the first entry of ``kind`` ('eq7', 'overlap', 'eq9', 'ladder')
     whose sets include ``set`` (or, for 'ladder', of friction ``mu``); ``fixed`` reads its fixed-exponent
-    fit. A fit not made, or one that cannot tell its parameters apart, is 'not determined'."""
+    fit, ``part`` another fit kept in the entry (a ladder's 'set_means'), ``label`` names it. A fit not made,
+    or one that cannot tell its parameters apart, is 'not determined'."""
     kind: str
     key: str
     set: str = ""
     mu: float = None
     fixed: bool = False
+    part: str = ""
+    label: str = ""
 
     def resolve(self, ctx):
         e = ctx.fit(self.kind, self.set, self.mu)
         if e is None and self.kind == "ladder" and self.mu is not None and ctx.ladder_pending(self.mu):
             return missing(f"ladder mu = {self.mu:g}", "no rung converged yet", "running")
-        return fit_measure(e, self.key, self.fixed, ctx.n_runs_of, self.kind)
+        m = fit_measure(e, self.key, "fixed" if self.fixed else self.part, ctx.n_runs_of, self.kind)
+        if self.label:
+            m.where = f"{self.label} {m.where}"
+        return m
 
 
 def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit"):
-    """A ``Measure`` of parameter ``key`` of fit entry ``e`` (None: not measured)."""
+    """A ``Measure`` of parameter ``key`` of fit entry ``e`` (None: not measured); ``fixed`` True (or "fixed")
+    reads its fixed-exponent fit, another string the fit of that name kept in the entry."""
     if e is None:
         return missing(kind, "no such fit")
     sets = e.get("sets") or []
@@ -186,15 +193,18 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit"):
     n = e.get("n_runs") or (sum(n_runs_of(s) for s in sets) if n_runs_of else 0)
     if kind == "ladder" and e.get("status") == "running":
         return missing(where, e.get("reason", ""), "running")
-    f = (e.get("fixed") or {}) if fixed else e
-    if fixed and "z_inf" not in f:
+    part = "fixed" if fixed is True else (fixed or "")
+    f = (e.get(part) or {}) if part else e
+    if part and key not in f:
         return missing(where, f.get("reason") or e.get("reason") or "not fitted", "not determined")
-    if f.get("status", "fitted") != "fitted" or (not fixed and e.get("determined") is False):
+    if f.get("status", "fitted") != "fitted" or (not part and e.get("determined") is False):
         return missing(where, e.get("reason", e.get("status", "")), "not determined")
     v, err = f.get(key), f.get(f"{key}_err")
     if not finite(v):
         return missing(where, f"no {key}", "not determined")
-    return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}", where)
+    # a fit over piles measured again at several k_n (a ladder's) names its piles
+    piles = f" of {f['n_piles']} piles" if f.get("n_piles") else ""
+    return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}{piles}", where)
 
 
 @dataclass
