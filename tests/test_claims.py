@@ -377,3 +377,14 @@ def test_every_verdict_of_the_committed_readme_agrees_with_its_number_of_errors(
             assert m and float(m.group(1)) > 2.0, ln
         elif "**differs" in verdict:        # a test or a bound: its reason all the same
             assert re.search(r"\*\*; (explained|open)", verdict), ln
+
+
+def test_a_fit_with_as_many_points_as_parameters_says_it_tests_nothing():
+    from mpdem.campaign import comparison
+    fam = {"mu": 0.0, "epsilon": 0.88, "N": 20000}
+    e = {"family": fam, "sets": ["S27", "S28", "S29"], "k_n": [2e6, 2e7, 2e8], "n_seeds": [2, 2, 1],
+         "status": "fitted", "z_inf": 6.011, "z_inf_err": 0.005, "a_tilde": 1762.0, "a_tilde_err": 9128.0,
+         "alpha_n": 0.747, "alpha_n_err": 0.366, "chi2": 0.0, "dof": 0, "weighted": True,
+         "check_alpha_n": {"alpha": 0.42, "alpha_err": 0.005, "n_runs": 5, "one_minus_alpha": 0.58}}
+    assert "an exact interpolation of its points, not a test of eq. 7" in comparison._fit_lines(e, "eq7")
+    assert "interpolation" not in comparison._fit_lines(dict(e, chi2=0.65, dof=1), "eq7")

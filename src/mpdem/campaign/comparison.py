@@ -332,6 +332,9 @@ def _fit_lines(e, kind):
         s = (f"A = {fmt_pm(e['A'], e['A_err'], 4)}, B = {fmt_pm(e['B'], e['B_err'], 4)}, "
              f"C = {fmt_pm(e['C'], e['C_err'], 2)}")
     s += f"; χ² = {e['chi2']:.3g} for {e['dof']} degrees of freedom" + (" (weighted)" if e["weighted"] else "")
+    if e["dof"] == 0:
+        # as many points as parameters: the curve passes through them, and nothing tests it
+        s += f": an exact interpolation of its points, not a test of eq. {7 if kind == 'eq7' else 9}"
     if math.isfinite(e.get("p_value", math.nan)):
         s += f", p = {e['p_value']:.2g}"
     s += _fixed_text(e)

@@ -183,13 +183,19 @@ class Fit:
         return m
 
 
-def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit"):
+def ext_id(results, sid):
+    """A set id of another collect, named with its directory (``dev:S15``): ids repeat between collects."""
+    return f"{os.path.basename(os.path.normpath(results))}:{sid}"
+
+
+def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
     """A ``Measure`` of parameter ``key`` of fit entry ``e`` (None: not measured); ``fixed`` True (or "fixed")
-    reads its fixed-exponent fit, another string the fit of that name kept in the entry."""
+    reads its fixed-exponent fit, another string the fit of that name kept in the entry; ``name`` writes a
+    set's id (``ext_id`` for another collect's)."""
     if e is None:
         return missing(kind, "no such fit")
     sets = e.get("sets") or []
-    where = f"{kind} [{' '.join(sets)}]"
+    where = f"{kind} [{' '.join(name(x) for x in sets)}]"
     n = e.get("n_runs") or (sum(n_runs_of(s) for s in sets) if n_runs_of else 0)
     if kind == "ladder" and e.get("status") == "running":
         return missing(where, e.get("reason", ""), "running")
@@ -270,7 +276,7 @@ class Ext:
 
     def resolve(self, ctx):
         row = ctx.ext_sets(self.results).get(self.set)
-        where = f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.set}"
+        where = f"{self.label + ' ' if self.label else ''}{ext_id(self.results, self.set)}"
         if row is None:
             return missing(where, f"{self.results}: no set {self.set}")
         m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), int(_f(row.get("n_seeds")) or 0)
@@ -294,7 +300,8 @@ class ExtFit:
         e = next((x for x in fits_.get(self.kind, []) if self.set in (x.get("sets") or [])), None)
         sets = ctx.ext_sets(self.results)
         m = fit_measure(e, self.key, self.fixed, lambda s: int(_f((sets.get(s) or {}).get("n_seeds")) or 0),
-                        f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}")
+                        f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}",
+                        lambda sid: ext_id(self.results, sid))
         return m
 
 
@@ -311,7 +318,7 @@ class ExtTest:
     def resolve(self, ctx):
         e = next((x for x in ctx.ext_fits(self.results).get(self.kind, []) if self.set in (x.get("sets") or [])),
                  None)
-        where = f"{self.label} [{' '.join((e or {}).get('sets') or [])}]"
+        where = f"{self.label} [{' '.join(ext_id(self.results, x) for x in (e or {}).get('sets') or [])}]"
         t = ((e or {}).get("quantities") or {}).get(self.q) or {}
         if not finite(t.get("p")):
             return missing(where, "no test")
