@@ -388,3 +388,13 @@ def test_a_fit_with_as_many_points_as_parameters_says_it_tests_nothing():
          "check_alpha_n": {"alpha": 0.42, "alpha_err": 0.005, "n_runs": 5, "one_minus_alpha": 0.58}}
     assert "an exact interpolation of its points, not a test of eq. 7" in comparison._fit_lines(e, "eq7")
     assert "interpolation" not in comparison._fit_lines(dict(e, chi2=0.65, dof=1), "eq7")
+
+
+def test_a_piles_local_exponent_is_read_from_three_rungs_a_decade_apart():
+    z = lambda k, a: 6.0 + 0.13 * (k / 2e5) ** -a   # noqa: E731
+    pts = [(k, z(k, 0.5), (1, 1)) for k in (2e5, 2e6, 2e7)] + [(2e8, z(2e8, 0.5) + 0.001, (1, 1))] + \
+          [(k, z(k, 0.5) - 0.004, (2, 2)) for k in (2e5, 2e6)]
+    loc = ladder.local_exponents(pts)
+    assert [x["k_n"][0] for x in loc] == [2e5, 2e6]          # pile 2 has no three rungs
+    assert math.isclose(loc[0]["alpha_n"], 0.5, rel_tol=1e-9)
+    assert loc[1]["alpha_n"] > 0.5                            # a 2e8 rung left high steepens the upper triple

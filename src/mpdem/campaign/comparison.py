@@ -271,6 +271,11 @@ def _ladder_lines(e):
         if "z_inf" in fx:
             line += (f"; α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, χ² = "
                      f"{fx['chi2']:.3g} for {fx['dof']} dof")
+        loc = [f"seed {x['pile'][0]}" + (f" (bed {x['pile'][1]})" if x["pile"][1] != x["pile"][0] else "")
+               + f" {x['alpha_n']:.3f} ({fmt_kn(x['k_n'][0])}–{fmt_kn(x['k_n'][2])})"
+               for x in e.get("local_exponents") or []]
+        if loc:
+            line += ". Each pile's exponent through three rungs (one power law gives one): " + ", ".join(loc)
         sm = e.get("set_means") or {}
         if sm.get("status") == "fitted":
             line += (f". The sets' means fitted as if independent: z∞ = {fmt_pm(sm['z_inf'], sm['z_inf_err'], 3)}, "

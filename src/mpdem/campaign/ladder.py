@@ -98,12 +98,29 @@ def within_pile_noise(points):
     return a["scatter"], a["dof"][1]
 
 
+def local_exponents(points):
+    """Each pile's eq. 7 exponent through three rungs a decade apart: z_inf drops out of
+    (z(k) - z(10 k)) / (z(10 k) - z(100 k)) = 10^alpha_n. One power law gives the same alpha_n for every
+    triple of a pile; list of {'pile', 'k_n' (the three), 'alpha_n'} (nan where z does not fall twice)."""
+    by = {}
+    for k, v, p in points:
+        by.setdefault(p, {})[k] = v
+    out = []
+    for p, d in by.items():
+        for k in sorted(d):
+            if 10 * k in d and 100 * k in d:
+                r1, r2 = d[k] - d[10 * k], d[10 * k] - d[100 * k]
+                a = math.log10(r1 / r2) if r1 > 0 and r2 > 0 else math.nan
+                out.append({"pile": list(p), "k_n": [k, 10 * k, 100 * k], "alpha_n": a})
+    return out
+
+
 def fit_piles(fam, points):
     """Eq. 7 over a ladder's runs (``fits.fit_eq7_piles``), free and with the exponent fixed (1/2 at mu = 0, the
     paper's 1/4 with friction), or status "not fitted" with why."""
     s_tot, dof_tot = total_scatter(points)
     s_w, dof_w = within_pile_noise(points)
-    e = {"s_total_dof": dof_tot, "s_within_dof": dof_w}
+    e = {"s_total_dof": dof_tot, "s_within_dof": dof_w, "local_exponents": local_exponents(points)}
     if not (math.isfinite(s_tot) and s_tot > 0):
         return dict(e, status="not fitted", reason="no two independent piles at one k_n: no seed scatter")
     if not (math.isfinite(s_w) and s_w > 0):
