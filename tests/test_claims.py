@@ -295,12 +295,53 @@ def test_eq7_over_piles_widens_its_errors_when_the_noise_is_larger_than_said():
     assert fixed["alpha_n_fixed"] and fixed["dof"] == 5 and abs(fixed["z_inf"] - 6.0015) < 0.002
 
 
+def test_eq7_over_piles_multiplies_every_error_by_its_scale_and_tests_chi2_against_the_measured_noise():
+    from mpdem.analysis import fits
+    from scipy.stats import f as f_dist
+    k = np.array([2e5, 2e6, 2e7, 2e8, 2e5, 2e6, 2e7])
+    pl = ["a"] * 4 + ["b"] * 3
+    z = 6.0 + 0.13 * (k / 2e5) ** -0.5 + np.array([3, -3, 3, -3, -3, 3, -3]) * 1e-4
+    fx = fits.fit_eq7_piles(k, z, pl, 0.003, 1e-4, alpha_n=0.5, s_within_dof=2)
+    C = fits.pile_covariance(pl, 0.003, 1e-4)
+    X = np.stack([np.ones_like(k), (k / 2e5) ** -0.5], axis=1)
+    cov = np.linalg.inv(X.T @ np.linalg.solve(C, X))          # the linear GLS covariance, unscaled
+    assert fx["scale"] > 1
+    assert math.isclose(fx["z_inf_err"], math.sqrt(cov[0, 0]) * fx["scale"], rel_tol=1e-9)
+    assert math.isclose(fx["a_tilde_err"], math.sqrt(cov[1, 1]) * fx["scale"] * 2e5 ** 0.5, rel_tol=1e-9)
+    assert math.isclose(fx["p_noise"], f_dist.sf(fx["chi2"] / fx["dof"], fx["dof"], 2), rel_tol=1e-12)
+    assert fx["p_noise"] > fx["p_value"]                       # a measured noise makes the test milder
+    # a pile's noise measured above the piles' scatter: no shared part, each run its own noise, and said so
+    C2 = fits.pile_covariance(pl, 1e-4, 3e-4)
+    assert np.count_nonzero(C2 - np.diag(np.diag(C2))) == 0 and np.allclose(np.diag(C2), 9e-8)
+    assert fits.fit_eq7_piles(k, z, pl, 1e-4, 3e-4)["s_b_clamped"]
+
+
+def test_a_fit_part_that_is_not_fitted_gives_its_own_reason_and_ids_of_other_collects_name_them():
+    e = {"sets": ["S12", "S27"], "status": "fitted", "z_inf": 6.0, "z_inf_err": 0.004,
+         "set_means": {"status": "not determined", "reason": "correlation 1", "z_inf": 6.1}}
+    m = src.fit_measure(e, "z_inf", "set_means", kind="ladder")
+    assert m.status == "not determined" and m.why == "correlation 1"
+    assert src.fit_measure(e, "z_inf", kind="ladder").value == 6.0
+    assert src.ext_id("../dev", "S15") == "dev:S15" and src.ext_id("ladder-dev", "S07") == "ladder-dev:S07"
+
+
+def test_a_contrasts_pooled_error_replaces_a_borrowed_one_and_the_count_says_which():
+    a, b = _set("S26", [4.872]), _set("S15", [4.84, 4.845, 4.85])
+    fit_res = {"contrasts": [{"reference": "S15", "rows": [{"set": "S26", "z": {"diff": 0.027, "err": 0.008}}]}]}
+    m = src.Diff(src.S("S26"), src.S("S15")).resolve(src.Context([a, b], fit_res, []))
+    assert m.err == 0.008 and "pooled seed scatter" in m.count and src.LENT not in m.count
+
+
 def test_within_pile_noise_is_the_residual_of_the_piles_on_their_common_rungs():
     pts = [(2e5, 6.13, (1, 1)), (2e6, 6.05, (1, 1)), (2e7, 6.02, (1, 1)), (2e8, 6.01, (1, 1)),
            (2e5, 6.126, (2, 2)), (2e6, 6.046, (2, 2)), (2e7, 6.017, (2, 2)), (2e5, 6.14, (3, 3))]
     s, dof = ladder.within_pile_noise(pts)
-    # piles 1 and 2 share 2e5, 2e6, 2e7: differences 0.004, 0.004, 0.003 -> a 3 x 2 table, 2 dof
-    assert dof == 2 and 0 < s < 0.001
+    # piles 1 and 2 share 2e5, 2e6, 2e7: differences 0.004, 0.004, 0.003 -> a 3 x 2 table, 2 dof, whose
+    # residual scatter is that of the differences over sqrt(2)
+    assert dof == 2 and math.isclose(s, float(np.std([0.004, 0.004, 0.003], ddof=1)) / math.sqrt(2), rel_tol=1e-6)
+    # a pile that climbed one rung only does not cut the others' table short
+    short = pts + [(2e5, 6.135, (4, 4)), (2e6, 6.052, (4, 4))]
+    assert ladder.within_pile_noise(short)[1] == 2
     one, none = ladder.within_pile_noise(pts[:4] + pts[7:])      # one pile climbed: no noise to be had
     assert math.isnan(one) and none == 0
     tot, tdof = ladder.total_scatter(pts)

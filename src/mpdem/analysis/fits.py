@@ -185,7 +185,8 @@ def pile_covariance(pile, s_total, s_within):
 
     Returns
     -------
-    (n, n) array: s_b^2 [pile_i == pile_j] + s_within^2 [i == j]
+    (n, n) array: s_b^2 [pile_i == pile_j] + s_within^2 [i == j]; where s_within > s_total (a pile's
+    noise measured above the piles' scatter) s_b^2 is 0 and each run's variance s_within^2
     """
     lab = {v: i for i, v in enumerate(dict.fromkeys(pile))}
     g = np.array([lab[v] for v in pile])
@@ -193,7 +194,7 @@ def pile_covariance(pile, s_total, s_within):
     return s_b2 * (g[:, None] == g[None, :]) + float(s_within) ** 2 * np.eye(len(g))
 
 
-def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None):
+def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None, s_within_dof=None):
     """Eq. 7 over the runs of a stiffening ladder by generalized least squares (``pile_covariance``).
 
     A ladder's rungs are the same piles again, each keeping its offset from the others (docs/model.md 6.6):
@@ -207,13 +208,16 @@ def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None):
     pile : (n,) each run's pile
     s_total, s_within : ``pile_covariance``'s
     alpha_n : None (free: z_inf, a, alpha_n) or the fixed exponent (z_inf, a)
+    s_within_dof : the degrees of freedom s_within was measured from (None: taken as known)
 
     Returns
     -------
-    dict: z_inf, a, alpha_n, a_tilde with errors, chi2 (r^T C^-1 r), dof, p_value, n_points, n_piles,
-    s_total, s_within, ``scale``: where chi2 / dof > 1 the errors are widened by sqrt(chi2 / dof) (the
-    noise s_within comes from a few degrees of freedom; a chi^2 above them says the fit or the noise is
-    off, and the errors never narrow for it), ``determined`` and ``correlation`` as ``fit_eq7``
+    dict: z_inf, a, alpha_n, a_tilde with errors, chi2 (r^T C^-1 r), dof, ``p_value`` (of chi2 with the
+    noise s_within taken as known), ``p_noise`` (of chi2 / dof against F(dof, s_within_dof): the noise is
+    itself measured, nan without s_within_dof), n_points, n_piles, s_total, s_within, ``s_b_clamped``
+    (s_within above s_total), ``scale``: where chi2 / dof > 1 the errors are widened by sqrt(chi2 / dof)
+    (the noise s_within comes from a few degrees of freedom; a chi^2 above them says the fit or the noise
+    is off, and the errors never narrow for it), ``determined`` and ``correlation`` as ``fit_eq7``
     """
     k_n, z = np.asarray(k_n, float), np.asarray(z, float)
     C = pile_covariance(list(pile), s_total, s_within)
@@ -249,9 +253,11 @@ def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None):
         out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) * scale
     else:
         out["a_tilde_err"] = out["a_err"] * K_REF ** a_exp
-    out.update(chi2=chi2, dof=dof, p_value=p_value(chi2, dof), scale=scale, n_points=int(len(z)),
-               n_piles=int(len(set(pile))), s_total=float(s_total), s_within=float(s_within), weighted=True,
-               covariance="piles", correlation=_largest_correlation(cov))
+    p_noise = (float(f_dist.sf(chi2 / dof, dof, s_within_dof)) if s_within_dof and dof >= 1 else math.nan)
+    out.update(chi2=chi2, dof=dof, p_value=p_value(chi2, dof), p_noise=p_noise, scale=scale,
+               n_points=int(len(z)), n_piles=int(len(set(pile))), s_total=float(s_total), s_within=float(s_within),
+               s_b_clamped=bool(s_within > s_total), weighted=True, covariance="piles",
+               correlation=_largest_correlation(cov))
     out["determined"] = bool(np.all(np.isfinite(err)) and out["correlation"] < 1.0 - 1e-9)
     return out
 

@@ -248,10 +248,14 @@ def _eq7_section(sets, fit_res, windows):
          "pooled seed-to-seed scatter / √(seeds of the set); the free fit, then with α_n fixed: 1/2 at μ = 0, the "
          "paper's 1/4 with friction):", ""]
     L += [_fit_lines(e, "eq7") for e in fit_res["eq7"]] or ["- no family with ≥ 2 values of k_n"]
-    L += ["", "Stiffening ladders (a settled pile stiffened rung by rung, physics.md 6.6; eq. 7 over the base pile "
-          "and the rungs once they give 4 k_n):", ""]
+    L += ["", "Stiffening ladders (a settled pile stiffened rung by rung, docs/model.md 6.6; eq. 7 over every run of "
+          "the base set's piles and the rungs they climbed, once they give 4 k_n):", ""]
     L += [_ladder_lines(e) for e in fit_res.get("ladder", [])] or ["- none collected"]
     return L + [""]
+
+
+def _widened(x):
+    return f", errors × {x['scale']:.3g} (√(χ²/dof))" if x.get("scale", 1.0) > 1.0 else ""
 
 
 def _ladder_lines(e):
@@ -259,29 +263,31 @@ def _ladder_lines(e):
     rungs = "; ".join(f"{fmt_kn(r['k_n'])} ({r['set']}, {r['n_runs']} run{'s' if r['n_runs'] > 1 else ''}): z "
                       f"{fmt_pm(r['z'], r['z_sem'] if r['z_sem'] is not None else NAN, 3, r['n_runs'])}, median "
                       f"overlap {r['overlap_median']:.2g} d" for r in sorted(e["rungs"], key=lambda r: r["k_n"]))
-    head = f"- μ = {f['mu']:g}, ε = {f['epsilon']:g}, N = {f['N']} [base {e['base'] or 'none'}]: {rungs}. "
+    line = f"- μ = {f['mu']:g}, ε = {f['epsilon']:g}, N = {f['N']} [base {e['base'] or 'none'}]: {rungs}. "
     if e.get("status") in ("fitted",) and "z_inf" in e:
-        widened = f", errors × {e['scale']:.3g} (√(χ²/dof))" if e.get("scale", 1.0) > 1.0 else ""
-        line = (head + f"Eq. 7 over its {e['n_points']} runs of {e['n_piles']} piles, a pile's runs covarying "
-                f"(piles' scatter {e['s_total']:.2g} from {e['s_total_dof']} dof, a pile's noise from rung to rung "
-                f"{e['s_within']:.2g} from {e['s_within_dof']}): z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, "
-                f"α_n = {fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; χ² = {e['chi2']:.3g} for {e['dof']} dof, "
-                f"p = {e['p_value']:.2g}{widened}")
+        noise = (f"; p = {e['p_noise']:.2g} against F({e['dof']}, {e['s_within_dof']}), the noise itself measured"
+                 if math.isfinite(e.get("p_noise", NAN)) else "")
+        line += (f"Eq. 7 over its {e['n_points']} runs of {e['n_piles']} piles, a pile's runs covarying "
+                 f"(piles' scatter {e['s_total']:.2g} from {e['s_total_dof']} dof, a pile's noise from rung to rung "
+                 f"{e['s_within']:.2g} from {e['s_within_dof']}): z∞ = {fmt_pm(e['z_inf'], e['z_inf_err'], 3)}, "
+                 f"α_n = {fmt_pm(e['alpha_n'], e['alpha_n_err'], 3)}; χ² = {e['chi2']:.3g} for {e['dof']} dof "
+                 f"(p = {e['p_value']:.2g} with that noise known{noise}){_widened(e)}")
         fx = e.get("fixed") or {}
         if "z_inf" in fx:
             line += (f"; α_n fixed at {fx['alpha_n']:g}: z∞ = {fmt_pm(fx['z_inf'], fx['z_inf_err'], 3)}, χ² = "
-                     f"{fx['chi2']:.3g} for {fx['dof']} dof")
-        loc = [f"seed {x['pile'][0]}" + (f" (bed {x['pile'][1]})" if x["pile"][1] != x["pile"][0] else "")
-               + f" {x['alpha_n']:.3f} ({fmt_kn(x['k_n'][0])}–{fmt_kn(x['k_n'][2])})"
-               for x in e.get("local_exponents") or []]
-        if loc:
-            line += ". Each pile's exponent through three rungs (one power law gives one): " + ", ".join(loc)
-        sm = e.get("set_means") or {}
-        if sm.get("status") == "fitted":
-            line += (f". The sets' means fitted as if independent: z∞ = {fmt_pm(sm['z_inf'], sm['z_inf_err'], 3)}, "
-                     f"α_n = {fmt_pm(sm['alpha_n'], sm['alpha_n_err'], 3)}; χ² = {sm['chi2']:.3g} for {sm['dof']} dof")
-        return line
-    return head + f"Eq. 7: **{e.get('status')}** ({e.get('reason', '')})"
+                     f"{fx['chi2']:.3g} for {fx['dof']} dof{_widened(fx)}")
+    else:
+        line += f"Eq. 7 over its runs: **{e.get('status')}** ({e.get('reason', '')})"
+    loc = [f"seed {x['pile'][0]}" + (f" (bed {x['pile'][1]})" if x["pile"][1] != x["pile"][0] else "")
+           + (f" {x['alpha_n']:.3f}" if math.isfinite(x["alpha_n"]) else " none (z does not fall at both steps)")
+           + f" ({fmt_kn(x['k_n'][0])}–{fmt_kn(x['k_n'][2])})" for x in e.get("local_exponents") or []]
+    if loc:
+        line += ". Each pile's exponent through three rungs (one power law gives one): " + ", ".join(loc)
+    sm = e.get("set_means") or {}
+    if sm.get("status") == "fitted":
+        line += (f". The sets' means fitted as if independent: z∞ = {fmt_pm(sm['z_inf'], sm['z_inf_err'], 3)}, "
+                 f"α_n = {fmt_pm(sm['alpha_n'], sm['alpha_n_err'], 3)}; χ² = {sm['chi2']:.3g} for {sm['dof']} dof")
+    return line
 
 
 def _eq9_section(sets, fit_res, windows):

@@ -1,4 +1,4 @@
-"""Stiffening ladders among the collected sets (``fits.json`` 'ladder'; physics.md 6.6).
+"""Stiffening ladders among the collected sets (``fits.json`` 'ladder'; docs/model.md 6.6).
 
 A rung is a set stiffened from a settled pile (``stiffen.k_n_from`` set: ``Set.extra``), so it is
 never grouped with a pile poured at the same k_n (a different protocol). The rungs of one ladder are
@@ -84,17 +84,24 @@ def total_scatter(points):
 
 
 def within_pile_noise(points):
-    """A pile's noise from rung to rung: the residual scatter of the two-way table (k_n by pile) of the piles
-    measured at two k_n or more, over the k_n they all have (``fits.two_way_anova``); (s, dof), (nan, 0)
-    when fewer than two such piles share two k_n."""
+    """A pile's noise from rung to rung: the residual scatter of a two-way table (k_n by pile) of piles
+    measured at the same k_n (``fits.two_way_anova``), the complete table with the most residual degrees
+    of freedom (a pile that climbed fewer rungs does not cut the others' table short); (s, dof), (nan, 0)
+    when no two piles share two k_n."""
     by = {}
     for k, v, p in points:
         by.setdefault(p, {})[k] = v
-    climbed = [p for p, d in by.items() if len(d) >= 2]
-    common = sorted(set.intersection(*(set(by[p]) for p in climbed))) if climbed else []
-    if len(climbed) < 2 or len(common) < 2:
+    best = None
+    for q in by:
+        ks = sorted(by[q])
+        piles = [p for p in by if set(ks) <= set(by[p])]
+        dof = (len(ks) - 1) * (len(piles) - 1)
+        if dof >= 1 and (best is None or dof > best[0]):
+            best = (dof, ks, piles)
+    if best is None:
         return math.nan, 0
-    a = fits.two_way_anova([[by[p][k] for p in climbed] for k in common])
+    _, ks, piles = best
+    a = fits.two_way_anova([[by[p][k] for p in piles] for k in ks])
     return a["scatter"], a["dof"][1]
 
 
@@ -130,12 +137,12 @@ def fit_piles(fam, points):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            e.update(status="fitted", **fits.fit_eq7_piles(k, z, pl, s_tot, s_w))
+            e.update(status="fitted", **fits.fit_eq7_piles(k, z, pl, s_tot, s_w, s_within_dof=dof_w))
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
             return dict(e, status="failed", reason=f"{type(err).__name__}: {err}")
         fixed = 0.5 if fam["mu"] == 0 else paper.EQ7_FRICTIONAL_ALPHA_N
         try:
-            e["fixed"] = fits.fit_eq7_piles(k, z, pl, s_tot, s_w, alpha_n=fixed)
+            e["fixed"] = fits.fit_eq7_piles(k, z, pl, s_tot, s_w, alpha_n=fixed, s_within_dof=dof_w)
         except (ValueError, np.linalg.LinAlgError) as err:
             e["fixed"] = {"status": "failed", "reason": str(err)}
     if not e["determined"]:
@@ -162,10 +169,12 @@ def ladders(sets, fit_one):
                                                  f"eq. 7 with alpha_n free needs {MIN_K_N}")
         else:
             e.update(fit_piles(fam, _points(members)))
-            # the sets' means fitted as if independent, beside it
+            # the sets' means fitted as if independent, beside it (and its fixed exponent: the only fit of a
+            # ladder one pile climbed)
             means = fit_one(fam, members)
             e["set_means"] = {kk: means.get(kk) for kk in ("status", "reason", "z_inf", "z_inf_err", "alpha_n",
-                                                           "alpha_n_err", "chi2", "dof", "p_value")
-                              if kk in means}
+                                                           "alpha_n_err", "a_tilde", "a_tilde_err", "chi2", "dof",
+                                                           "p_value") if kk in means}
+            e["set_means_fixed"] = means.get("fixed") or {"status": "not fitted", "reason": means.get("reason", "")}
         out.append(e)
     return out

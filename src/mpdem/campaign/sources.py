@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from . import verdict as V
 from .runs import NAN, fmt_kn, mean_sem, off_columns
 
-# the paper-size stiffening ladders (physics.md 6.6): runs/ladder-size/<mu>_s<seed>/kn<K>/
+# the paper-size stiffening ladders (docs/model.md 6.6): runs/ladder-size/<mu>_s<seed>/kn<K>/
 LADDER_DIR = "ladder-size"
 PAPER_N = 20000
 
@@ -139,6 +139,8 @@ class Diff:
             c = ctx.contrast(self.a.set, self.b.set, self.a.q)
             if c is not None and finite(c["err"]):
                 err = c["err"]
+                # the contrast's pooled scatter, not the other side's alone
+                lent = "; its 1 run with the sets' pooled seed scatter" if lent else ""
         return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs" + lent, where, k_n=ma.k_n)
 
 
@@ -204,7 +206,8 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
     if part and key not in f:
         return missing(where, f.get("reason") or e.get("reason") or "not fitted", "not determined")
     if f.get("status", "fitted") != "fitted" or (not part and e.get("determined") is False):
-        return missing(where, e.get("reason", e.get("status", "")), "not determined")
+        src = f if part else e
+        return missing(where, src.get("reason") or src.get("status", ""), "not determined")
     v, err = f.get(key), f.get(f"{key}_err")
     if not finite(v):
         return missing(where, f"no {key}", "not determined")
