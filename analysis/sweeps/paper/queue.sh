@@ -28,10 +28,10 @@ JOB_LIST=(
   "flow|row 38: the flow arrest kept on the incline (18 and 16 degrees), beside the levelled one|job_flow|"
   "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
   "ladder-mu0.5-s1|rows 23, 26: the mu = 0.5 ladder of seed 1 to 2e8 (its 2e7 rung first)|job_l05s1|"
+  "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung (does eq. 7 bend by 2e8?)|job_l0s2_2e8|ladder-mu0-s2-2e7"
   "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2|job_stiff05|"
+  "ladder-mu0.5-s2|rows 23, 24, 26: the second mu = 0.5 ladder (its pour at 2e5 first): eq. 7 over piles needs two|job_l05s2|"
   "friction-seeds|rows 7, 7b, 8, 12: second seeds of mu = 0.1 and 1|job_size_d|"
-  "ladder-mu0.5-s2|rows 23, 26: the second mu = 0.5 ladder (its pour at 2e5 first)|job_l05s2|"
-  "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung|job_l0s2_2e8|ladder-mu0-s2-2e7"
   "strict|row 1: the stricter stop (E_stop = 1e-10) on seeds 2 and 3|job_strict|"
   "mu10-and-mu0-s4|rows 1, 9: a fourth mu = 0 seed, and mu = 10|job_size_c|"
 )
