@@ -213,8 +213,9 @@ CLAIMS = [
           note=LADDER_NOTE,
           if_differs=("open", "the exponent comes from how each pile changes from rung to rung; seed 1, the one "
                               "pile at four k_n, falls faster from 2e6 to 2e8 than from 2e5 to 2e7 (each pile's "
-                              "three-rung exponents, Fig. 7's ladder line); seed 2's 2e8 rung will tell whether "
-                              "seed 1's settled short or eq. 7 itself bends")),
+                              "three-rung exponents, Fig. 7's ladder line), and settled further its 2e8 rung keeps "
+                              "its z (NOTES.md, 2026-11-29); seed 2's 2e8 rung will tell whether eq. 7 bends by "
+                              "2e8 or seed 1 is an accident")),
     Claim("21", "eq. 8: α_n = 1 − α, μ = 0 (α_n − (1 − α))", "0.498 against 0.48 ± 0.03", "compare", 0.0, 0.03,
           tolerance="the paper's own α_n and 1 − α differ by 0.018, within its α error 0.03",
           ours=[Diff(Fit("ladder", "alpha_n", mu=0.0), OneMinus(S("S12", "alpha")))],
