@@ -336,7 +336,9 @@ CLAIMS = [
           also=[S("S10", "z", "400 τ of flow"), *_kept_on_incline("z")],
           note="N = 8000 on 20 d × 10 d, 800 τ of steady flow at 24°, then levelled",
           if_differs=("open", "the packing was levelled to 0° where the paper's keeps its surface near the angle "
-                              "of repose; the flow's duration is not it (S10 beside)")),
+                              "of repose; the flow's duration is not it (S10 beside); kept at 18° (one seed, "
+                              "beside) z lies above the paper's and φ above it too, where levelled both lie below: "
+                              "the levelling moves them more than the paper's rounding; a second seed at 18° runs")),
     Claim("38b", "flow-arrest packing: φ, μ = 0.5", "0.594", "compare", 0.594, 0.0005,
           tolerance=TOL_DIGIT.format(q="0.001"), ours=[S("S22", "phi")],
           also=[S("S10", "phi", "400 τ of flow"), *_kept_on_incline("phi")],
