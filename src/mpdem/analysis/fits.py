@@ -226,10 +226,7 @@ def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None, s_within_dof=No
     if len(k_n) < (4 if free else 3):
         raise ValueError(f"{len(k_n)} runs cannot fix eq. 7's {3 if free else 2} parameters with a chi^2")
     if free:
-        lo = int(np.argmin(k_n))
-        z0 = float(z.min()) - 0.01
-        p, cov = curve_fit(eq7, k_n, z, p0=[z0, max(float(z[lo]) - z0, 1e-3), 0.5], sigma=C,
-                           absolute_sigma=True, maxfev=20000)
+        p, cov = curve_fit(eq7, k_n, z, p0=_eq7_start(k_n, z), sigma=C, absolute_sigma=True, maxfev=20000)
         names = ("z_inf", "a", "alpha_n")
     else:
         X = np.stack([np.ones_like(k_n), (k_n / K_REF) ** (-alpha_n)], axis=1)
@@ -246,13 +243,11 @@ def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None, s_within_dof=No
     out.update({f"{n}_err": float(e) for n, e in zip(names, err)})
     if not free:
         out.update(alpha_n=float(alpha_n), alpha_n_fixed=True)
-    a_exp = out["alpha_n"]
-    out["a_tilde"] = out["a"] * K_REF ** a_exp
-    if free and np.all(np.isfinite(cov)):
-        grad = np.array([K_REF ** a_exp, out["a_tilde"] * math.log(K_REF)])
-        out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) * scale
+    if free:
+        _a_tilde(out, cov, scale)
     else:
-        out["a_tilde_err"] = out["a_err"] * K_REF ** a_exp
+        out["a_tilde"] = out["a"] * K_REF ** out["alpha_n"]
+        out["a_tilde_err"] = out["a_err"] * K_REF ** out["alpha_n"]
     p_noise = (float(f_dist.sf(chi2 / dof, dof, s_within_dof)) if s_within_dof and dof >= 1 else math.nan)
     out.update(chi2=chi2, dof=dof, p_value=p_value(chi2, dof), p_noise=p_noise, scale=scale,
                n_points=int(len(z)), n_piles=int(len(set(pile))), s_total=float(s_total), s_within=float(s_within),
@@ -350,15 +345,28 @@ def fit_eq7(k_n, z, sigma=None):
     alpha_n.
     """
     k_n, z = np.asarray(k_n, float), np.asarray(z, float)
-    lo = int(np.argmin(k_n))
-    z0 = float(z.min()) - 0.01
-    p0 = [z0, max(float(z[lo]) - z0, 1e-3), 0.5]
-    out, cov = _fit(eq7, k_n, z, sigma, p0, ("z_inf", "a", "alpha_n"))
-    out["a_tilde"] = out["a"] * K_REF ** out["alpha_n"]
-    # a_tilde = a K^alpha_n: gradient (K^alpha_n, a_tilde ln K) in (a, alpha_n), with their covariance
-    grad = np.array([K_REF ** out["alpha_n"], out["a_tilde"] * math.log(K_REF)])
-    out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) if np.all(np.isfinite(cov)) else math.nan
+    out, cov = _fit(eq7, k_n, z, sigma, _eq7_start(k_n, z), ("z_inf", "a", "alpha_n"))
+    _a_tilde(out, cov)
     return out
+
+
+def _eq7_start(k_n, z):
+    """The free eq. 7 fit's starting point (z_inf, a, alpha_n): z_inf just below the lowest z."""
+    lo = int(np.argmin(k_n))
+    z0 = float(np.min(z)) - 0.01
+    return [z0, max(float(z[lo]) - z0, 1e-3), 0.5]
+
+
+def _a_tilde(out, cov, scale=1.0):
+    """The paper's prefactor a_tilde = a K_REF^alpha_n into ``out``, its error from the covariance of (a,
+    alpha_n) (gradient (K^alpha_n, a_tilde ln K)) times ``scale``; nan where the covariance is not finite."""
+    out["a_tilde"] = out["a"] * K_REF ** out["alpha_n"]
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        out["a_tilde_err"] = math.nan
+        return
+    grad = np.array([K_REF ** out["alpha_n"], out["a_tilde"] * math.log(K_REF)])
+    out["a_tilde_err"] = float(math.sqrt(max(grad @ cov[1:, 1:] @ grad, 0.0))) * scale
 
 
 def fit_eq9(phi_i, phi_f, sigma=None):

@@ -46,9 +46,9 @@ def _sign_verdict(claim, ctx):
         return ms, V.Verdict("not measured", why=f"{bad.where}: {bad.why}")
     # a step's error as a difference's (``sources.diff_error``: a side of one seed takes the other's seed
     # scatter); a step between two sides of one seed has none and is judged by its sign (``verdict.sign``)
-    steps = [(b.value - a.value, diff_error(b, a)[0]) for a, b in zip(ms, ms[1:])]
-    v = V.sign(steps, claim.value)
-    lent = [str(i + 1) for i, (a, b) in enumerate(zip(ms, ms[1:])) if diff_error(b, a)[1]]
+    errs = [diff_error(b, a) for a, b in zip(ms, ms[1:])]
+    v = V.sign([(b.value - a.value, e) for (a, b), (e, _) in zip(zip(ms, ms[1:]), errs)], claim.value)
+    lent = [str(i + 1) for i, (_, borrowed) in enumerate(errs) if borrowed]
     if lent and v.kind in ("reproduced", "differs"):
         v.why = "; ".join(w for w in (v.why, f"step{'s' if len(lent) > 1 else ''} {', '.join(lent)}: a side "
                                               "of 1 seed with the other's seed scatter") if w)
