@@ -25,10 +25,11 @@ ladder() { DEVICE=${DEVICE:-cpu} nice -n 10 bash "$P/ladder.sh" "$@"; }
 
 # name | what it decides | its function (below, with any words after it as arguments) | a job it waits for (one ladder's rungs are never run twice at once)
 JOB_LIST=(
-  "flow|row 38: the flow arrest kept on the incline (18 and 16 degrees), beside the levelled one|job_flow|"
+  "ladder-hertz|row 34: Hertzian ladders at N = 2000 from the three poured Hertzian piles, 2e5 to 2e8: Hertz's hard-sphere limit beside Hooke's|job_hertz|"
   "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
-  "ladder-mu0.5-s1|rows 23, 26: the mu = 0.5 ladder of seed 1 to 2e8 (its 2e7 rung first)|job_l05s1|"
   "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung (does eq. 7 bend by 2e8?)|job_l0s2_2e8|ladder-mu0-s2-2e7"
+  "flow|row 38: the flow arrest kept on the incline (18 and 16 degrees), beside the levelled one|job_flow|"
+  "ladder-mu0.5-s1|rows 23, 26: the mu = 0.5 ladder of seed 1 to 2e8 (its 2e7 rung first)|job_l05s1|"
   "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2|job_stiff05|"
   "ladder-mu0.5-s2|rows 23, 24, 26: the second mu = 0.5 ladder (its pour at 2e5 first): eq. 7 over piles needs two|job_l05s2|"
   "friction-seeds|rows 7, 7b, 8, 12: second seeds of mu = 0.1 and 1|job_size_d|"
@@ -39,6 +40,14 @@ job_flow() { sweep flow-arrest-tilted.tsv chute.toml flow; }
 job_l05s1() { STOP_ENERGY=translational ladder 0.5 1 "$R/ladder-size/mu0.5_s1" 2e8; }
 from0s2() { FROM=$R/size/mu0_eps0.88_kn2e5_phi0.13_s2_max_steps2e7 ladder 0 2 "$R/ladder-size/mu0_s2" "$1"; }
 job_l0s2_2e7() { from0s2 2e7; }
+# a frictionless pile's ladder starts from its committed packing; N = 2000, so each rung is minutes of a core
+job_hertz() {
+    local s
+    for s in 1 2 3; do
+        FROM=$R/dev/mu0_eps0.88_kn2e5_phi0.13_s${s}_modelhertz_max_steps1e7 ladder 0 "$s" "$R/ladder-dev/mu0_hertz_s$s" 2e8 \
+            || return $?
+    done
+}
 job_stiff05() { sweep size-stiff-friction.tsv size.toml size; }
 job_l05s2() { STOP_ENERGY=translational ladder 0.5 2 "$R/ladder-size/mu0.5_s2" 2e8; }
 job_l0s2_2e8() { from0s2 2e8; }
