@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mpdem.campaign import claims, claimtable as ct, ladder, sources as src, verdict as V
 from mpdem.campaign.runs import AnalysedRun, Set
@@ -248,6 +249,39 @@ def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
     same_rule = Set("S40", base.params, base.runs, dict(tr))
     got = ladder.ladders([base, same_rule, poured2e6, *spun], lambda fam, m: {"status": "fitted"})
     assert got[0]["base"] == "S40"
+
+
+def test_a_ladders_overlap_fit_spans_its_base_and_draws_its_piles():
+    """The overlap fit of a stiffened family takes its base set first (``ladder.with_base``) and bootstraps
+    piles (a run's seed), each with its runs at every rung; a poured family's runs are samples of their own."""
+    from mpdem import config
+    from mpdem.campaign import pooled
+
+    def p(k_n, seed):
+        vals = config.resolve({"run.max_steps": 1, "contact.mu": 0.0, "contact.k_n": k_n, "pour.N": 20000,
+                               "run.seed": seed}).values
+        return {k: vals[k] for k in config.PARAM_KEYS}
+
+    def st(sid, k_n, seeds, k_from=None):
+        runs = []
+        for i in seeds:
+            d = np.logspace(-5, -4, 5) * 2e5 / k_n
+            bands = {"in_bulk": [True] * 5, "overlap_mean": d.tolist(),
+                     "z": (6.0 + 12.0 * np.sqrt(d) + 0.002 * i).tolist()}
+            runs.append(AnalysedRun(f"{sid}-{i}", {"params": p(k_n, i), "z": 6.1, "phi": 0.64, "bands": bands}))
+        return Set(sid, p(k_n, seeds[0]), runs, {"stiffen.k_n_from": k_from} if k_from else {})
+
+    base, poured = st("S12", 2e5, [1, 2, 3]), st("S17", 2e6, [1, 2])
+    rungs = [st("S27", 2e6, [1, 2], 2e5), st("S28", 2e7, [1, 2], 2e6)]
+    members = ladder.with_base(rungs, [base, poured, *rungs])
+    assert [s.id for s in members] == ["S12", "S27", "S28"]
+    assert ladder.with_base([base, poured], [base, poured, *rungs]) == [base, poured]
+    e = pooled.overlap_fit(members)
+    assert e["status"] == "fitted" and e["n_runs"] == 7 and e["n_samples"] == e["n_piles"] == 3
+    assert e["sets"] == ["S12", "S27", "S28"]
+    assert e["z_c"] == pytest.approx(6.004, abs=0.003)
+    e = pooled.overlap_fit([base, poured])
+    assert e["n_runs"] == 5 and e["n_samples"] == 5 and "n_piles" not in e
 
 
 def test_eq7_over_the_runs_of_piles_follows_each_piles_change_not_its_offset():

@@ -350,6 +350,25 @@ def test_overlap_fit_recovers_z_c_with_a_bootstrap_error_over_runs():
         fits.fit_overlap([1e-5, 2e-5], [6.1, 6.2], [0, 0])
 
 
+def test_overlap_fit_bootstraps_samples_not_runs():
+    """A pile measured twice (a ladder's pile at two rungs, here the same bands again) is one sample: with
+    ``sample`` naming it, the fit and its bootstrap error are those of each pile once; counted as two runs
+    the error shrinks by about sqrt(2), the optimism the samples remove."""
+    rng = np.random.default_rng(11)
+    d = np.tile(np.logspace(-5, -4, 6), 4)
+    run = np.repeat(np.arange(4), 6)
+    z = 6.0 + 12.0 * np.sqrt(d) + 0.01 * rng.standard_normal(24) + 0.01 * rng.standard_normal(4)[run]
+    once = fits.fit_overlap(d, z, run)
+    twice = fits.fit_overlap(np.tile(d, 2), np.tile(z, 2), np.concatenate([run, run + 4]), sample=np.tile(run, 2))
+    assert twice["n_runs"] == 8 and twice["n_samples"] == 4 and once["n_samples"] == 4
+    assert twice["z_c"] == pytest.approx(once["z_c"], abs=1e-12)
+    assert twice["z_c_err"] == pytest.approx(once["z_c_err"], rel=1e-9)
+    naive = fits.fit_overlap(np.tile(d, 2), np.tile(z, 2), np.concatenate([run, run + 4]))
+    assert naive["n_samples"] == 8 and naive["z_c_err"] < 0.85 * once["z_c_err"]
+    with pytest.raises(ValueError, match="one sample per band"):
+        fits.fit_overlap(d, z, run, sample=run[:-1])
+
+
 def test_the_collapse_of_z_against_the_overlap_across_k_n_is_tested():
     """Bands of three k_n on one curve z = 6 + 12 sqrt(delta): the F test keeps the one curve
     (its p is uniform: a fifth of the draws below 0.2); an offset of 0.02 at one k_n, some six

@@ -257,43 +257,51 @@ def fit_eq7_piles(k_n, z, pile, s_total, s_within, alpha_n=None, s_within_dof=No
     return out
 
 
-def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5, level=None):
+def fit_overlap(delta, z, group, n_boot=2000, seed=12345, exponent=0.5, level=None, sample=None):
     """z - z_c = A (delta / d)^exponent over depth bands of many runs (docs/model.md 6.6).
 
     Parameters
     ----------
     delta : (K,) mean overlap of each band [d]; z : (K,) its z
-    group : (K,) the run each band comes from: the error is a bootstrap over runs
+    group : (K,) the run each band comes from
     exponent : 1/2 for Hookean contacts
     level : (K,) or None
         The k_n of each band's run: with two levels or more, whether the bands of all
         levels collapse on the one curve (``collapse``).
+    sample : (K,) or None
+        The independent sample each band's run belongs to (a pile: a ladder's rungs are its
+        piles again); the bootstrap resamples these, each with every band of its runs.
+        None: each run is a sample of its own.
 
     Returns
     -------
     dict: z_c, A (least squares, every band weighted alike), z_c_err and A_err
-    (standard deviations over runs resampled with replacement), n_bands, n_runs,
-    rms (residual), delta_min, delta_max, and with ``level`` the ``collapse`` test
+    (standard deviations over samples resampled with replacement), n_bands, n_runs,
+    n_samples, rms (residual), delta_min, delta_max, and with ``level`` the ``collapse`` test
     """
     delta, z, group = np.asarray(delta, float), np.asarray(z, float), np.asarray(group)
+    sample = group if sample is None else np.asarray(sample)
+    if sample.shape != group.shape:
+        raise ValueError(f"sample has shape {sample.shape}, the bands {group.shape}: one sample per band")
     ok = np.isfinite(delta) & np.isfinite(z) & (delta > 0)
-    delta, z, group = delta[ok], z[ok], group[ok]
+    delta, z, group, sample = delta[ok], z[ok], group[ok], sample[ok]
     level = None if level is None else np.asarray(level, float)[ok]
-    runs = np.unique(group)
+    runs, units = np.unique(group), np.unique(sample)
     if len(z) < 3:
         raise ValueError(f"{len(z)} bands: the overlap fit needs at least 3")
     xs = delta ** exponent
 
     c = np.linalg.lstsq(np.stack([np.ones(len(z)), xs], axis=1), z, rcond=None)[0]
     out = {"z_c": float(c[0]), "A": float(c[1]), "exponent": exponent, "n_bands": int(len(z)),
-           "n_runs": int(len(runs)), "rms": float(np.sqrt(np.mean((z - c[0] - c[1] * xs) ** 2))),
+           "n_runs": int(len(runs)), "n_samples": int(len(units)),
+           "rms": float(np.sqrt(np.mean((z - c[0] - c[1] * xs) ** 2))),
            "delta_min": float(delta.min()), "delta_max": float(delta.max()),
            "z_c_err": math.nan, "A_err": math.nan}
-    if len(runs) >= 2:
+    if len(units) >= 2:
         rng = np.random.default_rng(seed)
-        members = [np.flatnonzero(group == r) for r in runs]
+        members = [np.flatnonzero(sample == u) for u in units]
         boot = []
-        for pick in rng.integers(0, len(runs), (n_boot, len(runs))):
+        for pick in rng.integers(0, len(units), (n_boot, len(units))):
             idx = np.concatenate([members[p] for p in pick])
             if np.unique(xs[idx]).size < 2:
                 continue

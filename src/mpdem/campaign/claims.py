@@ -116,6 +116,7 @@ def _kept_on_incline(q):
             for a in (18.0, 16.0)]
 T2 = 0.005   # half a unit of the last of two decimals
 MEANS = "sets' means as if independent:"
+LADDER_OVERLAP = "the ladder's piles at every rung, z − z_c = A (δ/d)^(1/2) over their depth bands:"
 LADDER_NOTE = ("eq. 7 with α_n free over every run of the paper-size ladder (its base set's piles, and the rungs "
                "they climbed): runs of one pile covary by its offset (the piles' scatter and a pile's noise from "
                "rung to rung), errors widened by √(χ²/dof) where that exceeds 1 (Fig. 7's ladder line); the sets' "
@@ -202,8 +203,9 @@ CLAIMS = [
           note="paper size: two poured k_n at μ = 0 (the ladder's top rung beside: one seed); with friction "
                "N = 2000 only"),
     Claim("19", "eq. 7, μ = 0: z_∞", "6.01 ± 0.02", "compare", 6.01, 0.02,
-          ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S12")],
+          ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S17")],
           also=[Fit("ladder", "z_inf", mu=0.0, part="set_means", label=MEANS),
+                Fit("overlap", "z_c", "S27", label=LADDER_OVERLAP),
                 ExtFit(DEV, "eq7", "z_inf", "S15", label="N 2000 eq. 7 free"), Fit("overlap", "z_c", "S02")],
           note=LADDER_NOTE),
     Claim("20", "eq. 7, μ = 0: α_n", "0.498 ± 0.002", "compare", 0.498, 0.002,
@@ -269,9 +271,10 @@ CLAIMS = [
           also=[Diff(Ext(LADDER_DEV, "S05", label="N 2000 stiffened"), Ext(LADDER_DEV, "S04", label="poured")),
                 Diff(Ext(LADDER_DEV, "S12", label="N 2000 stiffened 2e8"), Ext(DEV, "S31", label="poured"))]),
     Claim("27", "frictionless packings are isostatic: z → 6", "z_∞ = 6.01 ± 0.02", "compare", 6.0, 0.02,
-          tolerance="", ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S12")],
+          tolerance="", ours=[Fit("ladder", "z_inf", mu=0.0), Fit("overlap", "z_c", "S17")],
           also=[Fit("ladder", "z_inf", mu=0.0, part="set_means", label=MEANS),
-                Fit("overlap", "z_c", "S02")], note="against 6, with the paper's z_∞ error",
+                Fit("overlap", "z_c", "S27", label=LADDER_OVERLAP), Fit("overlap", "z_c", "S02")],
+          note="against 6, with the paper's z_∞ error",
           if_differs=("open", "an excess above 6 at N = 2000 only")),
     Claim("28", "frictional packings lie above the generalized isostatic count (z − (4 + n_m/3), μ = 0.5)",
           "z > 4 + n_m/3", "bound", 0.0, ours=[PerRun("S15", _above_count, "S15: z − count, run by run")],

@@ -426,17 +426,25 @@ def _alpha_section(sets, fit_res, windows=()):
     return L
 
 
+def _piles_text(e):
+    """' of N piles' where the overlap fit's bootstrap drew fewer samples than runs (a ladder's piles)."""
+    n = e.get("n_samples")
+    return f" of {n} piles" if n is not None and n < e["n_runs"] else ""
+
+
 def _overlap_depth_section(sets, fit_res, windows):
     """z against the overlap (docs/model.md 6.6), then z on the fixed depth windows."""
     L = ["z against the overlap (docs/model.md 6.6):", "",
           "z − z_c = A (δ/d)^(1/2) fitted over the depth bands inside the bulk of every run of a family (all k_n), "
-          "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs. At μ = 0 isostaticity "
+          "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs, and over piles for a "
+          "stiffening ladder (its base set with its rungs: a pile's runs at every rung drawn together). At μ = 0 "
+          "isostaticity "
           "says z_c = 6. The collapse: the F test of the one curve against one of the same slope offset for each "
           "k_n (p small: the k_n do not collapse; bands taken as independent), and each k_n's mean residual from "
           "the one curve.", ""]
     ov = [e for e in fit_res.get("overlap", []) if e["status"] == "fitted"]
     L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)}, "
-          f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs, δ/d from "
+          f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs{_piles_text(e)}, δ/d from "
           f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}; {_collapse_text(e)}"
           for e in ov] or ["- no family with depth profiles of 2 runs or more"]
     return L + [""] + _depth_section(windows)

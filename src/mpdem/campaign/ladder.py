@@ -52,6 +52,15 @@ def _base(rungs, sets):
     return None
 
 
+def with_base(members, sets):
+    """A family's sets with the poured set its ladder starts from first (``_base``) where every member is a
+    stiffened rung; any other family as it is."""
+    if not members or not all(K_FROM in s.extra for s in members):
+        return list(members)
+    base = _base(members, sets)
+    return ([base] if base is not None else []) + list(members)
+
+
 def _rung(s):
     out = {"set": s.id, "k_n": s.p("k_n"), "k_n_from": s.extra[K_FROM], "n_runs": len(s.runs), "seeds": s.seeds}
     for q in RUNG_QUANTITIES:

@@ -9,7 +9,7 @@ docs/model.md 6.5, 6.6, 6.10).
 - the depth profile averaged over seeds, band by band;
 - z against the overlap: z - z_c = A (delta / d)^(1/2) over the depth bands
   inside the bulk of every run of a family (every k_n), z_c with a bootstrap
-  error over runs.
+  error over runs (over piles for a stiffening ladder).
 
 Runs analysed before these measures existed (no ``alpha_windows``, ``bands``
 or ``P_f`` in their summary.json) are left out of them, and counted.
@@ -22,6 +22,7 @@ import warnings
 import numpy as np
 
 from ..analysis import bands, fits, nearcontact
+from .ladder import K_FROM
 
 
 def _have(s, key):
@@ -98,20 +99,27 @@ def overlap_fit(members):
     """z - z_c = A (delta / d)^(1/2) over the bulk depth bands of every run of a family's sets, and
     whether the bands of its k_n collapse on that one curve (``fits.collapse``).
 
+    A stiffening ladder's sets (any member stiffened, its base set with them: ``ladder.with_base``) are its
+    piles again at each rung: the error's bootstrap then resamples piles (a run's seed and bed seed), each
+    with its runs at every rung; elsewhere each run is a sample of its own.
+
     Returns
     -------
     dict with the fit (``fits.fit_overlap``) and the sets and runs used, or
     status "not fitted" with the reason.
     """
-    delta, z, grp, k_n, used = [], [], [], [], []
+    piles = any(K_FROM in s.extra for s in members)
+    delta, z, grp, smp, k_n, used, samples = [], [], [], [], [], [], {}
     for s in members:
         for r in _have(s, "bands"):
             b = r.s["bands"]
+            unit = samples.setdefault((r.params["run.seed"], r.bed_seed) if piles else r.path, len(samples))
             for k, inb in enumerate(b["in_bulk"]):
                 if inb and b["overlap_mean"][k] is not None and b["z"][k] is not None:
                     delta.append(b["overlap_mean"][k])
                     z.append(b["z"][k])
                     grp.append(len(used))
+                    smp.append(unit)
                     k_n.append(s.params["contact.k_n"])
             used.append(r.path)
     e = {"sets": [s.id for s in members], "runs": used}
@@ -119,7 +127,9 @@ def overlap_fit(members):
         e.update(status="not fitted", reason=f"{len(used)} runs with depth profiles and {len(z)} bulk bands "
                                              f"(the fit needs 2 runs and 3 bands)")
         return e
-    e.update(status="fitted", **fits.fit_overlap(delta, z, grp, level=k_n))
+    e.update(status="fitted", **fits.fit_overlap(delta, z, grp, level=k_n, sample=smp))
+    if piles:
+        e["n_piles"] = e["n_samples"]
     return e
 
 
