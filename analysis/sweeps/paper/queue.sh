@@ -25,7 +25,7 @@ ladder() { DEVICE=${DEVICE:-cpu} nice -n 10 bash "$P/ladder.sh" "$@"; }
 
 # name | what it decides | its function (below, with any words after it as arguments) | a job it waits for (one ladder's rungs are never run twice at once)
 JOB_LIST=(
-  "ladder-hertz|row 34: Hertzian ladders at N = 2000 from the three poured Hertzian piles, 2e5 to 2e8: Hertz's hard-sphere limit beside Hooke's|job_hertz|"
+  "ladder-hertz|row 34: Hertzian ladders at N = 2000 from the three poured Hertzian piles to 2e6: the overlap fit's z_c of Hertz beside Hooke's|job_hertz|"
   "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
   "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung (does eq. 7 bend by 2e8?)|job_l0s2_2e8|ladder-mu0-s2-2e7"
   "flow|row 38: the flow arrest kept on the incline (18 and 16 degrees), beside the levelled one|job_flow|"
@@ -35,19 +35,26 @@ JOB_LIST=(
   "friction-seeds|rows 7, 7b, 8, 12: second seeds of mu = 0.1 and 1|job_size_d|"
   "strict|row 1: the stricter stop (E_stop = 1e-10) on seeds 2 and 3|job_strict|"
   "mu10-and-mu0-s4|rows 1, 9: a fourth mu = 0 seed, and mu = 10|job_size_c|"
+  "ladder-hertz-top|row 34: the Hertzian ladders to 2e7 and 2e8 (eq. 7 with alpha_n free needs four k_n)|job_hertz_top|ladder-hertz"
 )
 job_flow() { sweep flow-arrest-tilted.tsv chute.toml flow; }
 job_l05s1() { STOP_ENERGY=translational ladder 0.5 1 "$R/ladder-size/mu0.5_s1" 2e8; }
 from0s2() { FROM=$R/size/mu0_eps0.88_kn2e5_phi0.13_s2_max_steps2e7 ladder 0 2 "$R/ladder-size/mu0_s2" "$1"; }
 job_l0s2_2e7() { from0s2 2e7; }
-# a frictionless pile's ladder starts from its committed packing; N = 2000, so each rung is minutes of a core
-job_hertz() {
-    local s
-    for s in 1 2 3; do
-        FROM=$R/dev/mu0_eps0.88_kn2e5_phi0.13_s${s}_modelhertz_max_steps1e7 ladder 0 "$s" "$R/ladder-dev/mu0_hertz_s$s" 2e8 \
-            || return $?
+# a frictionless pile's ladder starts from its committed packing; the three piles climb rung by rung. A
+# Hertzian pile's damping weakens as its overlaps shrink, so it settles far slower than a Hookean one: at
+# N = 2000 the 2e6 rung is some 7e6 steps (half an hour of a core), the rungs above it hours each
+hertz() {  # TOP...: each pile to each TOP in turn
+    local s top
+    for top in "$@"; do
+        for s in 1 2 3; do
+            FROM=$R/dev/mu0_eps0.88_kn2e5_phi0.13_s${s}_modelhertz_max_steps1e7 \
+                ladder 0 "$s" "$R/ladder-dev/mu0_hertz_s$s" "$top" || return $?
+        done
     done
 }
+job_hertz() { hertz 2e6; }
+job_hertz_top() { hertz 2e7 2e8; }
 job_stiff05() { sweep size-stiff-friction.tsv size.toml size; }
 job_l05s2() { STOP_ENERGY=translational ladder 0.5 2 "$R/ladder-size/mu0.5_s2" 2e8; }
 job_l0s2_2e8() { from0s2 2e8; }

@@ -223,6 +223,9 @@ CLAIMS = [
           ours=[Diff(Fit("ladder", "alpha_n", mu=0.0), OneMinus(S("S12", "alpha")))],
           also=[Diff(ExtFit(DEV, "eq7", "alpha_n", "S15", label="N 2000"), OneMinus(Ext(DEV, "S15", "alpha")),
                      "N 2000")],
+          note="the ladder's runs include S12's, whose α is the other side (counted on both): the errors are "
+               "combined as if independent, α_n coming from z's change from rung to rung and α from the gaps "
+               "of g(r) at one k_n",
           if_differs=("explained", "α depends on its window (16)")),
     Claim("22", "z at k_n = 2e6 from eq. 7 (derived), μ = 0", "6.053 ± 0.02 (derived)", "compare",
           paper.EQ7_MU0_POINTS[2e6], 0.02, ours=[S("S17")],
