@@ -321,15 +321,20 @@ CLAIMS = [
                               "paper's runs with K0 = 20–100 or 0; at paper size a second K0 = 50 seed (S31, a "
                               "set apart: it stopped on the translational energy) and one at K0 = 20 (S32) stand "
                               "as far above (beside)")),
-    Claim("34", "Hertzian contacts give the same picture: the hard-sphere limit z_∞(Hertz) − z_∞(Hooke) (eq. 7, "
-          "α_n free), μ = 0", "the same (Sec. II)", "compare", 0.0, None, tolerance=NO_NUMBER.format(w="the same"),
+    Claim("34", "Hertzian contacts give the same picture: the hard-sphere limit, Hertz − Hooke, μ = 0: z_∞ of eq. 7 "
+          "(α_n free); before four k_n, z_c of z − z_c = A (δ/d)^(1/2)", "the same (Sec. II)", "compare", 0.0, None,
+          tolerance=NO_NUMBER.format(w="the same"),
           ours=[Diff(ExtFit(LADDER_DEV, "ladder", "z_inf", "S14", label="Hertz"),
-                     ExtFit(DEV, "eq7", "z_inf", "S15", label="Hooke eq. 7 free"))],
+                     ExtFit(DEV, "eq7", "z_inf", "S15", label="Hooke eq. 7 free")),
+                Diff(ExtFit(LADDER_DEV, "overlap", "z_c", "S20", label="Hertz"),
+                     Fit("overlap", "z_c", "S02", label="Hooke"))],
           also=[Diff(S("S23"), S("S02"), "at equal nominal k_n = 2e5")], judge_also=False,
           note="N = 2000. The paper's conclusions are about the limit k_n → ∞; at equal nominal k_n a Hertzian "
                "contact is softer (overlaps some 30 times larger, beside). Hertz: the three poured Hertzian piles "
-               "(S23) stiffened to 2e6, 2e7 and 2e8 (`ladder-dev/`), eq. 7 over their runs as the paper-size "
-               "ladder's (row 19); Hooke: the poured sets at 2e5-2e8 (row 19's N 2000 fit)",
+               "(S23, `ladder-dev:S14`) stiffened rung by rung (`ladder-dev/`; a Hertzian pile's damping weakens "
+               "as its overlaps shrink, so its rungs take several times a Hookean pile's steps), eq. 7 over their "
+               "runs as the paper-size ladder's (row 19), the overlap fit over the piles' depth bands at every "
+               "rung (row 19 beside); Hooke: the poured sets at 2e5-2e8 (eq. 7) and at 2e5-2e7 (the overlap fit)",
           if_differs=("open", "the Hertzian limit lies apart from the Hookean one at N = 2000")),
     Claim("35", "strains at k_n = 2e9 below 1e-8 (median overlap δ/d, μ = 0)", "δ/d ≤ 1e-8", "bound", 1e-8,
           above=False, ours=[Rung(0.0, "overlap_median", 2e9)],
