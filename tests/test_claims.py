@@ -253,7 +253,8 @@ def test_ladders_find_their_base_and_fit_eq7_only_with_four_k_n():
 
 def test_a_ladders_overlap_fit_spans_its_base_and_draws_its_piles():
     """The overlap fit of a stiffened family takes its base set first (``ladder.with_base``) and bootstraps
-    piles (a run's seed), each with its runs at every rung; a poured family's runs are samples of their own."""
+    piles (a run's seed and bed seed), each with its runs at every rung; it gives an error only where two piles
+    climbed; a poured family's runs are samples of their own."""
     from mpdem import config
     from mpdem.campaign import pooled
 
@@ -262,26 +263,35 @@ def test_a_ladders_overlap_fit_spans_its_base_and_draws_its_piles():
                                "run.seed": seed}).values
         return {k: vals[k] for k in config.PARAM_KEYS}
 
-    def st(sid, k_n, seeds, k_from=None):
+    def st(sid, k_n, piles, k_from=None):
         runs = []
-        for i in seeds:
+        for i, bed in piles:
             d = np.logspace(-5, -4, 5) * 2e5 / k_n
             bands = {"in_bulk": [True] * 5, "overlap_mean": d.tolist(),
-                     "z": (6.0 + 12.0 * np.sqrt(d) + 0.002 * i).tolist()}
-            runs.append(AnalysedRun(f"{sid}-{i}", {"params": p(k_n, i), "z": 6.1, "phi": 0.64, "bands": bands}))
-        return Set(sid, p(k_n, seeds[0]), runs, {"stiffen.k_n_from": k_from} if k_from else {})
+                     "z": (6.0 + 12.0 * np.sqrt(d) + 0.002 * i + 0.001 * (bed != i)).tolist()}
+            runs.append(AnalysedRun(f"{sid}-{i}-{bed}", {"params": p(k_n, i), "bed_seed": bed, "z": 6.1,
+                                                         "phi": 0.64, "bands": bands}))
+        return Set(sid, p(k_n, piles[0][0]), runs, {"stiffen.k_n_from": k_from} if k_from else {})
 
-    base, poured = st("S12", 2e5, [1, 2, 3]), st("S17", 2e6, [1, 2])
-    rungs = [st("S27", 2e6, [1, 2], 2e5), st("S28", 2e7, [1, 2], 2e6)]
+    # seed 1 on bed 101 is a pile apart from seed 1 on its own bed
+    base, poured = st("S12", 2e5, [(1, 1), (2, 2), (3, 3), (1, 101)]), st("S17", 2e6, [(1, 1), (2, 2)])
+    rungs = [st("S27", 2e6, [(1, 1), (2, 2)], 2e5), st("S28", 2e7, [(1, 1), (2, 2)], 2e6)]
     members = ladder.with_base(rungs, [base, poured, *rungs])
     assert [s.id for s in members] == ["S12", "S27", "S28"]
     assert ladder.with_base([base, poured], [base, poured, *rungs]) == [base, poured]
+    assert ladder.with_base(rungs, rungs) == rungs                  # no base collected: the rungs alone
     e = pooled.overlap_fit(members)
-    assert e["status"] == "fitted" and e["n_runs"] == 7 and e["n_samples"] == e["n_piles"] == 3
-    assert e["sets"] == ["S12", "S27", "S28"]
+    assert e["status"] == "fitted" and e["n_runs"] == 8 and e["n_samples"] == e["n_piles"] == 4
+    assert e["n_piles_climbed"] == 2 and e["determined"] and e["sets"] == ["S12", "S27", "S28"]
     assert e["z_c"] == pytest.approx(6.004, abs=0.003)
+    # one pile climbed: the bootstrap over piles cannot give an error, and a row citing it is not determined
+    one = [st("S27", 2e6, [(1, 1)], 2e5), st("S28", 2e7, [(1, 1)], 2e6)]
+    e1 = pooled.overlap_fit(ladder.with_base(one, [base, *one]))
+    assert e1["n_piles_climbed"] == 1 and e1["determined"] is False and "needs two" in e1["reason"]
+    m = src.Fit("overlap", "z_c", "S27").resolve(src.Context([], {"overlap": [e1]}, []))
+    assert m.status == "not determined" and "needs two" in m.why
     e = pooled.overlap_fit([base, poured])
-    assert e["n_runs"] == 5 and e["n_samples"] == 5 and "n_piles" not in e
+    assert e["n_runs"] == 6 and e["n_samples"] == 6 and "n_piles" not in e and "determined" not in e
 
 
 def test_eq7_over_the_runs_of_piles_follows_each_piles_change_not_its_offset():

@@ -12,7 +12,7 @@
 # start; MU and SEED are then only the ladder's labels and must match it): a pile already poured at the paper's size.
 # A committed run keeps its packing.npz, not its final.h5: at MU = 0 the ladder starts from that packing at rest
 # (no tangential force needs a history); a frictional pile needs its final.h5 (pour it again: the same bits).
-# DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
+# CAP_FACTOR multiplies each new rung's cap on steps (below). DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
 # before that much wall time (exit 75: run the script again to go on). STOP_ENERGY=translational stops each rung
 # it starts or restarts on the translational energy (docs/config.md `stop.energy`): for a frictional pile whose
 # total energy a sphere spinning about its contacts holds above E_stop (docs/model.md 5.4).
@@ -45,7 +45,9 @@ rung() {  # dir max_steps command...: the rung, unless it converged; a restart w
     [ $rc -eq 0 ] && analyse "$dir"
     return $rc
 }
-# the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt)
+# the caps: some 5 times the steps a rung took at development size (1e6 at 2e5; the ramp alone is 10 tau / dt),
+# times CAP_FACTOR (default 1: a Hertzian pile, whose damping weakens as its overlaps shrink, takes several times
+# a Hookean pile's steps)
 if [ -n "${FROM:-}" ]; then
     [ "$(status "$FROM")" = converged ] && { [ -f "$FROM/final.h5" ] || [ -f "$FROM/packing.npz" ]; } || {
         echo "ladder: FROM=$FROM is not a converged run with its final.h5 (or packing.npz, frictionless)"; exit 2; }
@@ -64,7 +66,7 @@ else
     prev=$out/kn2e5
 fi
 for k in 2e6 2e7 2e8 2e9; do
-    rung "$out/kn$k" "$("$PY" -c "print(f'{5e6 * ($k / 2e5) ** 0.5:.3g}')")" \
+    rung "$out/kn$k" "$("$PY" -c "print(f'{5e6 * ${CAP_FACTOR:-1} * ($k / 2e5) ** 0.5:.3g}')")" \
         "$PY" -m mpdem stiffen "$prev" --k_n "$k" --set output.checkpoint_seconds=600 || exit $?
     prev=$out/kn$k
     [ "$k" = "$top" ] && break

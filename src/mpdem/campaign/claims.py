@@ -325,16 +325,18 @@ CLAIMS = [
           "(α_n free); before four k_n, z_c of z − z_c = A (δ/d)^(1/2)", "the same (Sec. II)", "compare", 0.0, None,
           tolerance=NO_NUMBER.format(w="the same"),
           ours=[Diff(ExtFit(LADDER_DEV, "ladder", "z_inf", "S14", label="Hertz"),
-                     ExtFit(DEV, "eq7", "z_inf", "S15", label="Hooke eq. 7 free")),
+                     ExtFit(LADDER_DEV, "ladder", "z_inf", "S05", label="Hooke")),
                 Diff(ExtFit(LADDER_DEV, "overlap", "z_c", "S20", label="Hertz"),
-                     Fit("overlap", "z_c", "S02", label="Hooke"))],
+                     ExtFit(LADDER_DEV, "overlap", "z_c", "S05", label="Hooke"))],
           also=[Diff(S("S23"), S("S02"), "at equal nominal k_n = 2e5")], judge_also=False,
           note="N = 2000. The paper's conclusions are about the limit k_n → ∞; at equal nominal k_n a Hertzian "
-               "contact is softer (overlaps some 30 times larger, beside). Hertz: the three poured Hertzian piles "
-               "(S23, `ladder-dev:S14`) stiffened rung by rung (`ladder-dev/`; a Hertzian pile's damping weakens "
-               "as its overlaps shrink, so its rungs take several times a Hookean pile's steps), eq. 7 over their "
-               "runs as the paper-size ladder's (row 19), the overlap fit over the piles' depth bands at every "
-               "rung (row 19 beside); Hooke: the poured sets at 2e5-2e8 (eq. 7) and at 2e5-2e7 (the overlap fit)",
+               "contact is softer (its overlaps larger: the sets' overlap_median), so z differs there (beside). "
+               "Both laws by one protocol: the poured piles of seeds 1-3 (and 4 for Hooke) stiffened rung by rung "
+               "(`ladder-dev/`, running: a Hertzian pile's damping weakens as its overlaps shrink, so its rungs "
+               "take several times a Hookean pile's steps), eq. 7 over each ladder's runs as the paper-size "
+               "ladder's (row 19), the overlap fit over its piles' depth bands at every rung, each determined once "
+               "two piles have climbed. For Hertz the exponent 1/2 in δ is assumed from z − z_c ∝ (φ − φ_c)^(1/2) "
+               "with δ ∝ φ − φ_c (O'Hern et al. 2003, for both laws), not from the pressure as for Hooke",
           if_differs=("open", "the Hertzian limit lies apart from the Hookean one at N = 2000")),
     Claim("35", "strains at k_n = 2e9 below 1e-8 (median overlap δ/d, μ = 0)", "δ/d ≤ 1e-8", "bound", 1e-8,
           above=False, ours=[Rung(0.0, "overlap_median", 2e9)],

@@ -8,6 +8,8 @@ cause found". ``rows`` judges them all, ``table`` and ``section`` write them as 
 """
 from __future__ import annotations
 
+import dataclasses
+
 import math
 
 from . import verdict as V
@@ -93,11 +95,15 @@ def row(claim, ctx):
 
 
 def _first(sources, ctx):
-    """The first source with a number; else the first 'not determined', 'running', or the first source."""
+    """The first source with a number; else the first 'not determined', 'running', or the first source, its
+    reason followed by those of the later sources of that status (each source a way the row could be measured)."""
     ms = [src.resolve(ctx) for src in sources]
     for status in ("ok", "not determined", "running"):
         for m in ms:
-            if (m.ok if status == "ok" else m.status == status):
+            if m.ok if status == "ok" else m.status == status:
+                if status != "ok":
+                    whys = list(dict.fromkeys(x.why for x in ms if x.status == status and x.why))
+                    m = dataclasses.replace(m, why="; else: ".join(whys))
                 return m
     return ms[0] if ms else missing("", "no source")
 

@@ -101,7 +101,9 @@ def overlap_fit(members):
 
     A stiffening ladder's sets (any member stiffened, its base set with them: ``ladder.with_base``) are its
     piles again at each rung: the error's bootstrap then resamples piles (a run's seed and bed seed), each
-    with its runs at every rung; elsewhere each run is a sample of its own.
+    with its runs at every rung; elsewhere each run is a sample of its own. A ladder's fit is ``determined``
+    only where two piles or more have bands at two k_n or more: with one, the bootstrap only says whether
+    that pile was drawn (the others' bands lie at one k_n, over a narrow range of the overlap).
 
     Returns
     -------
@@ -109,7 +111,7 @@ def overlap_fit(members):
     status "not fitted" with the reason.
     """
     piles = any(K_FROM in s.extra for s in members)
-    delta, z, grp, smp, k_n, used, samples = [], [], [], [], [], [], {}
+    delta, z, grp, smp, k_n, used, samples, levels = [], [], [], [], [], [], {}, {}
     for s in members:
         for r in _have(s, "bands"):
             b = r.s["bands"]
@@ -121,6 +123,7 @@ def overlap_fit(members):
                     grp.append(len(used))
                     smp.append(unit)
                     k_n.append(s.params["contact.k_n"])
+                    levels.setdefault(unit, set()).add(s.params["contact.k_n"])
             used.append(r.path)
     e = {"sets": [s.id for s in members], "runs": used}
     if len(used) < 2 or len(z) < 3:
@@ -129,7 +132,11 @@ def overlap_fit(members):
         return e
     e.update(status="fitted", **fits.fit_overlap(delta, z, grp, level=k_n, sample=smp))
     if piles:
-        e["n_piles"] = e["n_samples"]
+        climbed = sum(len(v) >= 2 for v in levels.values())
+        e.update(n_piles=e["n_samples"], n_piles_climbed=climbed, determined=climbed >= 2)
+        if climbed < 2:
+            e["reason"] = (f"{climbed} of its {e['n_samples']} piles with bands at two k_n or more: the bootstrap over "
+                           f"piles needs two")
     return e
 
 
