@@ -22,7 +22,7 @@ import warnings
 import numpy as np
 
 from ..analysis import bands, fits, nearcontact
-from .ladder import K_FROM
+from .ladder import K_FROM, pile
 
 
 def _have(s, key):
@@ -100,7 +100,7 @@ def overlap_fit(members):
     whether the bands of its k_n collapse on that one curve (``fits.collapse``).
 
     A stiffening ladder's sets (any member stiffened, its base set with them: ``ladder.with_base``) are its
-    piles again at each rung: the error's bootstrap then resamples piles (a run's seed and bed seed), each
+    piles again at each rung: the error's bootstrap then resamples piles (``ladder.pile``), each
     with its runs at every rung; elsewhere each run is a sample of its own. A ladder's fit is ``determined``
     only where two piles or more have bands at two k_n or more: with one, the bootstrap only says whether
     that pile was drawn (the others' bands lie at one k_n, over a narrow range of the overlap).
@@ -115,7 +115,7 @@ def overlap_fit(members):
     for s in members:
         for r in _have(s, "bands"):
             b = r.s["bands"]
-            unit = samples.setdefault((r.params["run.seed"], r.bed_seed) if piles else r.path, len(samples))
+            unit = samples.setdefault(pile(r) if piles else r.path, len(samples))
             for k, inb in enumerate(b["in_bulk"]):
                 if inb and b["overlap_mean"][k] is not None and b["z"][k] is not None:
                     delta.append(b["overlap_mean"][k])
