@@ -443,9 +443,13 @@ class Figures:
         for e in self.fits.get("overlap", []):
             if e["status"] == "fitted":
                 xs = np.sqrt(np.array([0.0, e["delta_max"]]))
+                f = e["family"]
+                what = ", ".join(x for x in ("" if f.get("model", "hooke") == "hooke" else f["model"],
+                                             "ladder" if any(k.startswith("stiffened") for k in f) else "") if x)
+                zc = (f"{e['z_c']:.3f} (no error: {e.get('n_piles_climbed', 0)} pile climbed)"
+                      if e.get("determined") is False else fmt_pm(e["z_c"], e["z_c_err"], 3))
                 bx.plot(xs, e["z_c"] + e["A"] * xs, "-", lw=1,
-                        label=f"z_c = {fmt_pm(e['z_c'], e['z_c_err'], 3)} "
-                              f"(μ = {e['family']['mu']:g}, N = {e['family']['N']})")
+                        label=f"z_c = {zc} (μ = {f['mu']:g}, N = {f['N']}{', ' + what if what else ''})")
         bx.axhline(6.0, color="k", ls=":", lw=1, label="isostatic (μ = 0): 6")
         ax.set(xlabel="depth below the surface [d]", ylabel="z (band)",
                title="z per depth band (circled: in the bulk slab)")
