@@ -336,9 +336,10 @@ CLAIMS = [
                "take several times a Hookean pile's steps), eq. 7 over each ladder's runs as the paper-size "
                "ladder's (row 19), the overlap fit over its piles' depth bands at every rung, each determined once "
                "two piles have climbed. For Hertz the exponent 1/2 in δ is assumed from z − z_c ∝ (φ − φ_c)^(1/2) "
-               "with δ ∝ φ − φ_c (O'Hern et al. 2003, for both laws), not from the pressure as for Hooke; the "
-               "Hertzian bands at 2e5 and 2e6 cannot decide it, and 1/3 or 2/3 moves z_c by some 0.1 (NOTES.md, "
-               "2026-11-29, afternoon)",
+               "with δ ∝ φ − φ_c (O'Hern et al. 2003, for both laws), not from the pressure as for Hooke, and the "
+               "verdict rests on it: the Hertzian bands at 2e5 and 2e6 fit 1/3, 1/2 and 2/3 alike, and with 1/3 or "
+               "2/3 Hertz − Hooke would be some −0.13 or +0.06, many errors from 0 (NOTES.md, 2026-11-29, "
+               "afternoon); eq. 7 with α_n free, at four k_n, will not need it",
           if_differs=("open", "the Hertzian limit lies apart from the Hookean one at N = 2000")),
     Claim("35", "strains at k_n = 2e9 below 1e-8 (median overlap δ/d, μ = 0)", "δ/d ≤ 1e-8", "bound", 1e-8,
           above=False, ours=[Rung(0.0, "overlap_median", 2e9)],
