@@ -15,7 +15,7 @@ import numpy as np
 
 from ..io import rundir
 from ..analysis import fits
-from . import contrasts, depth, paper, ratio, samples
+from . import contrasts, depth, paper, pooled, ratio, samples
 from .figures import FIGURES
 from .runs import NAN, families, fmt_kn, fmt_pm, md_table as _table, off_columns as _off_columns
 
@@ -427,16 +427,8 @@ def _alpha_section(sets, fit_res, windows=()):
 
 
 def _piles_text(e):
-    """' of N piles' where the overlap fit's bootstrap drew fewer samples than runs (a ladder's piles)."""
-    n = e.get("n_samples")
-    return f" of {n} piles" if n is not None and n < e["n_runs"] else ""
-
-
-def _z_c_text(e):
-    """z_c with its error, or without one where the fit could not give it (a ladder one pile climbed)."""
-    if e.get("determined") is False:
-        return f"{e['z_c']:.3f} (error not determined: {e.get('reason', '')})"
-    return fmt_pm(e["z_c"], e["z_c_err"], 3)
+    """' of N piles' for a ladder's overlap fit, whose bootstrap draws piles (``pooled.overlap_fit``)."""
+    return f" of {e['n_piles']} piles" if e.get("n_piles") else ""
 
 
 def _overlap_depth_section(sets, fit_res, windows):
@@ -450,7 +442,7 @@ def _overlap_depth_section(sets, fit_res, windows):
           "k_n (p small: the k_n do not collapse; bands taken as independent), and each k_n's mean residual from "
           "the one curve.", ""]
     ov = [e for e in fit_res.get("overlap", []) if e["status"] == "fitted"]
-    L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {_z_c_text(e)}, "
+    L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {pooled.z_c_text(e)}, "
           f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs{_piles_text(e)}, δ/d from "
           f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}; {_collapse_text(e)}"
           for e in ov] or ["- no family with depth profiles of 2 runs or more"]

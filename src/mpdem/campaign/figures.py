@@ -20,7 +20,7 @@ from collections import Counter
 import numpy as np
 
 from ..analysis import fits
-from . import paper
+from . import paper, pooled
 from .runs import NAN, families, fmt_kn, fmt_pm, num, read_table
 
 
@@ -446,8 +446,7 @@ class Figures:
                 f = e["family"]
                 what = ", ".join(x for x in ("" if f.get("model", "hooke") == "hooke" else f["model"],
                                              "ladder" if any(k.startswith("stiffened") for k in f) else "") if x)
-                zc = (f"{e['z_c']:.3f} (no error: {e.get('n_piles_climbed', 0)} pile climbed)"
-                      if e.get("determined") is False else fmt_pm(e["z_c"], e["z_c_err"], 3))
+                zc = pooled.z_c_text(e, why=False)
                 bx.plot(xs, e["z_c"] + e["A"] * xs, "-", lw=1,
                         label=f"z_c = {zc} (μ = {f['mu']:g}, N = {f['N']}{', ' + what if what else ''})")
         bx.axhline(6.0, color="k", ls=":", lw=1, label="isostatic (μ = 0): 6")

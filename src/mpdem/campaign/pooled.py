@@ -23,6 +23,7 @@ import numpy as np
 
 from ..analysis import bands, fits, nearcontact
 from .ladder import K_FROM, pile
+from .runs import fmt_pm
 
 
 def _have(s, key):
@@ -138,6 +139,15 @@ def overlap_fit(members):
             e["reason"] = (f"{climbed} of its {e['n_samples']} piles with bands at two k_n or more: the bootstrap over "
                            f"piles needs two")
     return e
+
+
+def z_c_text(e, why=True):
+    """An overlap fit's z_c with its error; where it has none (a ladder one pile climbed: ``determined``
+    False), without, saying why (``why``) or, shorter, how many piles climbed."""
+    if e.get("determined") is False:
+        tail = e.get("reason", "") if why else f"{e.get('n_piles_climbed', 0)} pile climbed"
+        return f"{e['z_c']:.3f} (no error: {tail})"
+    return fmt_pm(e["z_c"], e["z_c_err"], 3)
 
 
 def eq7_sigma(members, q="z"):
