@@ -2,6 +2,7 @@
 (``campaign.claimtable``, ``campaign.claims``)."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -292,6 +293,66 @@ def test_a_ladders_overlap_fit_spans_its_base_and_draws_its_piles():
     assert m.status == "not determined" and "needs two" in m.why
     e = pooled.overlap_fit([base, poured])
     assert e["n_runs"] == 6 and e["n_samples"] == 6 and "n_piles" not in e and "determined" not in e
+
+
+def test_an_overlap_fit_keeps_its_alternative_exponents_beside_with_their_own_piles_and_reasons():
+    """The bands lie on z = 6 + 12 (delta/d)^(1/2): fitted with 1/3 too, the part 'exponent 1/3' has its own
+    z_c (off 6, worse residual) and the same piles; a ladder one pile climbed is not determined in every part."""
+    from mpdem.campaign import pooled
+
+    assert pooled.exponent_part(1 / 3) == "exponent 1/3" and pooled.exponent_part(2 / 3) == "exponent 2/3"
+    sets_ = []
+    for k_n, k_from in ((2e5, None), (2e6, 2e5)):
+        rr = []
+        for seed in (1, 2, 3):
+            d = np.logspace(-5, -4, 5) * 2e5 / k_n
+            bands = {"in_bulk": [True] * 5, "overlap_mean": d.tolist(),
+                     "z": (6.0 + 12.0 * np.sqrt(d) + 0.001 * seed).tolist()}
+            rr.append(AnalysedRun(f"{k_n}-{seed}", {"params": {"run.seed": seed, "contact.k_n": k_n},
+                                                     "z": 6.1, "phi": 0.64, "bands": bands}))
+        sets_.append(Set(f"S{len(sets_)}", {"contact.k_n": k_n}, rr, {"stiffen.k_n_from": k_from} if k_from else {}))
+    e = pooled.overlap_fit(sets_, alternatives=(1 / 3,))
+    third = e["exponent 1/3"]
+    assert e["exponent"] == 0.5 and third["exponent"] == 1 / 3 and "exponent 2/3" not in e
+    assert e["z_c"] == pytest.approx(6.002, abs=1e-3) and abs(third["z_c"] - 6.0) > 0.01
+    assert third["rms"] > e["rms"] and third["n_piles"] == e["n_piles"] == 3 and third["determined"]
+    m = src.Fit("overlap", "z_c", "S1", part="exponent 1/3").resolve(src.Context([], {"overlap": [e]}, []))
+    assert m.ok and m.value == third["z_c"]
+    one = [Set("S0", sets_[0].params, sets_[0].runs), Set("S1", sets_[1].params, sets_[1].runs[:1],
+                                                          sets_[1].extra)]
+    e1 = pooled.overlap_fit(one, alternatives=(1 / 3,))
+    assert e1["determined"] is False and e1["exponent 1/3"]["determined"] is False
+    m1 = src.fit_measure(e1, "z_c", "exponent 1/3", kind="overlap")
+    assert m1.status == "not determined" and "needs two" in m1.why
+
+
+def test_a_value_that_rests_on_an_assumed_choice_is_not_determined_where_an_alternative_changes_its_verdict():
+    """``sources.Assumes``: the claim is judged with every alternative; agreeing verdicts stand, a disagreeing
+    one makes the row 'not determined' with each choice's verdict; an alternative with no number is left out."""
+    c = claims.Claim("x", "the same", "the same", "compare", 0.0, None)
+
+    @dataclasses.dataclass
+    class Fixed:
+        m: src.Measure
+
+        def resolve(self, ctx):
+            return dataclasses.replace(self.m)
+
+    def ms(v, e=0.01):
+        return Fixed(src.Measure(v, e, 4, "4 runs", "w"))
+
+    agree = src.Assumes(ms(0.001), "x = 1/2", [("1/3", ms(0.005)), ("2/3", ms(-0.01))]).resolve(None)
+    assert agree.assumption == "x = 1/2" and len(agree.alts) == 2
+    assert ct.judge(c, agree).kind == "reproduced"
+    split = src.Assumes(ms(0.001), "x = 1/2", [("1/3", ms(0.1)), ("2/3", ms(0.005))]).resolve(None)
+    v = ct.judge(c, split)
+    assert v.kind == "not determined"
+    assert v.why == ("it rests on x = 1/2: with it reproduced (0.1 σ); with 1/3: differs by +0.100 (10.0 σ); "
+                     "with 2/3: 0.005 ± 0.010, reproduced (0.5 σ)")
+    both_differ = src.Assumes(ms(0.1), "x = 1/2", [("1/3", ms(0.2)), ("none", Fixed(src.missing("w")))])
+    assert ct.judge(c, both_differ.resolve(None)).kind == "differs"
+    # a primary without a number keeps its own status
+    assert src.Assumes(Fixed(src.missing("w", "no set")), "x", [("1/3", ms(0.1))]).resolve(None).alts == []
 
 
 def test_eq7_over_the_runs_of_piles_follows_each_piles_change_not_its_offset():

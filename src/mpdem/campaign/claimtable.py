@@ -20,7 +20,21 @@ from .sources import diff_error, finite, missing
 # ---------------------------------------------------------------- judging a claim
 
 def judge(claim, m):
-    """The rule (``verdict``) for measure ``m`` of ``claim`` (a ``claims.Claim``)."""
+    """The rule (``verdict``) for measure ``m`` of ``claim`` (a ``claims.Claim``). A number that rests on an
+    assumed choice (``m.alts``: ``sources.Assumes``) is judged with each alternative too; where one gives
+    another verdict than the assumed choice, the claim is not determined by it, and the verdict gives each."""
+    v = _judge_one(claim, m)
+    alts = [(label, a, _judge_one(claim, a)) for label, a in m.alts if a.ok]
+    if v.kind not in ("reproduced", "differs") or all(av.kind == v.kind for _, _, av in alts):
+        return v
+    # a 'differs by X' names its value already; any other verdict takes the value before it
+    each = "; ".join(f"with {label}: " + (av.text() if av.kind == "differs" and math.isfinite(av.diff)
+                                          else f"{_mtext(a, claim.digits, where=False)}, {av.text()}")
+                     for label, a, av in alts)
+    return V.Verdict("not determined", why=f"it rests on {m.assumption}: with it {v.text()}; {each}")
+
+
+def _judge_one(claim, m):
     if m.status in ("not measured", "running"):
         return V.Verdict("not measured", why=("running: " if m.status == "running" else "") + m.why)
     if m.status == "not determined":

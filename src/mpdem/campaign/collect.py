@@ -449,8 +449,10 @@ def make_fits(sets):
     out = {"eq7": [], "eq9": [], "overlap": [], "alpha": [], "P_f": [], "depth": [], "ratio": ratio.tests(sets),
            "contrasts": contrasts.contrasts(sets), "samples": samples.tests(sets)}
     for fam, members in families(sets, "contact.k_n"):
-        # a ladder's fit spans its base set too: the piles at every k_n they climbed
-        out["overlap"].append(dict(family=fam, **pooled.overlap_fit(ladder.with_base(members, sets))))
+        # a ladder's fit spans its base set too: the piles at every k_n they climbed; with the alternative
+        # exponents kept beside, for a claim that rests on the exponent (``sources.Assumes``)
+        out["overlap"].append(dict(family=fam, **pooled.overlap_fit(ladder.with_base(members, sets),
+                                                                    alternatives=pooled.OVERLAP_ALTERNATIVES)))
     for s in sets:
         for key, fn in (("alpha", pooled.set_alpha), ("P_f", pooled.set_force_distribution),
                         ("depth", pooled.set_depth)):

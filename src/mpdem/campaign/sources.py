@@ -32,7 +32,9 @@ PAPER_N = 20000
 class Measure:
     """A number of this work: ``value`` ± ``err`` from ``n`` samples (runs; ``count`` says of what),
     ``where`` it comes from (sets, window); ``status`` 'ok', 'not measured', 'not determined' or
-    'running', ``why`` the reason for a status other than 'ok'. ``k_n``: the stiffness of a rung."""
+    'running', ``why`` the reason for a status other than 'ok'. ``k_n``: the stiffness of a rung.
+    ``assumption`` and ``alts``: a number that rests on an assumed choice, with the same number made with
+    each alternative the claim names (``Assumes``; the verdict weighs them: ``claimtable.judge``)."""
     value: float = NAN
     err: float = NAN
     n: int = 0
@@ -41,6 +43,8 @@ class Measure:
     status: str = "ok"
     why: str = ""
     k_n: float = NAN
+    assumption: str = ""                        # what the number rests on (``Assumes``)
+    alts: list = field(default_factory=list)    # [(label, Measure)]: the same made with each alternative
 
     @property
     def ok(self):
@@ -185,6 +189,24 @@ class Fit:
         return m
 
 
+@dataclass
+class Assumes:
+    """A source whose number rests on an assumed choice (``assumption``, e.g. the exponent of the overlap
+    law for Hertzian contacts), with the same number made with each alternative choice: ``alternatives``
+    [(label, source)]. The claim is judged with each as well (``claimtable.judge``): where they disagree
+    on the verdict, the row is not determined, and says which choice gives which."""
+    src: object
+    assumption: str
+    alternatives: list = field(default_factory=list)
+
+    def resolve(self, ctx):
+        m = self.src.resolve(ctx)
+        if m.ok:
+            m.assumption = self.assumption
+            m.alts = [(label, a.resolve(ctx)) for label, a in self.alternatives]
+        return m
+
+
 def ext_id(results, sid):
     """A set id of another collect, named with its directory (``dev:S15``): ids repeat between collects."""
     return f"{os.path.basename(os.path.normpath(results))}:{sid}"
@@ -205,9 +227,8 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
     f = (e.get(part) or {}) if part else e
     if part and key not in f:
         return missing(where, f.get("reason") or e.get("reason") or "not fitted", "not determined")
-    if f.get("status", "fitted") != "fitted" or (not part and e.get("determined") is False):
-        src = f if part else e
-        return missing(where, src.get("reason") or src.get("status", ""), "not determined")
+    if f.get("status", "fitted") != "fitted" or f.get("determined") is False:
+        return missing(where, f.get("reason") or f.get("status", ""), "not determined")
     v, err = f.get(key), f.get(f"{key}_err")
     if not finite(v):
         return missing(where, f"no {key}", "not determined")
@@ -290,19 +311,22 @@ class Ext:
 
 @dataclass
 class ExtFit:
-    """A parameter of a fit in another collect's ``fits.json`` (as ``Fit``)."""
+    """A parameter of a fit in another collect's ``fits.json`` (as ``Fit``: ``fixed`` its fixed-exponent fit,
+    ``part`` another fit kept in the entry, such as an overlap fit's 'exponent 1/3')."""
     results: str
     kind: str
     key: str
     set: str
     fixed: bool = False
     label: str = ""
+    part: str = ""
 
     def resolve(self, ctx):
         fits_ = ctx.ext_fits(self.results)
         e = next((x for x in fits_.get(self.kind, []) if self.set in (x.get("sets") or [])), None)
         sets = ctx.ext_sets(self.results)
-        m = fit_measure(e, self.key, self.fixed, lambda s: int(_f((sets.get(s) or {}).get("n_seeds")) or 0),
+        m = fit_measure(e, self.key, "fixed" if self.fixed else self.part,
+                        lambda s: int(_f((sets.get(s) or {}).get("n_seeds")) or 0),
                         f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}",
                         lambda sid: ext_id(self.results, sid))
         return m
