@@ -295,6 +295,31 @@ def test_a_ladders_overlap_fit_spans_its_base_and_draws_its_piles():
     assert e["n_runs"] == 6 and e["n_samples"] == 6 and "n_piles" not in e and "determined" not in e
 
 
+def test_a_pile_is_followed_back_to_its_pour_and_one_poured_stiffer_is_another_pile(tmp_path):
+    """``ladder.pile``: (seed, bed seed, k_n poured at), the pour found through each rung's run.initial_file:
+    as written, or the rung of that name in its own ladder (a copy run elsewhere); where the state's run is
+    gone, its stiffen.k_n_from. A pile of the same seeds poured at 2e6 is another pile."""
+
+    def run(rel, k_n, k_from=0.0, start=""):
+        d = tmp_path / rel
+        d.mkdir(parents=True)
+        (d / "config.toml").write_text(f'[run]\nseed = 1\ninitial_file = "{start}"\n[contact]\nk_n = {k_n}\n'
+                                       f'[stiffen]\nk_n_from = {k_from}\n')
+        return AnalysedRun(str(d), {"params": {"run.seed": 1, "contact.k_n": k_n}, "bed_seed": 1})
+
+    pour = run("size/s1", 2e5)
+    r6 = run("lad/s1/kn2e6", 2e6, 2e5, f"{tmp_path}/size/s1/packing.npz")
+    r7 = run("lad/s1/kn2e7", 2e7, 2e6, ".device/lad/s1/kn2e6/final.h5")     # ran elsewhere: its sibling
+    again = run("lad/s1/kn2e5", 2e5)                                          # the same pour again
+    stiff = run("size/s1_kn2e6", 2e6)                                         # poured at 2e6
+    gone = run("lad2/s1/kn2e6", 2e6, 2e5, "removed/kn2e5/final.h5")           # its start is not at hand
+    keys = [ladder.pile(r) for r in (pour, r6, r7, again, stiff, gone)]
+    assert keys[0] == (1, 1, 2e5) and keys[:4] == [keys[0]] * 4 and keys[5] == keys[0]
+    assert keys[4] == (1, 1, 2e6)
+    # a summary without its config.toml is named by its seeds
+    assert ladder.pile(AnalysedRun(str(tmp_path / "none"), {"params": {"run.seed": 3}, "bed_seed": 7})) == (3, 7)
+
+
 def test_an_overlap_fit_keeps_its_alternative_exponents_beside_with_their_own_piles_and_reasons():
     """The bands lie on z = 6 + 12 (delta/d)^(1/2): fitted with 1/3 too, the part 'exponent 1/3' has its own
     z_c (off 6, worse residual) and the same piles; a ladder one pile climbed is not determined in every part."""

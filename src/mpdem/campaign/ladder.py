@@ -15,7 +15,10 @@ were independent is kept beside it (``set_means``) for comparison.
 """
 from __future__ import annotations
 
+import functools
 import math
+import os
+import tomllib
 import warnings
 
 import numpy as np
@@ -71,8 +74,43 @@ def _rung(s):
 
 
 def pile(run):
-    """A pile's identity along a ladder: its seed and its bed's seed (a rung is its base's pile stiffened)."""
-    return (run.params["run.seed"], run.bed_seed)
+    """A pile's identity along a ladder (a rung is its pour stiffened): its seed, its bed's seed and the k_n
+    it was poured at (``poured_k_n``). A pour is a pure function of its parameters and seeds, so a pile
+    poured again with the same ones is the same pile, and one poured at 2e6 is not the pile of the same
+    seeds poured at 2e5 and stiffened. A run directory without a config.toml (a summary alone) is named
+    by its seeds alone."""
+    k = poured_k_n(run.path)
+    key = (run.params["run.seed"], run.bed_seed)
+    return key if k is None else (*key, k)
+
+
+@functools.lru_cache(maxsize=None)
+def poured_k_n(path):
+    """The k_n a run directory's pile was poured at, followed back rung by rung: each stiffened run's
+    config.toml names the state it started from (``run.initial_file``), a run directory as written or,
+    where the ladder ran elsewhere (a device's copy), the rung of that name beside it in its own ladder.
+    Where that run is not at hand, the k_n it was settled at (``stiffen.k_n_from``): a rung is a decade,
+    so a ladder started from a stiffened pile whose runs are gone is taken as poured there. None where
+    ``path`` has no config.toml."""
+    seen = set()
+    while True:
+        try:
+            with open(os.path.join(path, "config.toml"), "rb") as fh:
+                c = tomllib.load(fh)
+        except OSError:
+            return None
+        k_n, k_from = float(c["contact"]["k_n"]), float((c.get("stiffen") or {}).get("k_n_from") or 0.0)
+        real = os.path.realpath(path)
+        if k_from <= 0 or real in seen:
+            return k_n
+        seen.add(real)
+        parent = os.path.dirname(os.path.normpath(c["run"].get("initial_file") or ""))
+        sibling = os.path.join(os.path.dirname(os.path.normpath(path)), os.path.basename(parent))
+        nxt = next((d for d in (parent, sibling) if parent and os.path.realpath(d) != real
+                    and os.path.isfile(os.path.join(d, "config.toml"))), None)
+        if nxt is None:
+            return k_from
+        path = nxt
 
 
 def _points(members, q="z"):
