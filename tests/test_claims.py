@@ -313,11 +313,24 @@ def test_a_pile_is_followed_back_to_its_pour_and_one_poured_stiffer_is_another_p
     again = run("lad/s1/kn2e5", 2e5)                                          # the same pour again
     stiff = run("size/s1_kn2e6", 2e6)                                         # poured at 2e6
     gone = run("lad2/s1/kn2e6", 2e6, 2e5, "removed/kn2e5/final.h5")           # its start is not at hand
-    keys = [ladder.pile(r) for r in (pour, r6, r7, again, stiff, gone)]
-    assert keys[0] == (1, 1, 2e5) and keys[:4] == [keys[0]] * 4 and keys[5] == keys[0]
+    ckpt = run("lad/s1/kn2e8", 2e8, 2e7, f"{tmp_path}/lad/s1/kn2e7/checkpoints/ckpt-00003.h5")   # a checkpoint
+    settle = run("lad/s1/kn2e8_strict", 2e8, 0.0, f"{tmp_path}/lad/s1/kn2e8/final.h5")          # settled on
+    keys = [ladder.pile(r) for r in (pour, r6, r7, again, stiff, gone, ckpt, settle)]
+    assert keys[0] == (1, 1, 2e5) and keys[:4] == [keys[0]] * 4 and keys[5:] == [keys[0]] * 3
     assert keys[4] == (1, 1, 2e6)
-    # a summary without its config.toml is named by its seeds
-    assert ladder.pile(AnalysedRun(str(tmp_path / "none"), {"params": {"run.seed": 3}, "bed_seed": 7})) == (3, 7)
+    # a start whose k_n is not the one the rung was stiffened from is not its start: its k_n_from stands
+    odd = run("lad3/s1/kn2e7", 2e7, 2e6, f"{tmp_path}/size/s1/final.h5")
+    assert ladder.pile(odd) == (1, 1, 2e6)
+    # a chain that turns in a circle names no pour
+    run("loop/a", 2e5, 0.0, f"{tmp_path}/loop/b/final.h5")
+    loop_b = run("loop/b", 2e5, 0.0, f"{tmp_path}/loop/a/final.h5")
+    with pytest.warns(UserWarning, match="circle"):
+        assert ladder.poured_k_n(loop_b.path) is None
+    # a summary without its config.toml is named by its seeds, and a family mixing both is warned of
+    bare = AnalysedRun(str(tmp_path / "none"), {"params": {"run.seed": 3}, "bed_seed": 7})
+    assert ladder.pile(bare) == (3, 7)
+    with pytest.warns(UserWarning, match="may count twice"):
+        ladder.piles([pour, bare])
 
 
 def test_an_overlap_fit_keeps_its_alternative_exponents_beside_with_their_own_piles_and_reasons():
@@ -374,8 +387,15 @@ def test_a_value_that_rests_on_an_assumed_choice_is_not_determined_where_an_alte
     assert v.kind == "not determined"
     assert v.why == ("it rests on x = 1/2: with it reproduced (0.1 σ); with 1/3: differs by +0.100 (10.0 σ); "
                      "with 2/3: 0.005 ± 0.010, reproduced (0.5 σ)")
-    both_differ = src.Assumes(ms(0.1), "x = 1/2", [("1/3", ms(0.2)), ("none", Fixed(src.missing("w")))])
-    assert ct.judge(c, both_differ.resolve(None)).kind == "differs"
+    # alternatives that agree leave the verdict, and it says they were tried
+    both_differ = src.Assumes(ms(0.1), "x = 1/2", [("1/3", ms(0.2)), ("2/3", ms(-0.3))]).resolve(None)
+    w = ct.judge(c, both_differ)
+    assert w.kind == "differs" and "the same with 1/3 (0.200 ± 0.010), 2/3 (-0.300 ± 0.010) in place of x = 1/2" \
+        in w.why
+    # an alternative without a number cannot confirm the verdict: not determined, with its reason
+    gone = src.Assumes(ms(0.001), "x = 1/2", [("1/3", ms(0.005)), ("2/3", Fixed(src.missing("w", "no part")))])
+    u = ct.judge(c, gone.resolve(None))
+    assert u.kind == "not determined" and "with 2/3: not measured (no part)" in u.why
     # a primary without a number keeps its own status
     assert src.Assumes(Fixed(src.missing("w", "no set")), "x", [("1/3", ms(0.1))]).resolve(None).alts == []
 
@@ -446,11 +466,31 @@ def test_eq7_over_piles_multiplies_every_error_by_its_scale_and_tests_chi2_again
     assert fits.fit_eq7_piles(k, z, pl, 1e-4, 3e-4)["s_b_clamped"]
 
 
+def test_row_34_reads_its_alternative_exponents_from_the_committed_ladder_fits():
+    """Row 34's overlap difference rests on the exponent 1/2: both alternatives resolve against the committed
+    ladder-dev fits, each a number apart from the assumed one (were they lost, the row would be judged on 1/2
+    alone, and this fails)."""
+    c = next(c for c in claims.CLAIMS if c.id == "34")
+    a = next(x for x in c.ours if isinstance(x, src.Assumes))
+    m = a.resolve(src.Context([], {}, [], str(ROOT / "analysis/results/paper")))
+    assert m.ok and len(m.alts) == 2 and all(am.ok and am.value != m.value for _, am in m.alts)
+    assert [label for label, _ in m.alts] == ["1/3 for both", "2/3 for both"]
+    for x in ("19", "27"):              # the Hookean overlap fit that stands in for eq. 7 rests on it too
+        row = next(c for c in claims.CLAIMS if c.id == x)
+        assert isinstance(row.ours[1], src.Assumes) and len(row.ours[1].alternatives) == 2
+
+
 def test_a_fit_part_that_is_not_fitted_gives_its_own_reason_and_ids_of_other_collects_name_them():
     e = {"sets": ["S12", "S27"], "status": "fitted", "z_inf": 6.0, "z_inf_err": 0.004,
          "set_means": {"status": "not determined", "reason": "correlation 1", "z_inf": 6.1}}
     m = src.fit_measure(e, "z_inf", "set_means", kind="ladder")
     assert m.status == "not determined" and m.why == "correlation 1"
+    # a part fitted but not determined (a ladder one pile climbed) reads not determined, with its reason
+    e["exponent 1/3"] = {"status": "fitted", "z_c": 5.9, "z_c_err": 0.1, "determined": False, "reason": "1 pile"}
+    m3 = src.fit_measure(e, "z_c", "exponent 1/3", kind="overlap")
+    assert m3.status == "not determined" and m3.why == "1 pile"
+    with pytest.raises(ValueError, match="one fit"):
+        src.ExtFit("x", "overlap", "z_c", "S1", fixed=True, part="exponent 1/3").resolve(None)
     assert src.fit_measure(e, "z_inf", kind="ladder").value == 6.0
     assert src.ext_id("../dev", "S15") == "dev:S15" and src.ext_id("ladder-dev", "S07") == "ladder-dev:S07"
 
@@ -494,6 +534,9 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
         for v in vars(x).values():
             if hasattr(v, "resolve"):
                 walk(v)
+            if isinstance(v, list):     # an assumption's alternatives: [(label, source)]
+                for item in v:
+                    walk(item[1])
     for c in claims.CLAIMS:
         assert c.kind in kinds, c.id
         if c.kind == "compare":

@@ -21,16 +21,25 @@ from .sources import diff_error, finite, missing
 
 def judge(claim, m):
     """The rule (``verdict``) for measure ``m`` of ``claim`` (a ``claims.Claim``). A number that rests on an
-    assumed choice (``m.alts``: ``sources.Assumes``) is judged with each alternative too; where one gives
-    another verdict than the assumed choice, the claim is not determined by it, and the verdict gives each."""
+    assumed choice (``m.alts``: ``sources.Assumes``) is judged with each alternative too: where every one
+    gives the same verdict it stands, and says so; where one gives another, or has no number, the claim is
+    not determined by it, and the verdict gives each."""
     v = _judge_one(claim, m)
-    alts = [(label, a, _judge_one(claim, a)) for label, a in m.alts if a.ok]
-    if v.kind not in ("reproduced", "differs") or all(av.kind == v.kind for _, _, av in alts):
+    if not m.alts or v.kind not in ("reproduced", "differs"):
+        return v
+    alts = [(label, a, _judge_one(claim, a) if a.ok else None) for label, a in m.alts]
+
+    def value(a):
+        return _mtext(a, claim.digits, where=False)
+
+    if all(av is not None and av.kind == v.kind for _, _, av in alts):
+        same = ", ".join(f"{label} ({value(a)})" for label, a, _ in alts)
+        v.why = "; ".join(w for w in (v.why, f"the same with {same} in place of {m.assumption}") if w)
         return v
     # a 'differs by X' names its value already; any other verdict takes the value before it
-    each = "; ".join(f"with {label}: " + (av.text() if av.kind == "differs" and math.isfinite(av.diff)
-                                          else f"{_mtext(a, claim.digits, where=False)}, {av.text()}")
-                     for label, a, av in alts)
+    each = "; ".join(f"with {label}: " + (
+        f"{a.status} ({a.why})" if av is None else av.text() if av.kind == "differs" and math.isfinite(av.diff)
+        else f"{value(a)}, {av.text()}") for label, a, av in alts)
     return V.Verdict("not determined", why=f"it rests on {m.assumption}: with it {v.text()}; {each}")
 
 

@@ -446,6 +446,7 @@ def make_fits(sets):
     of k_n (any number of k_n), alpha, P(f) and the depth windows pooled over the seeds of each set, the
     F_t/F_n collapse per family of mu (``ratio.tests``), the sets that differ in one setting from the
     one at its default (``contrasts.contrasts``), whether the runs are independent samples (``samples.tests``)."""
+    ladder.poured_k_n.cache_clear()     # the piles are read from the run directories as they are now
     out = {"eq7": [], "eq9": [], "overlap": [], "alpha": [], "P_f": [], "depth": [], "ratio": ratio.tests(sets),
            "contrasts": contrasts.contrasts(sets), "samples": samples.tests(sets)}
     for fam, members in families(sets, "contact.k_n"):

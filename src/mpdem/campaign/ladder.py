@@ -77,45 +77,78 @@ def pile(run):
     """A pile's identity along a ladder (a rung is its pour stiffened): its seed, its bed's seed and the k_n
     it was poured at (``poured_k_n``). A pour is a pure function of its parameters and seeds, so a pile
     poured again with the same ones is the same pile, and one poured at 2e6 is not the pile of the same
-    seeds poured at 2e5 and stiffened. A run directory without a config.toml (a summary alone) is named
-    by its seeds alone."""
+    seeds poured at 2e5 and stiffened. A run directory without a readable config.toml (a summary alone)
+    is named by its seeds alone (``piles`` warns where a family mixes the two)."""
     k = poured_k_n(run.path)
     key = (run.params["run.seed"], run.bed_seed)
     return key if k is None else (*key, k)
 
 
+def piles(runs):
+    """``pile`` of each run, warning where some are named by their seeds alone and others by their pour:
+    the same pile would then count as two."""
+    keys = [pile(r) for r in runs]
+    if len({len(k) for k in keys}) > 1:
+        n = sum(len(k) == 2 for k in keys)
+        warnings.warn(f"{n} of {len(keys)} runs have no readable config.toml to follow back to their pour: "
+                      f"named by their seeds alone, their piles may count twice", stacklevel=2)
+    return keys
+
+
+def _read_config(path):
+    try:
+        with open(os.path.join(path, "config.toml"), "rb") as fh:
+            c = tomllib.load(fh)
+        start = c["run"].get("initial_file") or ""
+        return float(c["contact"]["k_n"]), float((c.get("stiffen") or {}).get("k_n_from") or 0.0), start
+    except (OSError, ValueError, KeyError, TypeError):     # tomllib.TOMLDecodeError is a ValueError
+        return None
+
+
+def _started_from(path, start):
+    """The run directory of the state a run started from (``run.initial_file``): as written (a checkpoint's
+    run: the directory above checkpoints/) or, where the run was made elsewhere (a device's copy), the
+    directory of that name beside ``path``; None where neither holds a config.toml."""
+    d = os.path.dirname(os.path.normpath(start))
+    if os.path.basename(d) == "checkpoints":
+        d = os.path.dirname(d)
+    if not d:
+        return None
+    real = os.path.realpath(path)
+    sibling = os.path.join(os.path.dirname(os.path.normpath(path)), os.path.basename(d))
+    return next((x for x in (d, sibling) if os.path.realpath(x) != real
+                 and os.path.isfile(os.path.join(x, "config.toml"))), None)
+
+
 @functools.lru_cache(maxsize=None)
 def poured_k_n(path):
-    """The k_n a run directory's pile was poured at, followed back rung by rung: each stiffened run's
-    config.toml names the state it started from (``run.initial_file``), a run directory as written or,
-    where the ladder ran elsewhere (a device's copy), the rung of that name beside it in its own ladder.
-    Where that run is not at hand, the k_n it was settled at (``stiffen.k_n_from``): a rung is a decade,
-    so a ladder started from a stiffened pile whose runs are gone is taken as poured there. None where
-    ``path`` has no config.toml."""
+    """The k_n a run directory's pile was poured at, followed back through the states each run started from
+    (``run.initial_file``, ``_started_from``) to one that started from none. Where that chain leaves the
+    runs at hand, or reaches a run whose k_n is not the one a stiffened run says it was settled at: that
+    stiffened run's ``stiffen.k_n_from`` (a ladder whose earlier rungs are gone is taken as poured there);
+    a run that was not stiffened, its own k_n. None where ``path`` has no readable config.toml, or the
+    chain turns in a circle. ``collect`` clears the cache (``make_fits``)."""
     seen = set()
+    here = _read_config(path)
+    if here is None:
+        return None
     while True:
-        try:
-            with open(os.path.join(path, "config.toml"), "rb") as fh:
-                c = tomllib.load(fh)
-        except OSError:
+        k_n, k_from, start = here
+        seen.add(os.path.realpath(path))
+        prev = _started_from(path, start) if start else None
+        got = _read_config(prev) if prev else None
+        if got is None or (k_from > 0 and not math.isclose(got[0], k_from, rel_tol=1e-9)):
+            return k_from if k_from > 0 else k_n
+        if os.path.realpath(prev) in seen:
+            warnings.warn(f"{path}: its run.initial_file chain turns in a circle at {prev}", stacklevel=2)
             return None
-        k_n, k_from = float(c["contact"]["k_n"]), float((c.get("stiffen") or {}).get("k_n_from") or 0.0)
-        real = os.path.realpath(path)
-        if k_from <= 0 or real in seen:
-            return k_n
-        seen.add(real)
-        parent = os.path.dirname(os.path.normpath(c["run"].get("initial_file") or ""))
-        sibling = os.path.join(os.path.dirname(os.path.normpath(path)), os.path.basename(parent))
-        nxt = next((d for d in (parent, sibling) if parent and os.path.realpath(d) != real
-                    and os.path.isfile(os.path.join(d, "config.toml"))), None)
-        if nxt is None:
-            return k_from
-        path = nxt
+        path, here = prev, got
 
 
 def _points(members, q="z"):
     """(k_n, value, pile) of every run of the ladder's sets with a finite ``q``."""
-    return [(s.p("k_n"), r.q[q], pile(r)) for s in members for r in s.runs if math.isfinite(r.q[q])]
+    runs = [(s, r) for s in members for r in s.runs if math.isfinite(r.q[q])]
+    return [(s.p("k_n"), r.q[q], p) for (s, r), p in zip(runs, piles([r for _, r in runs]))]
 
 
 def total_scatter(points):

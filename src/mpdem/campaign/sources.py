@@ -322,6 +322,8 @@ class ExtFit:
     part: str = ""
 
     def resolve(self, ctx):
+        if self.fixed and self.part:
+            raise ValueError(f"ExtFit {self.kind} {self.key}: fixed and part {self.part!r} both given: one fit")
         fits_ = ctx.ext_fits(self.results)
         e = next((x for x in fits_.get(self.kind, []) if self.set in (x.get("sets") or [])), None)
         sets = ctx.ext_sets(self.results)

@@ -11,8 +11,10 @@ is reproduced when this work's value is beyond it by two errors, a range ("3-8e6
 value lies inside it or within two errors of it. A value of one seed (no error of its own) takes the
 other side's seed scatter in a difference (``sources.diff_error``), and alone is judged on the paper's
 error, or by its side of a bound or sign. A test's p value (one law, one curve) is reproduced at
-p >= 0.0455, the two-sided 2 sigma level. A value that rests on an assumed choice (an exponent no
-measurement here fixes) is judged with each alternative its row names as well (``claimtable.judge``).
+p >= 0.0455, the two-sided 2 sigma level. A value that rests on an assumed choice the measurements
+here do not fix (an exponent taken from theory, where the data fit others as well) is judged with each
+alternative its row names as well (``claimtable.judge``); an alternative without a number leaves the
+row not determined too.
 A row with nothing measured reads "not measured"; a fit that cannot tell its parameters apart, or a
 value whose verdict changes with the assumed choice, "not determined".
 
@@ -40,8 +42,10 @@ RULE = (
     "alone it is judged on the paper's error or tolerance alone, against a bound or a sign by its side "
     "alone; each time the row says so. A claim that a family follows one law, or that sets collapse onto "
     "one curve, tested by a fit's χ² or an analysis of variance, is reproduced when the test's p ≥ 0.0455 "
-    "(two-sided 2σ) and differs otherwise. A value that rests on an assumed choice no measurement here fixes "
-    "(an exponent) is judged with each alternative the row names as well. **not measured**: nothing of this "
+    "(two-sided 2σ) and differs otherwise. A value that rests on an assumed choice the measurements here do "
+    "not fix (an exponent taken from theory, where the data fit others as well) is judged with each "
+    "alternative the row names, with its reason, as well; none is dropped for its verdict. "
+    "**not measured**: nothing of this "
     "work measures it (or the runs are still running); **not determined**: a fit that cannot tell its "
     "parameters apart, a value with no error against a claim with no tolerance, or a value whose verdict "
     "changes with the assumed choice (the row gives each). A claim of a figure's shape, with no number, is judged by "
