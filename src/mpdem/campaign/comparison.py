@@ -195,7 +195,7 @@ def write_readme(path, info, sets, fit_res, rows, figs, skipped, windows=(), cla
           "A stiffened rung (`stiffen.k_n_from` set) is a set of its own, apart from a pile poured at its k_n.", ""]
     head = ["set", "μ", "ε", "k_n", "φ_i", "N", "box", "seeds", "z", "z (no rattlers)", "φ_f", "α", "rattlers"]
     L += [_table(head, [[s.id, f"{s.p('mu'):g}", f"{s.p('epsilon'):g}", fmt_kn(s.p("k_n")), f"{s.p('phi_i'):g}",
-                         s.p("N"), f"{s.p('L_x'):g}×{s.p('L_y'):g}", " ".join(map(str, s.seeds)),
+                         s.p("N"), f"{s.p('L_x'):g}×{s.p('L_y'):g}", _seeds(s),
                          fmt_pm(*s.stat("z")[:2], 3, len(s.runs)), fmt_pm(*s.stat("z_no_rattlers")[:2], 3, len(s.runs)),
                          fmt_pm(*s.stat("phi")[:2], 4, len(s.runs)),
                          fmt_pm(*s.stat("alpha")[:2], 3, s.stat("alpha")[2]),
@@ -460,3 +460,9 @@ def _pf_section(sets, fit_res, windows=()):
             for s in sets if s.id in pf]
     L += [_table(["set", "μ", "ε", "k_n", "N", "contacts", "f < 0.1", "β"], rows), ""] if rows else ["None.", ""]
     return L
+
+
+def _seeds(s):
+    """A set's seeds as the table shows them: a run whose bed has a seed of its own says so ("1 (bed 101)")."""
+    return " ".join(f"{r.params['run.seed']}" + (f" (bed {r.bed_seed})" if r.bed_seed != r.params["run.seed"] else "")
+                    for r in s.runs)
