@@ -20,7 +20,7 @@ import pytest
 
 from mpdem import config
 from mpdem.io import rundir
-from mpdem.campaign import collect as co
+from mpdem.campaign import collect as co, pooled
 from mpdem.analysis import bands, fits, nearcontact, report
 from mpdem.analysis.report import AnalysisError
 
@@ -298,7 +298,12 @@ def test_overlap_fit_over_the_bulk_bands_of_a_family(tree):
     assert abs(e["A"] - OVERLAP_TRUE["A"]) < 4 * e["A_err"]
     pf = {s["set"]: s for s in fj["P_f"]}
     assert all(abs(p["tail_rate"] - 1.0) < 5 * p["tail_rate_err"] for p in pf.values())
-    assert "z against the overlap" in (tree["out"] / "README.md").read_text()
+    readme = (tree["out"] / "README.md").read_text()
+    assert "z against the overlap" in readme
+    # the bands are drawn on the square-root law: the alternative exponents fit them worse, and say so
+    third, two_thirds = e["exponent 1/3"], e["exponent 2/3"]
+    assert third["rms"] > e["rms"] and two_thirds["rms"] > e["rms"]
+    assert f"with 1/3: z_c {pooled.z_c_text(third, why=False)}, rms {third['rms']:.3f}" in readme
 
 
 def test_unusable_runs_listed_with_reasons(tree):

@@ -431,10 +431,19 @@ def _piles_text(e):
     return f" of {e['n_piles']} piles" if e.get("n_piles") else ""
 
 
+def _alternatives_text(e):
+    """'; with 1/3: z_c 5.887, rms 0.049; ...' of an overlap fit's alternative exponents
+    (``pooled.OVERLAP_ALTERNATIVES``)."""
+    alts = [(k.split()[1], f) for k, f in e.items() if k.startswith("exponent ") and isinstance(f, dict)
+            and f.get("status") == "fitted"]
+    return "".join(f"; with {x}: z_c {pooled.z_c_text(f, why=False)}, rms {f['rms']:.3f}" for x, f in alts)
+
+
 def _overlap_depth_section(sets, fit_res, windows):
     """z against the overlap (docs/model.md 6.6), then z on the fixed depth windows."""
     L = ["z against the overlap (docs/model.md 6.6):", "",
           "z − z_c = A (δ/d)^(1/2) fitted over the depth bands inside the bulk of every run of a family (all k_n), "
+          "and with the exponents of the bracket the bands do not rule out (their z_c and rms after each line), "
           "δ the band's mean contact overlap; the error of z_c is a bootstrap over runs, and over piles for a "
           "stiffening ladder (its base set with its rungs: a pile's runs at every rung drawn together). At μ = 0 "
           "isostaticity "
@@ -445,7 +454,7 @@ def _overlap_depth_section(sets, fit_res, windows):
     L += [f"- {_fam_text(e['family'], ('k_n',))}: z_c = {pooled.z_c_text(e)}, "
           f"A = {fmt_pm(e['A'], e['A_err'], 1)}; {e['n_bands']} bands of {e['n_runs']} runs{_piles_text(e)}, δ/d from "
           f"{e['delta_min']:.2g} to {e['delta_max']:.2g}, rms residual {e['rms']:.3f}; {_collapse_text(e)}"
-          for e in ov] or ["- no family with depth profiles of 2 runs or more"]
+          f"{_alternatives_text(e)}" for e in ov] or ["- no family with depth profiles of 2 runs or more"]
     return L + [""] + _depth_section(windows)
 
 
