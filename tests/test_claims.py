@@ -318,6 +318,11 @@ def test_a_pile_is_followed_back_to_its_pour_and_one_poured_stiffer_is_another_p
     keys = [ladder.pile(r) for r in (pour, r6, r7, again, stiff, gone, ckpt, settle)]
     assert keys[0] == (1, 1, 2e5) and keys[:4] == [keys[0]] * 4 and keys[5:] == [keys[0]] * 3
     assert keys[4] == (1, 1, 2e6)
+    # a relative start, written from the checkout the ladder ran in, is found below an ancestor of the rung
+    run("ck/runs/size/s9", 2e4)
+    run("ck/runs/mid/s9", 2e5, 2e4, f"{tmp_path}/ck/runs/size/s9/packing.npz")
+    rel = run("ck/runs/lad/s9/kn2e6", 2e6, 2e5, "runs/mid/s9/final.h5")
+    assert ladder.pile(rel) == (1, 1, 2e4)
     # a start whose k_n is not the one the rung was stiffened from is not its start: its k_n_from stands
     odd = run("lad3/s1/kn2e7", 2e7, 2e6, f"{tmp_path}/size/s1/final.h5")
     assert ladder.pile(odd) == (1, 1, 2e6)

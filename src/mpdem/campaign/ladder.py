@@ -107,8 +107,9 @@ def _read_config(path):
 
 def _started_from(path, start):
     """The run directory of the state a run started from (``run.initial_file``): as written (a checkpoint's
-    run: the directory above checkpoints/) or, where the run was made elsewhere (a device's copy), the
-    directory of that name beside ``path``; None where neither holds a config.toml."""
+    run: the directory above checkpoints/), or, where the run was made elsewhere (a device's copy), the
+    directory of that name beside ``path``, or a relative one below an ancestor of ``path`` (collect run
+    from another directory than the run was); None where none holds a config.toml."""
     d = os.path.dirname(os.path.normpath(start))
     if os.path.basename(d) == "checkpoints":
         d = os.path.dirname(d)
@@ -116,8 +117,19 @@ def _started_from(path, start):
         return None
     real = os.path.realpath(path)
     sibling = os.path.join(os.path.dirname(os.path.normpath(path)), os.path.basename(d))
-    return next((x for x in (d, sibling) if os.path.realpath(x) != real
+    # a relative start was written from where the run was launched: the checkout holding it, an ancestor
+    up = [os.path.join(a, d) for a in _ancestors(os.path.abspath(path))] if not os.path.isabs(d) else []
+    return next((x for x in (d, sibling, *up) if os.path.realpath(x) != real
                  and os.path.isfile(os.path.join(x, "config.toml"))), None)
+
+
+def _ancestors(path):
+    while True:
+        parent = os.path.dirname(path)
+        if parent == path:
+            return
+        path = parent
+        yield path
 
 
 @functools.lru_cache(maxsize=None)
