@@ -471,6 +471,35 @@ def test_eq7_over_piles_multiplies_every_error_by_its_scale_and_tests_chi2_again
     assert fits.fit_eq7_piles(k, z, pl, 1e-4, 3e-4)["s_b_clamped"]
 
 
+def test_a_claim_set_against_a_rival_is_reproduced_only_where_the_rival_is_not():
+    """Row 23's reading: 0.06 +- 0.30 lies within 2 sigma of 1/4 and of the frictionless 1/2 (not determined);
+    0.25 +- 0.05 reproduces 1/4 and lies 5 sigma from 1/2. A test's rival is its own source: both passed is
+    not determined, the rival rejected reproduces, a rival without a number cannot reject anything."""
+    c = claims.Claim("x", "follows 1/4", "1/4", "compare", 0.25, 0.005, rival=("1/2", 0.5))
+    wide = ct.judge(c, src.Measure(0.06, 0.30, 11, "11 runs", "w"))
+    assert wide.kind == "not determined" and "cannot tell them apart" in wide.why and "(1.5 σ)" in wide.why
+    sharp = ct.judge(c, src.Measure(0.25, 0.05, 11, "11 runs", "w"))
+    assert sharp.kind == "reproduced" and "1/2 5.0 σ away" in sharp.why
+    assert ct.judge(c, src.Measure(0.6, 0.05, 11, "11 runs", "w")).kind == "differs"    # a rival cannot rescue
+
+    @dataclasses.dataclass
+    class P:
+        p: float
+
+        def resolve(self, ctx):
+            return src.missing("rival", "gone") if self.p is None else src.Measure(self.p, NAN, 6, "6 runs", "r")
+
+    def judged(rival_p):
+        t = claims.Claim("t", "follows 1/4", "figure", "test", rival=("1/2", P(rival_p)))
+        return ct.judge(t, src.Measure(0.69, NAN, 6, "6 runs", "w"), ctx=object())
+
+    both = judged(0.47)
+    assert both.kind == "not determined" and "does not tell them apart" in both.why
+    told = judged(0.01)
+    assert told.kind == "reproduced" and "1/2 rejected, p = 0.01" in told.why
+    assert judged(None).kind == "not determined"
+
+
 def test_row_34_reads_its_alternative_exponents_from_the_committed_ladder_fits():
     """Row 34's overlap difference rests on the exponent 1/2: both alternatives resolve against the committed
     ladder-dev fits, each a number apart from the assumed one (were they lost, the row would be judged on 1/2
@@ -549,7 +578,7 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
             # a tolerance in place of a paper error is always given with its reason, from the paper's text
             assert c.paper_err is None or c.tolerance or c.paper in ("6.144 ± 0.002", "0.52 ± 0.03") \
                 or "±" in c.paper, c.id
-        for x in c.ours + c.also:
+        for x in c.ours + c.also + ([c.rival[1]] if c.rival and hasattr(c.rival[1], "resolve") else []):
             walk(x)
     paper = ROOT / "analysis/results/paper"
     have = set(json.loads((paper / "collect.json").read_text())["sets"])

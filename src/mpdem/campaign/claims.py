@@ -49,6 +49,9 @@ class Claim:
     also : sources shown beside it (other sizes, windows), each with its distance from the paper's value
     if_differs : ('explained' | 'open', why), shown when the rule says it differs
     note : conditions or caveats, always shown
+    rival : (label, value or source): the other answer the paper's claim is set against (for a 'compare',
+        a value, judged by the same rule with the same errors; for a 'test', the source of the rival law's
+        p). A measure that reproduces both cannot tell them apart: not determined (``claimtable.judge``)
     """
     id: str
     claim: str
@@ -67,6 +70,7 @@ class Claim:
     why_none: str = ""
     digits: int = None
     judge_also: bool = True
+    rival: tuple = None
 
     def paper_text(self):
         """The paper's number as the table shows it, with the tolerance and its reason where it has one."""
@@ -74,6 +78,24 @@ class Claim:
             return f"{self.paper} (tolerance ±{self.paper_err:g}: {self.tolerance})" if self.paper_err \
                 else f"{self.paper} ({self.tolerance})"
         return self.paper
+
+
+# Fig. 7b's claim of k_n^(-1/4) with friction is set against the frictionless law, k_n^(-1/2): friction
+# changing nothing in the approach is the answer it must tell apart
+RIVAL_FRICTIONLESS = ("α_n = 1/2 (the frictionless law)", 0.5)
+STIFFENED = "paper-size stiffening ladder (another protocol with friction)"
+
+
+def _frictional_z_inf(sid, label):
+    """z_inf of a frictional family's eq. 7 with alpha_n fixed at the paper's 1/4, judged with 1/2 as well."""
+    return Assumes(ExtFit(DEV, "eq7", "z_inf", sid, True, label), "α_n = 1/4 fixed",
+                   [("α_n = 1/2 fixed", ExtFit(DEV, "eq7", "z_inf", sid, label=label, part="fixed 1/2"))])
+
+
+def _z_inf_diff(part):
+    """Row 24b's difference of the frictional z_inf ([0.5, 0.88] − [0.5, 0.5]) with alpha_n fixed by ``part``."""
+    return Diff(ExtFit(DEV, "eq7", "z_inf", "S20", label="N 2000 [0.5, 0.88]", part=part),
+                ExtFit(DEV, "eq7", "z_inf", "S38", label="[0.5, 0.5]", part=part))
 
 
 _OVERLAP_ALTERNATIVES = [exponent_part(x) for x in OVERLAP_ALTERNATIVES]
@@ -258,20 +280,26 @@ CLAIMS = [
           paper.EQ7_FRICTIONAL_ALPHA_N, 0.005,
           tolerance="the paper writes α_f ≈ −1/4, no error; read as 0.25 to two digits, the strictest reading "
                     "(a looser one could only widen what counts as reproduced)",
-          ours=[Fit("ladder", "alpha_n", mu=0.5), Fit("ladder", "alpha_n", mu=0.5, part="set_means", label=MEANS)],
-          also=[ExtFit(DEV, "eq7", "alpha_n", "S20", label="N 2000 [0.5, 0.88] eq. 7 free"),
-                ExtFit(DEV, "eq7", "alpha_n", "S38", label="N 2000 [0.5, 0.5]"),
-                ExtFit(DEV, "eq7", "alpha_n", "S06", label="N 2000 [0.5, 0.26]")]),
+          ours=[ExtFit(DEV, "eq7", "alpha_n", "S20", label="N 2000 [0.5, 0.88] poured, eq. 7 free")],
+          also=[ExtFit(DEV, "eq7", "alpha_n", "S38", label="N 2000 [0.5, 0.5]"),
+                ExtFit(DEV, "eq7", "alpha_n", "S06", label="N 2000 [0.5, 0.26]"),
+                Fit("ladder", "alpha_n", mu=0.5, label=STIFFENED),
+                Fit("ladder", "alpha_n", mu=0.5, part="set_means", label=f"{STIFFENED}, {MEANS}")],
+          rival=RIVAL_FRICTIONLESS,
+          note="the paper pours each k_n (docs/model.md 6.6); with friction a stiffened pile is another packing "
+               "(row 26), so the paper-size stiffening ladder stands beside, not in its place; N = 2000 poured "
+               "families only"),
     Claim("24", "frictional z_∞ > 4 ([0.5, 0.88], α_n = 1/4 fixed)", "> 4", "bound", 4.0,
-          ours=[Fit("ladder", "z_inf", mu=0.5, fixed=True),
-                Fit("ladder", "z_inf", mu=0.5, part="set_means_fixed", label=MEANS),
-                ExtFit(DEV, "eq7", "z_inf", "S20", True, "N 2000")],
-          also=[ExtFit(DEV, "eq7", "z_inf", "S38", True, "N 2000 [0.5, 0.5]"),
-                ExtFit(DEV, "eq7", "z_inf", "S06", True, "N 2000 [0.5, 0.26]"),
-                ExtFit(DEV, "eq7", "z_inf", "S11", True, "N 2000 [10, 0.26]")]),
+          ours=[_frictional_z_inf("S20", "N 2000 poured")],
+          also=[_frictional_z_inf("S38", "N 2000 [0.5, 0.5]"), _frictional_z_inf("S06", "N 2000 [0.5, 0.26]"),
+                ExtFit(DEV, "eq7", "z_inf", "S11", True, "N 2000 [10, 0.26]"),
+                Fit("ladder", "z_inf", mu=0.5, fixed=True, label=STIFFENED),
+                Fit("ladder", "z_inf", mu=0.5, part="set_means_fixed", label=f"{STIFFENED}, {MEANS}")],
+          note="poured families (the paper's protocol, docs/model.md 6.6); the paper-size stiffening ladder "
+               "beside"),
     Claim("24b", "frictional z_∞ depends on ε: [0.5, 0.88] − [0.5, 0.5] (α_n = 1/4 fixed)", "depends",
-          "nonzero", ours=[Diff(ExtFit(DEV, "eq7", "z_inf", "S20", True, "N 2000 [0.5, 0.88]"),
-                                ExtFit(DEV, "eq7", "z_inf", "S38", True, "[0.5, 0.5]"))],
+          "nonzero", ours=[Assumes(_z_inf_diff("fixed"), "α_n = 1/4 fixed",
+                                   [("α_n = 1/2 fixed", _z_inf_diff("fixed 1/2"))])],
           also=[Diff(ExtFit(DEV, "eq7", "z_inf", "S38", True, "N 2000 [0.5, 0.5]"),
                      ExtFit(DEV, "eq7", "z_inf", "S06", True, "[0.5, 0.26]"))],
           note="N = 2000 only; [10, 0.26] has two rungs (not fitted)"),
@@ -279,7 +307,9 @@ CLAIMS = [
           ours=[ExtFit(DEV, "eq7", "p_value", "S38", True, "N 2000 [0.5, 0.5]")],
           also=[ExtFit(DEV, "eq7", "p_value", "S06", True, "N 2000 [0.5, 0.26]"),
                 ExtFit(DEV, "eq7", "p_value", "S20", True, "N 2000 [0.5, 0.88]")],
-          note="the paper gives the families as a figure, no numbers; N = 2000 only"),
+          rival=(RIVAL_FRICTIONLESS[0], ExtFit(DEV, "eq7", "p_value", "S38", label="α_n = 1/2", part="fixed 1/2")),
+          note="the paper gives the families as a figure, no numbers; N = 2000 only; each family beside is "
+               "judged by its own p alone (the rival's p is the first family's)"),
     Claim("26", "with friction the limits k_n → ∞ and μ → 0 do not commute: z stiffened − z poured at 2e6, "
                 "μ = 0.5", "differ (Sec. III E)", "nonzero",
           ours=[Diff(Rung(0.5, "z", 2e6), Find("z", {"mu": 0.5, **PAPER20K, "k_n": 2e6},

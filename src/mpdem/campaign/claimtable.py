@@ -19,11 +19,41 @@ from .sources import diff_error, finite, missing
 
 # ---------------------------------------------------------------- judging a claim
 
-def judge(claim, m):
+def judge(claim, m, ctx=None):
     """The rule (``verdict``) for measure ``m`` of ``claim`` (a ``claims.Claim``). A number that rests on an
     assumed choice (``m.alts``: ``sources.Assumes``) is judged with each alternative too: where every one
     gives the same verdict it stands, and says so; where one gives another, or has no number, the claim is
-    not determined by it, and the verdict gives each."""
+    not determined by it, and the verdict gives each. A claim with a ``rival`` is reproduced only where the
+    rival is not (``_against_rival``; ``ctx`` resolves a rival source)."""
+    return _against_rival(claim, m, _judge_assumed(claim, m), ctx)
+
+
+def _against_rival(claim, m, v, ctx):
+    """A reproduced verdict that the claim's rival would get as well: not determined, saying so."""
+    if claim.rival is None or v.kind != "reproduced" or not m.ok:
+        return v
+    label, r = claim.rival
+    if claim.kind == "compare":
+        rv = V.compare(m.value, m.err, r, claim.paper_err)
+        if rv.kind == "reproduced":
+            return V.Verdict("not determined", why=f"within 2 σ of the paper's {claim.paper} ({v.n_sigma:.1f} σ) "
+                                                    f"and of {label} ({rv.n_sigma:.1f} σ): it cannot tell them apart")
+        v.why = "; ".join(w for w in (v.why, f"{label} {rv.n_sigma:.1f} σ away") if w)
+        return v
+    if claim.kind == "test":
+        rm = r.resolve(ctx) if ctx is not None else None
+        if rm is None or not rm.ok:
+            return V.Verdict("not determined", why=f"{v.why}; {label}: " + (
+                f"{rm.status} ({rm.why})" if rm is not None else "not resolved") + ": not told apart")
+        if rm.value >= V.P_K:
+            return V.Verdict("not determined", why=f"{v.why}, and {label} p = {rm.value:.2g}: the test does not "
+                                                    f"tell them apart")
+        v.why = f"{v.why}; {label} rejected, p = {rm.value:.2g}"
+        return v
+    raise ValueError(f"claim {claim.id}: a rival for kind {claim.kind!r}")
+
+
+def _judge_assumed(claim, m):
     v = _judge_one(claim, m)
     if not m.alts or v.kind not in ("reproduced", "differs"):
         return v
@@ -98,7 +128,7 @@ def row(claim, ctx):
         ours, count = "—", "—"
     else:
         m = _first(claim.ours, ctx)
-        v = judge(claim, m)
+        v = judge(claim, m, ctx)
         ours = _mtext(m, claim.digits) if m.ok else "—"
         count = m.count if m.ok else "—"
     reason = ""
@@ -108,7 +138,8 @@ def row(claim, ctx):
     for src in claim.also:
         m = src.resolve(ctx)
         if claim.judge_also and claim.kind in ("compare", "bound", "range", "nonzero", "test") and m.ok:
-            cv = judge(claim, m)
+            # a rival value holds for every measure of the claim; a rival source (a test's) is the first's own
+            cv = judge(claim, m, ctx) if claim.kind == "compare" else _judge_assumed(claim, m)
             ctxt.append(f"{m.where}: {_mtext(m, claim.digits, where=False)} ({m.count}; {_short(cv, claim.kind)})")
         else:
             ctxt.append(f"{m.where}: {_mtext(m, claim.digits, where=False)}" + (f" ({m.count})" if m.ok else ""))

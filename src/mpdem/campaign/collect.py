@@ -410,10 +410,12 @@ def _fit_one(kind, fam, members):
     if kind == "eq7" and weighted:
         # the exponent fixed: 1/2 at mu = 0 (z - z_c ~ delta^(1/2)), the paper's 1/4 with friction
         fixed = 0.5 if e["family"]["mu"] == 0 else paper.EQ7_FRICTIONAL_ALPHA_N
-        try:
-            e["fixed"] = fits.fit_eq7_fixed(x, e[q], sem, fixed)
-        except (ValueError, np.linalg.LinAlgError) as err:
-            e["fixed"] = {"status": "failed", "reason": str(err)}
+        # with friction, the frictionless exponent beside it: the rival a claim of 1/4 must tell apart
+        for part, a_n in (("fixed", fixed), *((("fixed 1/2", 0.5),) if e["family"]["mu"] != 0 else ())):
+            try:
+                e[part] = fits.fit_eq7_fixed(x, e[q], sem, a_n)
+            except (ValueError, np.linalg.LinAlgError) as err:
+                e[part] = {"status": "failed", "reason": str(err)}
     if not r["determined"]:
         # e.g. alpha_n -> 0, where z_inf and a trade off exactly: printing them would print noise
         e.update(status="not determined",

@@ -14,7 +14,8 @@ error, or by its side of a bound or sign. A test's p value (one law, one curve) 
 p >= 0.0455, the two-sided 2 sigma level. A value that rests on an assumed choice the measurements
 here do not fix (an exponent taken from theory, where the data fit others as well) is judged with each
 alternative its row names as well (``claimtable.judge``); an alternative without a number leaves the
-row not determined too.
+row not determined too. A claim set against a rival answer (``claims.Claim.rival``) is reproduced only
+where the rival is not: a value within two errors of both, or a test that both pass, is not determined.
 A row with nothing measured reads "not measured"; a fit that cannot tell its parameters apart, or a
 value whose verdict changes with the assumed choice, "not determined".
 
@@ -44,13 +45,14 @@ RULE = (
     "one curve, tested by a fit's χ² or an analysis of variance, is reproduced when the test's p ≥ 0.0455 "
     "(two-sided 2σ) and differs otherwise. A value that rests on an assumed choice the measurements here do "
     "not fix (an exponent taken from theory, where the data fit others as well) is judged with each "
-    "alternative the row names, with its reason, as well; none is dropped for its verdict. "
-    "**not measured**: nothing of this "
-    "work measures it (or the runs are still running); **not determined**: a fit that cannot tell its "
-    "parameters apart, a value with no error against a claim with no tolerance, or a value whose verdict "
-    "changes with the assumed choice (the row gives each). A claim of a figure's shape, with no number, is judged by "
-    "eye and says so (**seen** / **not seen**). No method, window or default is chosen to land on the "
-    "paper's number.")
+    "alternative the row names, with its reason, as well; none is dropped for its verdict. A claim the row "
+    "sets against a rival answer (k_n^(−1/4) with friction against the frictionless k_n^(−1/2)) is "
+    "reproduced only where the rival would not be. **not measured**: nothing of this work measures it (or "
+    "the runs are still running); **not determined**: a fit that cannot tell its parameters apart, a value "
+    "with no error against a claim with no tolerance, a value whose verdict changes with the assumed choice "
+    "(the row gives each), or one that reproduces the rival as well. A claim of a figure's shape, with no "
+    "number, is judged by eye and says so (**seen** / **not seen**). No method, window or default is chosen "
+    "to land on the paper's number.")
 
 
 @dataclass
