@@ -500,6 +500,34 @@ def test_a_claim_set_against_a_rival_is_reproduced_only_where_the_rival_is_not()
     assert judged(None).kind == "not determined"
 
 
+def test_the_papers_eq9_is_tested_against_the_sets_means_with_the_pooled_seed_scatter():
+    """Points on the paper's curve give chi^2 = 0 (p = 1); moved by one pooled error at one set of two seeds
+    (sigma = s / sqrt 2) the chi^2 is exactly 1 for 3 dof, whatever that set's own error."""
+    from mpdem.campaign import paper
+    from scipy.stats import chi2
+
+    x = np.array([0.02, 0.13, 0.3])
+    n = np.array([2, 4, 2])
+    sem = np.array([0.001, 0.002, 0.0005])
+    s_pool = math.sqrt(np.sum((n - 1) * sem ** 2 * n) / np.sum(n - 1))
+
+    class Ctx:
+        def __init__(self, y):
+            self.y = y
+
+        def ext_fits(self, results):
+            return {"eq9": [{"sets": ["S1", "S2", "S3"], "phi_i": x.tolist(), "phi": self.y.tolist(),
+                             "phi_sem": sem.tolist(), "n_seeds": n.tolist()}]}
+
+    on = src.Eq9PaperTest("d", "S2").resolve(Ctx(paper.eq9_paper(x)))
+    assert on.ok and on.value == pytest.approx(1.0) and on.n == 8 and "χ² = 0.0 for 3 dof" in on.where
+    y = paper.eq9_paper(x)
+    y[2] += s_pool / math.sqrt(2)
+    off = src.Eq9PaperTest("d", "S2").resolve(Ctx(y))
+    assert off.value == pytest.approx(chi2.sf(1.0, 3), rel=1e-9) and "+1.0 σ at φ_i = 0.3" in off.where
+    assert src.Eq9PaperTest("d", "S9").resolve(Ctx(y)).status == "not measured"
+
+
 def test_row_34_reads_its_alternative_exponents_from_the_committed_ladder_fits():
     """Row 34's overlap difference rests on the exponent 1/2: both alternatives resolve against the committed
     ladder-dev fits, each a number apart from the assumed one (were they lost, the row would be judged on 1/2
@@ -563,7 +591,7 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
     def walk(x):
         if isinstance(x, (src.S, src.Window, src.PerRun)):
             cited.add(x.set)
-        if isinstance(x, (src.Ext, src.ExtFit, src.ExtTest, src.Eq9Deviation)):
+        if isinstance(x, (src.Ext, src.ExtFit, src.ExtTest, src.Eq9Deviation, src.Eq9PaperTest)):
             ext.setdefault(x.results, set()).add(x.set)
         for v in vars(x).values():
             if hasattr(v, "resolve"):

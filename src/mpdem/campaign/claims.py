@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from . import paper
 from .pooled import OVERLAP_ALTERNATIVES, exponent_part
 from .runs import quantities
-from .sources import (AlphaWindow, Assumes, Diff, Eq9Deviation, Ext, ExtFit, ExtTest, Find, Fit, OneMinus, PerRun,
-                         Rung, S, Window)
+from .sources import (AlphaWindow, Assumes, Diff, Eq9Deviation, Eq9PaperTest, Ext, ExtFit, ExtTest, Find, Fit,
+                      OneMinus, PerRun, Rung, S, Window)
 
 DEV = "../dev"                 # analysis/results/dev: the development sweeps (N = 2000, 10 d x 10 d)
 LADDER_DEV = "ladder-dev"      # the N = 2000 stiffening ladders' collect
@@ -344,13 +344,15 @@ CLAIMS = [
           ours=[ExtTest(DEV, "ratio", "S08", "ratio_mean", "N 2000 ε 0.26, mean F_t/F_n")],
           if_differs=("open", "the mean F_t/F_n rises with μ at ε = 0.26 (the F_t/F_n section of "
                               "analysis/results/dev)"), note="N = 2000 only"),
-    Claim("31", "eq. 9: φ_f(φ_i) = 0.5778 + 0.0567 exp(−4.3 φ_i), μ = 0.5: A", "0.5778", "compare",
-          paper.EQ9["A"], 0.00005, tolerance=TOL_DIGIT.format(q="1e-4"),
-          ours=[ExtFit(DEV, "eq9", "A", "S12", label="N 2000 eq. 9")],
-          also=[Eq9Deviation(DEV, "S12")], judge_also=False,
-          if_differs=("explained", "three parameters of a flat curve trade off; the curve itself stays close to "
-                                   "the paper's (beside)"),
-          note="N = 2000 only; the paper-size campaign has no φ_i sweep"),
+    Claim("31", "eq. 9: φ_f(φ_i) = 0.5778 + 0.0567 exp(−4.3 φ_i), μ = 0.5 (the paper's curve against the sets' "
+                "means)", "0.5778 + 0.0567 exp(−4.3 φ_i)", "test",
+          ours=[Eq9PaperTest(DEV, "S12")],
+          also=[ExtFit(DEV, "eq9", "A", "S12", label="N 2000 eq. 9 fit, A"), Eq9Deviation(DEV, "S12")],
+          judge_also=False,
+          if_differs=("open", "the sets' means leave the paper's curve most at the largest φ_i (beside: this work's "
+                              "own fit, whose three parameters are almost fully correlated); N = 2000 only, where "
+                              "φ_f at φ_i = 0.13 lies 0.001 below the paper-size value (row 5)"),
+          note="N = 2000 only; the paper-size campaign has no φ_i sweep; no parameter is fitted to the test"),
     Claim("32", "z at μ = 0 does not depend on the construction: z(φ_i = 0.02) − z(0.13)", "isostatic regardless",
           "compare", 0.0, None, tolerance=NO_NUMBER.format(w="isostatic regardless"),
           ours=[Diff(S("S19"), S("S02"))], also=[Diff(S("S20"), S("S02"), "N 2000, φ_i 0.30 − 0.13")],

@@ -6,9 +6,10 @@ by parameters, so that a set joining later is picked up), a fixed depth window (
 of two sources (``Diff``; a one-setting contrast takes its pooled error), a fit of ``fits.json`` (``Fit``),
 a rung of a paper-size stiffening ladder (``Rung``), a run-level quantity of the summaries (``PerRun``),
 an eq. 6 window (``AlphaWindow``), 1 minus a source (``OneMinus``), or another collect's tables (``Ext``,
-``ExtFit``, ``ExtTest``, ``Eq9Deviation``: the development sweeps of ``analysis/results/dev``, the N = 2000
-ladders). ``Context`` is what they read. Numbers are never written by hand here: a source with nothing to
-read gives a ``Measure`` that says "not measured" (or "running", "not determined") and why.
+``ExtFit``, ``ExtTest``, ``Eq9Deviation``, ``Eq9PaperTest``: the development sweeps of
+``analysis/results/dev``, the N = 2000 ladders). ``Context`` is what they read. Numbers are never written
+by hand here: a source with nothing to read gives a ``Measure`` that says "not measured" (or "running",
+"not determined") and why.
 """
 from __future__ import annotations
 
@@ -405,6 +406,40 @@ class Eq9Deviation:
         n = sum(e.get("n_seeds") or [])
         return Measure(float(d[i]), NAN, n, f"{len(x)} sets, {_runs(n)}; a fit's curve, no error",
                        f"eq. 9 fit − paper, largest at φ_i = {x[i]:g} (φ_i {x.min():g}–{x.max():g})")
+
+
+@dataclass
+class Eq9PaperTest:
+    """The paper's eq. 9 curve against another collect's sets' means of phi_f (the family of its eq. 9 fit
+    holding ``set``): chi^2 over the sets with no parameter fitted, each set's error the seed scatter
+    pooled over the family (from its sets' standard errors and seeds) over sqrt(its seeds); the p value
+    of chi^2 for as many degrees of freedom as sets."""
+    results: str
+    set: str
+
+    def resolve(self, ctx):
+        import numpy as np
+        from scipy.stats import chi2 as chi2_dist
+        from . import paper
+        e = next((x for x in ctx.ext_fits(self.results).get("eq9", []) if self.set in (x.get("sets") or [])), None)
+        where = "the paper's eq. 9 against the sets' means"
+        if e is None:
+            return missing(where, "no eq. 9 family")
+        x, y = np.array(e["phi_i"], float), np.array(e["phi"], float)
+        sem = np.array([_f(v) for v in e["phi_sem"]], float)
+        n = np.array(e["n_seeds"], float)
+        have = np.isfinite(sem) & (n >= 2)
+        dof = float(np.sum(n[have] - 1))
+        if dof < 1:
+            return missing(where, "no set with two seeds: no seed scatter", "not determined")
+        scatter = math.sqrt(float(np.sum((n[have] - 1) * sem[have] ** 2 * n[have])) / dof)
+        r = (y - paper.eq9_paper(x)) / (scatter / np.sqrt(n))
+        chi2 = float(np.sum(r ** 2))
+        i = int(np.argmax(np.abs(r)))
+        return Measure(float(chi2_dist.sf(chi2, len(x))), NAN, int(n.sum()),
+                       f"{len(x)} sets, {_runs(int(n.sum()))}",
+                       f"{where}: χ² = {chi2:.1f} for {len(x)} dof (seed scatter {scatter:.2g} pooled on "
+                       f"{dof:g} dof), largest residual {r[i]:+.1f} σ at φ_i = {x[i]:g}")
 
 
 def _f(v):
