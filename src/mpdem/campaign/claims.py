@@ -157,6 +157,9 @@ def _kept_on_incline(q):
     return [Find(q, CHUTE, {"flow.incline": 24.0, "flow.time": 400.0, "box.incline": a}, f"kept at {a:g}°")
             for a in (18.0, 16.0)]
 T2 = 0.005   # half a unit of the last of two decimals
+ARREST_NOTE = ("N = 8000 on 20 d × 10 d, 400 τ of steady flow at 24°, then the incline lowered to 18° and kept "
+               "there (the paper's packing keeps its surface near the angle of repose: NOTES.md, 2026-11-29, "
+               "midday); levelled to 0° after 800 τ (S22) and 400 τ (S10) of flow beside")
 MEANS = "sets' means as if independent:"
 LADDER_OVERLAP = "the ladder's piles at every rung, z − z_c = A (δ/d)^(1/2) over their depth bands:"
 LADDER_NOTE = ("eq. 7 with α_n free over every run of the paper-size ladder (its base set's piles, and the rungs "
@@ -405,23 +408,30 @@ CLAIMS = [
     Claim("37", "run length at k_n = 2e9", "(4–8) × 1e7", "range", (4e7, 8e7), ours=[Rung(0.0, "step", 2e9)],
           also=[Rung(0.0, "step", "top")], judge_also=False),
     Claim("38", "flow-arrest packing: z, μ = 0.5 (another protocol)", "4.69", "compare", 4.69, T2,
-          tolerance=TOL_DIGIT.format(q="0.01"), ours=[S("S22")],
-          also=[S("S10", "z", "400 τ of flow"), *_kept_on_incline("z")],
-          note="N = 8000 on 20 d × 10 d, 800 τ of steady flow at 24°, then levelled",
-          if_differs=("open", "the packing was levelled to 0° where the paper's keeps its surface near the angle "
-                              "of repose; the flow's duration is not it (S10 beside); kept at 18° (one seed, "
-                              "beside) z lies above the paper's and φ above it too, where levelled both lie below: "
-                              "the levelling moves them more than the paper's rounding; a second seed at 18° runs")),
+          tolerance=TOL_DIGIT.format(q="0.01"), ours=[_kept_on_incline("z")[0]],
+          also=[S("S22", "z", "levelled to 0°"), S("S10", "z", "levelled, 400 τ of flow"), _kept_on_incline("z")[1]],
+          note=ARREST_NOTE,
+          if_differs=("open", "kept at 18° z lies above the paper's, levelled (beside) below it: the angle the "
+                              "pile is kept at moves z more than the paper's rounding, and the paper names none "
+                              "(16° runs); one seed at 18° (a second runs)")),
     Claim("38b", "flow-arrest packing: φ, μ = 0.5", "0.594", "compare", 0.594, 0.0005,
-          tolerance=TOL_DIGIT.format(q="0.001"), ours=[S("S22", "phi")],
-          also=[S("S10", "phi", "400 τ of flow"), *_kept_on_incline("phi")],
-          if_differs=("open", "as 38")),
+          tolerance=TOL_DIGIT.format(q="0.001"), ours=[_kept_on_incline("phi")[0]],
+          also=[S("S22", "phi", "levelled to 0°"), S("S10", "phi", "levelled, 400 τ of flow"),
+                _kept_on_incline("phi")[1]],
+          note=ARREST_NOTE, if_differs=("open", "as 38")),
     Claim("38c", "poured minus arrested z (15–25 d)", "4.90 − 4.69 = 0.21", "compare", 0.21, 0.0071,
-          tolerance="both quoted to 0.01: ±0.005 each", ours=[Diff(Window("S15", "15-25"), Window("S22", "15-25"))],
-          note="the 36 d flow layer has no 10–30 d window"),
+          tolerance="both quoted to 0.01: ±0.005 each", ours=[Diff(Window("S15", "15-25"), Window("S34", "15-25"))],
+          also=[Diff(Window("S15", "15-25"), Window("S22", "15-25"), "levelled to 0° (S22)"),
+                Diff(S("S15"), S("S34"), "bulk slabs, kept at 18°")],
+          note="the 36 d flow layer has no 10–30 d window; " + ARREST_NOTE,
+          if_differs=("open", "this work's poured pile lies below the paper's 4.90 (row 4) while its arrest kept "
+                              "at 18° lies above the paper's 4.69 (row 38); levelled (beside) the difference is "
+                              "the paper's")),
     Claim("38d", "poured minus arrested φ (15–25 d)", "0.61 − 0.594 = 0.016", "compare", 0.016, 0.00502,
-          tolerance="quoted to 0.01 and 0.001: ±0.005 and ±0.0005", ours=[Diff(Window("S15", "15-25", "phi"),
-                                                           Window("S22", "15-25", "phi"))]),
+          tolerance="quoted to 0.01 and 0.001: ±0.005 and ±0.0005",
+          ours=[Diff(Window("S15", "15-25", "phi"), Window("S34", "15-25", "phi"))],
+          also=[Diff(Window("S15", "15-25", "phi"), Window("S22", "15-25", "phi"), "levelled to 0° (S22)")],
+          note=ARREST_NOTE),
 ]
 
 
