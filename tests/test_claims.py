@@ -96,6 +96,21 @@ def _claim(**kw):
     return claims.Claim(**{**base, **kw})
 
 
+def test_a_rare_kind_of_sphere_is_counted_over_the_runs_with_its_poisson_error():
+    """Row 13: 1, 1 and 2 spheres with n = 2 among 10 000 bulk spheres each: 4 of 30 000, error sqrt(4);
+    a bound at 0 is then passed by exactly 2 sigma (sqrt 4), not by a standard error over three tiny counts."""
+    s = _set("S15", [4.85, 4.86, 4.84])
+    for r, k in zip(s.runs, (1, 1, 2)):
+        r.s.update(P_z=[0.0, 0.0, k / 10000, 0.5], n_bulk=10000)
+    m = src.Count("S15", 2).resolve(src.Context([s], {}, []))
+    assert m.value == pytest.approx(4 / 30000) and m.err == pytest.approx(2 / 30000)
+    assert m.count == "4 of 30000 bulk spheres in 3 runs, Poisson error"
+    v = ct.judge(claims.Claim("13", "n = 2 appear", "P(2) > 0", "bound", 0.0), m)
+    assert v.kind == "reproduced" and v.n_sigma == pytest.approx(2.0)
+    s.runs[0].s["P_z"] = [0.0, 0.0]
+    assert src.Count("S15", 2).resolve(src.Context([s], {}, [])).status == "not measured"
+
+
 def test_a_row_whose_set_is_absent_reads_not_measured():
     ctx = src.Context([_set("S01", [4.85, 4.86])], {}, [])
     r = ct.row(_claim(ours=[src.S("S99")]), ctx)

@@ -291,6 +291,33 @@ class PerRun:
 
 
 @dataclass
+class Count:
+    """The fraction of a set's bulk spheres with ``n`` contacts, counted over all its runs (P_z[n] times
+    n_bulk, summed), with the Poisson error of the count: k ± sqrt(k) spheres of the runs' bulk total. For
+    events too rare for a scatter over seeds (a sphere or two a pile), where a standard error over a few
+    tiny counts means nothing."""
+    set: str
+    n: int
+    label: str = ""
+
+    def resolve(self, ctx):
+        s = ctx.sets.get(self.set)
+        where = self.label or self.set
+        if s is None:
+            return missing(where, f"set {self.set} not collected")
+        k = total = 0
+        for r in s.runs:
+            pz, nb = r.s.get("P_z") or [], r.s.get("n_bulk")
+            if len(pz) <= self.n or not nb:
+                return missing(where, f"{r.path}: no P_z or n_bulk in its summary")
+            k += round(float(pz[self.n]) * nb)
+            total += nb
+        return Measure(k / total, math.sqrt(k) / total, len(s.runs),
+                       f"{k} of {total} bulk spheres in {_runs(len(s.runs))}, Poisson error", where,
+                       k_n=s.p("k_n"))
+
+
+@dataclass
 class Ext:
     """A set of another collect's ``sets.csv`` (``results``: its directory, relative to this collect's
     output), e.g. the development sweeps at N = 2000."""
