@@ -511,35 +511,59 @@ def test_a_claim_set_against_a_rival_is_reproduced_only_where_the_rival_is_not()
     both = judged(0.47)
     assert both.kind == "not determined" and "does not tell them apart" in both.why
     told = judged(0.01)
-    assert told.kind == "reproduced" and "1/2 rejected, p = 0.01" in told.why
+    assert told.kind == "reproduced" and told.why == "p = 0.69: not rejected; 1/2: p = 0.01, rejected"
     assert judged(None).kind == "not determined"
+    # a rival named by a fit part: each measure, first or beside, is set against its own family's rival fit
+    fits_ = {"eq7": [{"sets": ["A"], "status": "fitted", "fixed": {"p_value": 0.6}, "fixed 1/2": {"p_value": 0.5}},
+                     {"sets": ["B"], "status": "fitted", "fixed": {"p_value": 0.5}, "fixed 1/2": {"p_value": 0.001}}]}
+
+    class Ctx(src.Context):
+        def ext_fits(self, results):
+            return fits_
+
+        def ext_sets(self, results):
+            return {}
+
+    t = claims.Claim("t", "follows 1/4", "figure", "test", rival=("1/2", "fixed 1/2"),
+                     ours=[src.ExtFit("d", "eq7", "p_value", "A", True)],
+                     also=[src.ExtFit("d", "eq7", "p_value", "B", True)])
+    r = ct.row(t, Ctx([], {}, []))
+    assert r["verdict"].kind == "not determined" and "p = 0.5: the test does not tell them apart" in r["verdict"].why
+    assert "p = 0.5: not rejected; 1/2: p = 0.001, rejected)" in r["context"]
+    both_pass = dict(fits_["eq7"][1], **{"fixed 1/2": {"p_value": 0.3}})
+    fits_["eq7"][1] = both_pass
+    assert "not determined: p = 0.5, and 1/2 p = 0.3" in ct.row(t, Ctx([], {}, []))["context"]
+    with pytest.raises(ValueError, match="a rival for kind"):
+        claims.Claim("b", "x", "x", "bound", 4.0, rival=("y", 5.0))
 
 
 def test_the_papers_eq9_is_tested_against_the_sets_means_with_the_pooled_seed_scatter():
-    """Points on the paper's curve give chi^2 = 0 (p = 1); moved by one pooled error at one set of two seeds
-    (sigma = s / sqrt 2) the chi^2 is exactly 1 for 3 dof, whatever that set's own error."""
+    """Two sets of two seeds with standard errors 0.003 and 0.004 (variances 2 * 0.003^2 and 2 * 0.004^2, one
+    dof each) pool to a scatter of 0.005 on 2 dof. Points on the paper's curve give F = 0 (p = 1); moved by
+    0.005 / sqrt 2 at one set, chi^2 = 1 and chi^2 / 2 is F(2, 2) distributed, the scatter being estimated."""
     from mpdem.campaign import paper
-    from scipy.stats import chi2
+    from scipy.stats import chi2, f
 
-    x = np.array([0.02, 0.13, 0.3])
-    n = np.array([2, 4, 2])
-    sem = np.array([0.001, 0.002, 0.0005])
-    s_pool = math.sqrt(np.sum((n - 1) * sem ** 2 * n) / np.sum(n - 1))
+    x = np.array([0.02, 0.3])
+    n = np.array([2, 2])
+    sem = np.array([0.003, 0.004])
 
     class Ctx:
         def __init__(self, y):
             self.y = y
 
         def ext_fits(self, results):
-            return {"eq9": [{"sets": ["S1", "S2", "S3"], "phi_i": x.tolist(), "phi": self.y.tolist(),
+            return {"eq9": [{"sets": ["S1", "S2"], "phi_i": x.tolist(), "phi": self.y.tolist(),
                              "phi_sem": sem.tolist(), "n_seeds": n.tolist()}]}
 
     on = src.Eq9PaperTest("d", "S2").resolve(Ctx(paper.eq9_paper(x)))
-    assert on.ok and on.value == pytest.approx(1.0) and on.n == 8 and "χ² = 0.0 for 3 dof" in on.where
+    assert on.ok and on.value == pytest.approx(1.0) and on.n == 4 and "F = 0.00 on (2, 2) dof" in on.where
+    assert "seed scatter 0.005 pooled on 2 dof" in on.where
     y = paper.eq9_paper(x)
-    y[2] += s_pool / math.sqrt(2)
+    y[1] += 0.005 / math.sqrt(2)
     off = src.Eq9PaperTest("d", "S2").resolve(Ctx(y))
-    assert off.value == pytest.approx(chi2.sf(1.0, 3), rel=1e-9) and "+1.0 σ at φ_i = 0.3" in off.where
+    assert off.value == pytest.approx(f.sf(0.5, 2, 2), rel=1e-9) and "+1.0 σ at φ_i = 0.3" in off.where
+    assert off.value > chi2.sf(1.0, 2)             # an estimated scatter makes the test milder than chi^2
     assert src.Eq9PaperTest("d", "S9").resolve(Ctx(y)).status == "not measured"
 
 

@@ -49,9 +49,10 @@ class Claim:
     also : sources shown beside it (other sizes, windows), each with its distance from the paper's value
     if_differs : ('explained' | 'open', why), shown when the rule says it differs
     note : conditions or caveats, always shown
-    rival : (label, value or source): the other answer the paper's claim is set against (for a 'compare',
-        a value, judged by the same rule with the same errors; for a 'test', the source of the rival law's
-        p). A measure that reproduces both cannot tell them apart: not determined (``claimtable.judge``)
+    rival : (label, value or part): the other answer the paper's claim is set against (for a 'compare', a
+        value, judged by the same rule with the same errors; for a 'test', the part of each measure's own fit
+        holding the rival law's p, or a source). A measure that reproduces both cannot tell them apart: not
+        determined (``claimtable.judge``), the row's first measure and those beside alike
     """
     id: str
     claim: str
@@ -71,6 +72,14 @@ class Claim:
     digits: int = None
     judge_also: bool = True
     rival: tuple = None
+
+    def __post_init__(self):
+        if self.rival is not None:
+            ok = {"compare": lambda r: isinstance(r, (int, float)),
+                  "test": lambda r: isinstance(r, str) or hasattr(r, "resolve")}.get(self.kind)
+            if ok is None or not ok(self.rival[1]):
+                raise ValueError(f"claim {self.id}: a rival for kind {self.kind!r} must be a value (compare) or a "
+                                 f"fit part or source (test), not {self.rival[1]!r}")
 
     def paper_text(self):
         """The paper's number as the table shows it, with the tolerance and its reason where it has one."""
@@ -154,9 +163,10 @@ def _kept_on_incline(q):
 T2 = 0.005   # half a unit of the last of two decimals
 ALPHA_SOFT = ("at k_n = 2e5 the default window's lower end (ξ = 1e-3) lies below 20 times the median overlap "
               "(soft in the α table): there the overlaps reach into it")
-ARREST_NOTE = ("N = 8000 on 20 d × 10 d, 400 τ of steady flow at 24°, then the incline lowered to 18° and kept "
-               "there (the paper's packing keeps its surface near the angle of repose: NOTES.md, 2026-11-29, "
-               "midday); levelled to 0° after 800 τ (S22) and 400 τ (S10) of flow beside")
+ARREST_NOTE = ("N = 8000 on 20 d × 10 d, 400 τ of flow at 24° (S10's seed 1, not steady by the flow check), then "
+               "the incline lowered to 18° and kept there (the paper's packing keeps its surface near the angle of "
+               "repose: NOTES.md, 2026-11-29, midday); levelled to 0° after 800 τ (S22) and 400 τ (S10) of flow "
+               "beside")
 MEANS = "sets' means as if independent:"
 LADDER_OVERLAP = "the ladder's piles at every rung, z − z_c = A (δ/d)^(1/2) over their depth bands:"
 LADDER_NOTE = ("eq. 7 with α_n free over every run of the paper-size ladder (its base set's piles, and the rungs "
@@ -226,8 +236,9 @@ CLAIMS = [
     Claim("13", "spheres with n = 2 appear at μ = 0.5", "appear: P(2) > 0", "bound", 0.0,
           ours=[Count("S15", 2)], also=[Count("S16", 2), Count("S12", 2, "S12 (μ = 0)")], judge_also=False,
           if_differs=("open", "one or two spheres a pile: too rare to resolve over 3 seeds"),
-          note="counted over the runs with the count's Poisson error; μ = 0 (beside) has such spheres too, so "
-               "that they appear with friction is shown, not that they are the friction's"),
+          note="counted over the runs with the count's Poisson error, under which 4 spheres pass the bound at "
+               "exactly 2 σ (√4); μ = 0 (beside) has such spheres too, so that they appear with friction is shown, "
+               "not that they are the friction's"),
     Claim("14", "g(r) at μ = 0: split second peak (Fig. 5)", "figure", "qualitative",
           note="fig5_gofr.png: subpeaks at √3 d and 2 d"),
     Claim("15", "g(r): secondary peaks weaken as μ grows (Fig. 5)", "figure", "qualitative",
@@ -319,9 +330,9 @@ CLAIMS = [
           ours=[ExtFit(DEV, "eq7", "p_value", "S38", True, "N 2000 [0.5, 0.5]")],
           also=[ExtFit(DEV, "eq7", "p_value", "S06", True, "N 2000 [0.5, 0.26]"),
                 ExtFit(DEV, "eq7", "p_value", "S20", True, "N 2000 [0.5, 0.88]")],
-          rival=(RIVAL_FRICTIONLESS[0], ExtFit(DEV, "eq7", "p_value", "S38", label="α_n = 1/2", part="fixed 1/2")),
-          note="the paper gives the families as a figure, no numbers; N = 2000 only; each family beside is "
-               "judged by its own p alone (the rival's p is the first family's)"),
+          rival=(RIVAL_FRICTIONLESS[0], "fixed 1/2"),
+          note="the paper gives the families as a figure, no numbers; N = 2000 only; each family is set against "
+               "its own fit with α_n = 1/2 fixed"),
     Claim("26", "with friction the stiff limit and the preparation do not commute: z stiffened − z poured at "
                 "2e6, μ = 0.5", "differ (Sec. III E)", "nonzero",
           ours=[Diff(Rung(0.5, "z", 2e6), Find("z", {"mu": 0.5, **PAPER20K, "k_n": 2e6},
@@ -363,9 +374,10 @@ CLAIMS = [
           also=[ExtFit(DEV, "eq9", "A", "S12", label="N 2000 eq. 9 fit, A"), Eq9Deviation(DEV, "S12")],
           judge_also=False,
           if_differs=("open", "the sets' means leave the paper's curve most at the largest φ_i (beside: this work's "
-                              "own fit, whose three parameters are almost fully correlated); N = 2000 only, where "
-                              "φ_f at φ_i = 0.13 lies 0.001 below the paper-size value (row 5)"),
-          note="N = 2000 only; the paper-size campaign has no φ_i sweep; no parameter is fitted to the test"),
+                              "own fit, whose three parameters are almost fully correlated)"),
+          note="N = 2000 only; the paper-size campaign has no φ_i sweep; no parameter is fitted to the test, and the "
+               "paper's curve is taken as exact (its C = 4.3 rounded to two digits moves it by up to 2.4e-4 at "
+               "φ_i = 0.2–0.3, a quarter of a set's error)"),
     Claim("32", "z at μ = 0 does not depend on the construction: z(φ_i = 0.02) − z(0.13)", "isostatic regardless",
           "compare", 0.0, None, tolerance=NO_NUMBER.format(w="isostatic regardless"),
           ours=[Diff(S("S19"), S("S02"))], also=[Diff(S("S20"), S("S02"), "N 2000, φ_i 0.30 − 0.13")],

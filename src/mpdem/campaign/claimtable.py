@@ -41,14 +41,19 @@ def _against_rival(claim, m, v, ctx):
         v.why = "; ".join(w for w in (v.why, f"{label} {rv.n_sigma:.1f} σ away") if w)
         return v
     if claim.kind == "test":
-        rm = r.resolve(ctx) if ctx is not None else None
+        # a part name: the same fit of this measure's own source with the rival law (each family its own)
+        fitted = m.source is not None and dataclasses.is_dataclass(m.source) \
+            and {"fixed", "part"} <= {f.name for f in dataclasses.fields(m.source)}
+        src = dataclasses.replace(m.source, fixed=False, part=r) if isinstance(r, str) and fitted \
+            else r if hasattr(r, "resolve") else None
+        rm = src.resolve(ctx) if ctx is not None and src is not None else None
         if rm is None or not rm.ok:
             return V.Verdict("not determined", why=f"{v.why}; {label}: " + (
                 f"{rm.status} ({rm.why})" if rm is not None else "not resolved") + ": not told apart")
         if rm.value >= V.P_K:
             return V.Verdict("not determined", why=f"{v.why}, and {label} p = {rm.value:.2g}: the test does not "
                                                     f"tell them apart")
-        v.why = f"{v.why}; {label} rejected, p = {rm.value:.2g}"
+        v.why = f"{v.why}: not rejected; {label}: p = {rm.value:.2g}, rejected"
         return v
     raise ValueError(f"claim {claim.id}: a rival for kind {claim.kind!r}")
 
@@ -138,8 +143,8 @@ def row(claim, ctx):
     for src in claim.also:
         m = src.resolve(ctx)
         if claim.judge_also and claim.kind in ("compare", "bound", "range", "nonzero", "test") and m.ok:
-            # a rival value holds for every measure of the claim; a rival source (a test's) is the first's own
-            cv = judge(claim, m, ctx) if claim.kind == "compare" else _judge_assumed(claim, m)
+            m.source = src
+            cv = judge(claim, m, ctx)
             ctxt.append(f"{m.where}: {_mtext(m, claim.digits, where=False)} ({m.count}; {_short(cv, claim.kind)})")
         else:
             ctxt.append(f"{m.where}: {_mtext(m, claim.digits, where=False)}" + (f" ({m.count})" if m.ok else ""))
@@ -152,6 +157,8 @@ def _first(sources, ctx):
     """The first source with a number; else the first 'not determined', 'running', or the first source, its
     reason followed by those of the later sources of that status (each source a way the row could be measured)."""
     ms = [src.resolve(ctx) for src in sources]
+    for src, m in zip(sources, ms):
+        m.source = src
     for status in ("ok", "not determined", "running"):
         for m in ms:
             if m.ok if status == "ok" else m.status == status:
@@ -164,8 +171,11 @@ def _first(sources, ctx):
 
 def _short(v, kind="compare"):
     """A context measure's distance from the claim in words."""
+    if v.kind == "not determined" and v.why:
+        return f"not determined: {v.why}"
     if kind == "test":
-        return f"{v.why}: " + ("not rejected" if v.kind == "reproduced" else "rejected")
+        said = v.why.endswith("rejected")      # a rival's verdict says it already
+        return v.why if said else f"{v.why}: " + ("not rejected" if v.kind == "reproduced" else "rejected")
     if v.kind not in ("reproduced", "differs"):
         return v.kind
     if kind in ("bound", "nonzero") and not math.isfinite(v.n_sigma):

@@ -46,6 +46,8 @@ class Measure:
     k_n: float = NAN
     assumption: str = ""                        # what the number rests on (``Assumes``)
     alts: list = field(default_factory=list)    # [(label, Measure)]: the same made with each alternative
+    borrowed: str = ""                          # where a value of one run takes its error from, in words
+    source: object = None                       # the source that made it (a test's rival part: ``claimtable``)
 
     @property
     def ok(self):
@@ -120,8 +122,14 @@ class Window:
         r = ctx.windows.get((self.set, self.window, self.q))
         if r is None or not finite(r["mean"]):
             return missing(where, "no depth window")
-        err = r["pooled_sem"] if finite(r["pooled_sem"]) else r["jackknife"]
-        return Measure(r["mean"], err, r["n_seeds"], _runs(r["n_seeds"]), where)
+        pooled = finite(r["pooled_sem"])
+        err = r["pooled_sem"] if pooled else r["jackknife"]
+        n = r["n_seeds"]
+        # one run has no scatter of its own: its error is the sets' pooled one (or its columns'), and says so
+        why = ("the seed scatter pooled over its N and μ's sets" if pooled else "the jackknife over its columns") \
+            if n == 1 else ""
+        return Measure(r["mean"], err, n, _runs(n) + (f", its error {why}" if why else ""), where,
+                       borrowed=f"its 1 run with {why}" if why else "")
 
 
 @dataclass
@@ -146,6 +154,8 @@ class Diff:
                 err = c["err"]
                 # the contrast's pooled scatter, not the other side's alone
                 lent = "; its 1 run with the sets' pooled seed scatter" if lent else ""
+        if not lent and (ma.borrowed or mb.borrowed):
+            lent = "; " + "; ".join(x.borrowed for x in (ma, mb) if x.borrowed)
         return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs" + lent, where, k_n=ma.k_n)
 
 
@@ -331,7 +341,7 @@ class Ext:
         where = f"{self.label + ' ' if self.label else ''}{ext_id(self.results, self.set)}"
         if row is None:
             return missing(where, f"{self.results}: no set {self.set}")
-        m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), int(_f(row.get("n_seeds")) or 0)
+        m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), _count(row.get("n_seeds"))
         if not finite(m):
             return missing(where, f"no {self.q}")
         return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), where, k_n=_f(row.get("k_n")))
@@ -356,7 +366,7 @@ class ExtFit:
         e = next((x for x in fits_.get(self.kind, []) if self.set in (x.get("sets") or [])), None)
         sets = ctx.ext_sets(self.results)
         m = fit_measure(e, self.key, "fixed" if self.fixed else self.part,
-                        lambda s: int(_f((sets.get(s) or {}).get("n_seeds")) or 0),
+                        lambda s: _count((sets.get(s) or {}).get("n_seeds")),
                         f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}",
                         lambda sid: ext_id(self.results, sid))
         return m
@@ -439,14 +449,15 @@ class Eq9Deviation:
 class Eq9PaperTest:
     """The paper's eq. 9 curve against another collect's sets' means of phi_f (the family of its eq. 9 fit
     holding ``set``): chi^2 over the sets with no parameter fitted, each set's error the seed scatter
-    pooled over the family (from its sets' standard errors and seeds) over sqrt(its seeds); the p value
-    of chi^2 for as many degrees of freedom as sets."""
+    pooled over the family (from its sets' standard errors and seeds) over sqrt(its seeds). That scatter is
+    itself estimated (on the seeds' degrees of freedom), so chi^2 / K over K sets is F(K, dof) distributed
+    where the curve holds: its p is the value."""
     results: str
     set: str
 
     def resolve(self, ctx):
         import numpy as np
-        from scipy.stats import chi2 as chi2_dist
+        from scipy.stats import f as f_dist
         from . import paper
         e = next((x for x in ctx.ext_fits(self.results).get("eq9", []) if self.set in (x.get("sets") or [])), None)
         where = "the paper's eq. 9 against the sets' means"
@@ -463,10 +474,17 @@ class Eq9PaperTest:
         r = (y - paper.eq9_paper(x)) / (scatter / np.sqrt(n))
         chi2 = float(np.sum(r ** 2))
         i = int(np.argmax(np.abs(r)))
-        return Measure(float(chi2_dist.sf(chi2, len(x))), NAN, int(n.sum()),
-                       f"{len(x)} sets, {_runs(int(n.sum()))}",
-                       f"{where}: χ² = {chi2:.1f} for {len(x)} dof (seed scatter {scatter:.2g} pooled on "
-                       f"{dof:g} dof), largest residual {r[i]:+.1f} σ at φ_i = {x[i]:g}")
+        k = len(x)
+        return Measure(float(f_dist.sf(chi2 / k, k, dof)), NAN, int(n.sum()), f"{k} sets, {_runs(int(n.sum()))}",
+                       f"{where}: χ² = {chi2:.1f} for {k} dof, F = {chi2 / k:.2f} on ({k}, {dof:g}) dof (the seed "
+                       f"scatter {scatter:.2g} pooled on {dof:g} dof), largest residual {r[i]:+.1f} σ at "
+                       f"φ_i = {x[i]:g}")
+
+
+def _count(v):
+    """A count read from a table cell: 0 where it holds none."""
+    x = _f(v)
+    return int(x) if math.isfinite(x) else 0
 
 
 def _f(v):
