@@ -181,7 +181,7 @@ CLAIMS = [
                 S("S13", "z", "stop 100 × stricter")],
           if_differs=("open", "below the paper by 0.009 at its size; at N = 2000 this work's 6.115 lies 0.025 below "
                               "the reference implementation's one seed (6.140, with γ_t = γ_n/2, 3 d margins, a "
-                              "sparser bed and the translational stop: physics.md 7.1); a "
+                              "sparser bed and the translational stop: docs/model.md 7.1); a "
                               "100 times stricter stop raises one pile by 0.002 (S13); the 2 of 6 pours that have "
                               "not reached the stop rule (seed 4 and bed 102, still rearranging at E_k/N 2-4e-6) "
                               "hold z = 6.105 and 6.119 at their newest checkpoints (NOTES.md, 2026-11-28): "
