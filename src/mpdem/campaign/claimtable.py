@@ -42,9 +42,8 @@ def _against_rival(claim, m, v, ctx):
         return v
     if claim.kind == "test":
         # a part name: the same fit of this measure's own source with the rival law (each family its own)
-        fitted = m.source is not None and dataclasses.is_dataclass(m.source) \
-            and {"fixed", "part"} <= {f.name for f in dataclasses.fields(m.source)}
-        src = dataclasses.replace(m.source, fixed=False, part=r) if isinstance(r, str) and fitted \
+        with_part = getattr(m.source, "with_part", None)
+        src = with_part(r) if isinstance(r, str) and with_part is not None \
             else r if hasattr(r, "resolve") else None
         rm = src.resolve(ctx) if ctx is not None and src is not None else None
         if rm is None or not rm.ok:

@@ -14,6 +14,7 @@ by hand here: a source with nothing to read gives a ``Measure`` that says "not m
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -63,6 +64,11 @@ def _runs(n):
     return f"{n} run{'s' if n != 1 else ''}"
 
 
+def _runs_note(n):
+    """The samples cell of a mean over ``n`` runs: one run has no scatter, so no error."""
+    return _runs(n) + ("" if n > 1 else ", no error")
+
+
 def finite(x):
     """Whether ``x`` is a finite number (not a bool, None or a string)."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
@@ -78,14 +84,14 @@ class S:
     label: str = ""
 
     def resolve(self, ctx):
-        s = ctx.sets.get(self.set)
         where = self.label or self.set
-        if s is None:
-            return missing(where, f"set {self.set} not collected")
+        s, gone = ctx.set_or_missing(self.set, where)
+        if gone:
+            return gone
         m, e, n = s.stat(self.q)
         if not n:
             return missing(where, f"no {self.q} in set {self.set}")
-        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), f"{where}" if self.label else self.set,
+        return Measure(m, e, n, _runs_note(n), f"{where}" if self.label else self.set,
                        k_n=s.p("k_n"))
 
 
@@ -199,6 +205,10 @@ class Fit:
             m.where = f"{self.label} {m.where}"
         return m
 
+    def with_part(self, part):
+        """This fit's other part ``part`` (another law kept in the same entry, such as a claim's rival)."""
+        return dataclasses.replace(self, fixed=False, part=part)
+
 
 @dataclass
 class Assumes:
@@ -277,7 +287,7 @@ class Rung:
         v, err, n = r.get(self.q, NAN), r.get(f"{self.q}_sem", NAN), r["n_runs"]
         if not finite(v):
             return missing(where, f"no {self.q} on the rung")
-        return Measure(v, err if finite(err) else NAN, n, _runs(n) + ("" if n > 1 else ", no error"),
+        return Measure(v, err if finite(err) else NAN, n, _runs_note(n),
                        f"{where} ({fmt_kn(r['k_n'])}, {r['set']})", k_n=r["k_n"])
 
 
@@ -290,13 +300,13 @@ class PerRun:
     label: str = ""
 
     def resolve(self, ctx):
-        s = ctx.sets.get(self.set)
-        if s is None:
-            return missing(self.set, f"set {self.set} not collected")
+        s, gone = ctx.set_or_missing(self.set, self.label or self.set)
+        if gone:
+            return gone
         m, e, n = mean_sem([self.fn(r.s) for r in s.runs])
         if not n:
             return missing(self.label or self.set, "not in its summaries")
-        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), self.label or self.set,
+        return Measure(m, e, n, _runs_note(n), self.label or self.set,
                        k_n=s.p("k_n"))
 
 
@@ -311,10 +321,10 @@ class Count:
     label: str = ""
 
     def resolve(self, ctx):
-        s = ctx.sets.get(self.set)
         where = self.label or self.set
-        if s is None:
-            return missing(where, f"set {self.set} not collected")
+        s, gone = ctx.set_or_missing(self.set, where)
+        if gone:
+            return gone
         k = total = 0
         for r in s.runs:
             pz, nb = r.s.get("P_z") or [], r.s.get("n_bulk")
@@ -344,7 +354,7 @@ class Ext:
         m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), _count(row.get("n_seeds"))
         if not finite(m):
             return missing(where, f"no {self.q}")
-        return Measure(m, e, n, _runs(n) + ("" if n > 1 else ", no error"), where, k_n=_f(row.get("k_n")))
+        return Measure(m, e, n, _runs_note(n), where, k_n=_f(row.get("k_n")))
 
 
 @dataclass
@@ -370,6 +380,10 @@ class ExtFit:
                         f"{self.label or os.path.basename(os.path.normpath(self.results))} {self.kind}",
                         lambda sid: ext_id(self.results, sid))
         return m
+
+    def with_part(self, part):
+        """This fit's other part ``part`` (another law kept in the same entry, such as a claim's rival)."""
+        return dataclasses.replace(self, fixed=False, part=part)
 
 
 @dataclass
@@ -508,6 +522,11 @@ class Context:
         self.out = out
         self.inputs = list(inputs)
         self._ext = {}
+
+    def set_or_missing(self, sid, where):
+        """``(set, None)`` for a collected set id, else ``(None, a Measure saying it was not collected)``."""
+        s = self.sets.get(sid)
+        return (s, None) if s is not None else (None, missing(where, f"set {sid} not collected"))
 
     def n_runs_of(self, sid):
         s = self.sets.get(sid)
