@@ -713,3 +713,43 @@ def test_a_piles_local_exponent_is_read_from_three_rungs_a_decade_apart():
     assert [x["k_n"][0] for x in loc] == [2e5, 2e6]          # pile 2 has no three rungs
     assert math.isclose(loc[0]["alpha_n"], 0.5, rel_tol=1e-9)
     assert loc[1]["alpha_n"] > 0.5                            # a 2e8 rung left high steepens the upper triple
+
+
+def test_a_piles_exponent_change_is_zero_for_one_law_and_its_error_is_the_propagated_noise():
+    law = lambda k, a=0.5: 6.0 + 0.13 * (k / 2e5) ** -a   # noqa: E731
+    ks = (2e5, 2e6, 2e7, 2e8)
+    one = [(k, law(k), (1, 1)) for k in ks] + [(k, law(k) + 0.003, (2, 2)) for k in ks]
+    b = ladder.exponent_change(one, 1e-4, 6)
+    assert b["status"] == "fitted" and b["n_piles"] == 2 and b["n_runs"] == 8
+    assert abs(b["change"]) < 1e-9 and math.isclose(b["low"], 0.5) and math.isclose(b["high"], 0.5)
+    # a triple's error: var(ln r1 - ln r2) = 2 s^2 / r1^2 + 2 s^2 / r2^2 + 2 s^2 / (r1 r2), z_b shared
+    s, z = 1e-4, [law(k) for k in ks[:3]]
+    r1, r2 = z[0] - z[1], z[1] - z[2]
+    want = s / math.log(10) * math.sqrt(2 / r1 ** 2 + 2 / r2 ** 2 + 2 / (r1 * r2))
+    loc = ladder.local_exponents(one, s)
+    assert math.isclose(loc[0]["alpha_n_err"], want, rel_tol=1e-5)
+    assert all(math.isnan(x["alpha_n_err"]) for x in ladder.local_exponents(one))    # no noise, no error
+    # a 2e8 rung left high steepens the upper triple of that pile alone; the pooled change is their
+    # inverse-variance mean, and a pile of three rungs has no change
+    bent = [(k, law(k) + (0.002 if k == 2e8 else 0.0), (1, 1)) for k in ks] + one[4:] + \
+        [(k, law(k), (3, 3)) for k in ks[:3]]
+    b = ladder.exponent_change(bent, 1e-4, 6)
+    (p1, p2) = b["piles"]
+    assert p1["change"] > 0.05 and abs(p2["change"]) < 1e-9 and b["n_piles"] == 2
+    w1, w2 = p1["change_err"] ** -2, p2["change_err"] ** -2
+    assert math.isclose(b["change"], (w1 * p1["change"] + w2 * p2["change"]) / (w1 + w2))
+    assert math.isclose(b["change_err"], (w1 + w2) ** -0.5)
+    assert b["change_err"] < min(p1["change_err"], p2["change_err"])
+    # what cannot be read says why
+    assert ladder.exponent_change(one[:3], 1e-4)["status"] == "not fitted"
+    assert "noise" in ladder.exponent_change(one, math.nan)["reason"]
+
+
+def test_a_fit_part_over_fewer_runs_than_its_entry_counts_its_own():
+    e = {"family": {"mu": 0.0}, "sets": ["S12", "S27"], "n_runs": 10, "status": "fitted", "alpha_n": 0.5,
+         "alpha_n_err": 0.01, "bend": {"status": "fitted", "change": 0.12, "change_err": 0.05, "n_piles": 2,
+                                       "n_runs": 8}}
+    ctx = src.Context([], {"ladder": [e]})
+    m = src.Fit("ladder", "change", mu=0.0, part="bend").resolve(ctx)
+    assert (m.value, m.err, m.n) == (0.12, 0.05, 8) and "8 runs of 2 piles" in m.count
+    assert src.Fit("ladder", "alpha_n", mu=0.0).resolve(ctx).n == 10

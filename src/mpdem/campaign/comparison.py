@@ -258,6 +258,11 @@ def _widened(x):
     return f", errors × {x['scale']:.3g} (√(χ²/dof))" if x.get("scale", 1.0) > 1.0 else ""
 
 
+def _pile_name(p):
+    """seed S, and its bed where that is not S (a ladder's pile: seed, bed seed, poured k_n)."""
+    return f"seed {p[0]}" + (f" (bed {p[1]})" if p[1] != p[0] else "")
+
+
 def _ladder_lines(e):
     f = e["family"]
     rungs = "; ".join(f"{fmt_kn(r['k_n'])} ({r['set']}, {r['n_runs']} run{'s' if r['n_runs'] > 1 else ''}): z "
@@ -278,11 +283,23 @@ def _ladder_lines(e):
                      f"{fx['chi2']:.3g} for {fx['dof']} dof{_widened(fx)}")
     else:
         line += f"Eq. 7 over its runs: **{e.get('status')}** ({e.get('reason', '')})"
-    loc = [f"seed {x['pile'][0]}" + (f" (bed {x['pile'][1]})" if x["pile"][1] != x["pile"][0] else "")
-           + (f" {x['alpha_n']:.3f}" if math.isfinite(x["alpha_n"]) else " none (z does not fall at both steps)")
+    loc = [_pile_name(x["pile"])
+           + (f" {fmt_pm(x['alpha_n'], x.get('alpha_n_err', NAN))}" if math.isfinite(x["alpha_n"])
+              else " none (z does not fall at both steps)")
            + f" ({fmt_kn(x['k_n'][0])}–{fmt_kn(x['k_n'][2])})" for x in e.get("local_exponents") or []]
     if loc:
-        line += ". Each pile's exponent through three rungs (one power law gives one): " + ", ".join(loc)
+        errs = any(math.isfinite(x.get("alpha_n_err", NAN)) for x in e.get("local_exponents"))
+        line += (". Each pile's exponent through three rungs (one power law gives one"
+                 + ("; errors from a pile's noise from rung to rung" if errs else "") + "): " + ", ".join(loc))
+    bend = e.get("bend") or {}
+    if bend.get("status") == "fitted":
+        each = ", ".join(_pile_name(x["pile"]) + (f" {fmt_pm(x['change'], x['change_err'])}"
+                                                  if math.isfinite(x["change"]) else " none")
+                         for x in bend["piles"])
+        line += (f". The exponent's change from a pile's lowest three rungs to its highest, pooled over "
+                 f"{bend['n_piles']} piles: {fmt_pm(bend['change'], bend['change_err'])} ({each}; the noise from "
+                 f"{bend['s_within_dof']} dof; one power law gives 0); the lowest three rungs' exponent pooled "
+                 f"{fmt_pm(bend['low'], bend['low_err'])}, the highest's {fmt_pm(bend['high'], bend['high_err'])}")
     sm = e.get("set_means") or {}
     if sm.get("status") == "fitted":
         line += (f". The sets' means fitted as if independent: z∞ = {fmt_pm(sm['z_inf'], sm['z_inf_err'], 3)}, "

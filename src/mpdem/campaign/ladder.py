@@ -175,14 +175,20 @@ def total_scatter(points):
     return fits.pooled_scatter(list(groups.values()))
 
 
+def _by_pile(points):
+    """{pile: {k_n: value}} of (k_n, value, pile) points."""
+    by = {}
+    for k, v, p in points:
+        by.setdefault(p, {})[k] = v
+    return by
+
+
 def within_pile_noise(points):
     """A pile's noise from rung to rung: the residual scatter of a two-way table (k_n by pile) of piles
     measured at the same k_n (``fits.two_way_anova``), the complete table with the most residual degrees
     of freedom (a pile that climbed fewer rungs does not cut the others' table short); (s, dof), (nan, 0)
     when no two piles share two k_n."""
-    by = {}
-    for k, v, p in points:
-        by.setdefault(p, {})[k] = v
+    by = _by_pile(points)
     best = None
     for q in by:
         ks = sorted(by[q])
@@ -197,20 +203,84 @@ def within_pile_noise(points):
     return a["scatter"], a["dof"][1]
 
 
-def local_exponents(points):
+def _triple_alpha(z):
+    """eq. 7's exponent through three z a decade apart in k_n: log10((z0 - z1) / (z1 - z2)); nan unless z
+    falls at both steps."""
+    r1, r2 = z[0] - z[1], z[1] - z[2]
+    return math.log10(r1 / r2) if r1 > 0 and r2 > 0 else math.nan
+
+
+def _propagated(f, z, s):
+    """The standard error of ``f(z)`` for z with independent noise ``s`` each (a pile's noise from rung to
+    rung), by the linear propagation of central differences; nan where f is nan or s is not finite."""
+    z = list(z)
+    if not (math.isfinite(s) and s > 0 and math.isfinite(f(z))):
+        return math.nan
+    h = 1e-3 * s
+    grad = [(f(z[:i] + [z[i] + h] + z[i + 1:]) - f(z[:i] + [z[i] - h] + z[i + 1:])) / (2 * h)
+            for i in range(len(z))]
+    return s * math.sqrt(sum(g * g for g in grad))
+
+
+def _triples(d):
+    """The lowest k_n of each three rungs a decade apart in a pile's {k_n: z}."""
+    return [k for k in sorted(d) if 10 * k in d and 100 * k in d]
+
+
+def local_exponents(points, s_within=math.nan):
     """Each pile's eq. 7 exponent through three rungs a decade apart: z_inf drops out of
     (z(k) - z(10 k)) / (z(10 k) - z(100 k)) = 10^alpha_n. One power law gives the same alpha_n for every
-    triple of a pile; list of {'pile', 'k_n' (the three), 'alpha_n'} (nan where z does not fall twice)."""
-    by = {}
-    for k, v, p in points:
-        by.setdefault(p, {})[k] = v
+    triple of a pile; list of {'pile', 'k_n' (the three), 'alpha_n' (nan where z does not fall twice),
+    'alpha_n_err'} (the error from ``s_within``, a pile's noise from rung to rung; nan without it)."""
     out = []
-    for p, d in by.items():
-        for k in sorted(d):
-            if 10 * k in d and 100 * k in d:
-                r1, r2 = d[k] - d[10 * k], d[10 * k] - d[100 * k]
-                a = math.log10(r1 / r2) if r1 > 0 and r2 > 0 else math.nan
-                out.append({"pile": list(p), "k_n": [k, 10 * k, 100 * k], "alpha_n": a})
+    for p, d in _by_pile(points).items():
+        for k in _triples(d):
+            z = [d[k], d[10 * k], d[100 * k]]
+            out.append({"pile": list(p), "k_n": [k, 10 * k, 100 * k], "alpha_n": _triple_alpha(z),
+                        "alpha_n_err": _propagated(_triple_alpha, z, s_within)})
+    return out
+
+
+def exponent_change(points, s_within, s_within_dof=0):
+    """Does eq. 7 hold with one exponent over a ladder's rungs? Each pile's exponent through its highest
+    three rungs a decade apart minus through its lowest (``local_exponents``), their shared rungs' noise
+    propagated (``s_within`` for each z), pooled over the piles with inverse-variance weights. One power
+    law gives 0. {'status': 'fitted', 'change', 'low', 'high' (the exponent through the lowest and the
+    highest three rungs, pooled alike), each with its '_err', 'n_piles', 'n_runs', 'piles' [{'pile', 'k_n'
+    (lowest rungs of the two triples), 'n_rungs', 'change', 'low', 'high', each with its '_err'}], 's_within',
+    's_within_dof'}, or status 'not fitted' with a reason (no pile with two triples, no noise, z not falling)."""
+    rows = []
+    for p, d in _by_pile(points).items():
+        ks = _triples(d)
+        if len(ks) < 2:
+            continue
+        lo, hi = ks[0], ks[-1]
+        rungs = sorted({lo, 10 * lo, 100 * lo, hi, 10 * hi, 100 * hi})
+        at = {k: i for i, k in enumerate(rungs)}
+
+        def change(z, lo=lo, hi=hi, at=at):
+            return _triple_alpha([z[at[hi]], z[at[10 * hi]], z[at[100 * hi]]]) - \
+                _triple_alpha([z[at[lo]], z[at[10 * lo]], z[at[100 * lo]]])
+
+        z = [d[k] for k in rungs]
+        ends = {}
+        for end, k in (("low", lo), ("high", hi)):
+            zz = [d[k], d[10 * k], d[100 * k]]
+            ends.update({end: _triple_alpha(zz), f"{end}_err": _propagated(_triple_alpha, zz, s_within)})
+        rows.append({"pile": list(p), "k_n": [lo, hi], "n_rungs": len(rungs), "change": change(z),
+                     "change_err": _propagated(change, z, s_within), **ends})
+    base = {"piles": rows, "s_within": s_within, "s_within_dof": s_within_dof}
+    if not rows:
+        return dict(base, status="not fitted", reason="no pile climbed four rungs a decade apart")
+    if not (math.isfinite(s_within) and s_within > 0):
+        return dict(base, status="not fitted", reason="no noise from rung to rung measured")
+    good = [r for r in rows if math.isfinite(r["change"]) and math.isfinite(r["change_err"]) and r["change_err"] > 0]
+    if not good:
+        return dict(base, status="not fitted", reason="z does not fall at every step of a pile's rungs")
+    out = dict(base, status="fitted", n_piles=len(good), n_runs=sum(r["n_rungs"] for r in good))
+    for key in ("change", "low", "high"):
+        w = [1 / r[f"{key}_err"] ** 2 for r in good]
+        out.update({key: sum(wi * r[key] for wi, r in zip(w, good)) / sum(w), f"{key}_err": 1 / math.sqrt(sum(w))})
     return out
 
 
@@ -219,7 +289,8 @@ def fit_piles(fam, points):
     paper's 1/4 with friction), or status "not fitted" with why."""
     s_tot, dof_tot = total_scatter(points)
     s_w, dof_w = within_pile_noise(points)
-    e = {"s_total_dof": dof_tot, "s_within_dof": dof_w, "local_exponents": local_exponents(points)}
+    e = {"s_total_dof": dof_tot, "s_within_dof": dof_w, "local_exponents": local_exponents(points, s_w),
+         "bend": exponent_change(points, s_w, dof_w)}
     if not (math.isfinite(s_tot) and s_tot > 0):
         return dict(e, status="not fitted", reason="no two independent piles at one k_n: no seed scatter")
     if not (math.isfinite(s_w) and s_w > 0):

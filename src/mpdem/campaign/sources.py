@@ -248,6 +248,7 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
     f = (e.get(part) or {}) if part else e
     if part and key not in f:
         return missing(where, f.get("reason") or e.get("reason") or "not fitted", "not determined")
+    n = f.get("n_runs") or n            # a part over fewer runs than its entry (a ladder's 'bend') says so
     if f.get("status", "fitted") != "fitted" or f.get("determined") is False:
         return missing(where, f.get("reason") or f.get("status", ""), "not determined")
     v, err = f.get(key), f.get(f"{key}_err")
