@@ -753,3 +753,17 @@ def test_a_fit_part_over_fewer_runs_than_its_entry_counts_its_own():
     m = src.Fit("ladder", "change", mu=0.0, part="bend").resolve(ctx)
     assert (m.value, m.err, m.n) == (0.12, 0.05, 8) and "8 runs of 2 piles" in m.count
     assert src.Fit("ladder", "alpha_n", mu=0.0).resolve(ctx).n == 10
+
+
+def test_a_difference_of_two_one_run_windows_says_once_where_both_errors_come_from():
+    nan = float("nan")
+    win = [{"set": s, "window": "10-30", "quantity": "z", "mean": v, "pooled_sem": 0.007, "jackknife": nan,
+            "n_seeds": 1} for s, v in (("S30", 4.541), ("S35", 4.763))]
+    win.append({"set": "S15", "window": "10-30", "quantity": "z", "mean": 4.842, "pooled_sem": 0.004,
+                "jackknife": 0.006, "n_seeds": 3})
+    ctx = src.Context([], {}, win)
+    m = src.Diff(src.Window("S30", "10-30"), src.Window("S35", "10-30")).resolve(ctx)
+    assert math.isclose(m.value, 4.541 - 4.763) and math.isclose(m.err, 0.007 * math.sqrt(2))
+    assert m.count == "1 + 1 runs; each side's 1 run with the seed scatter pooled over its N and μ's sets"
+    one = src.Diff(src.Window("S30", "10-30"), src.Window("S15", "10-30")).resolve(ctx)
+    assert one.count == "1 + 3 runs; its 1 run with the seed scatter pooled over its N and μ's sets"

@@ -352,10 +352,12 @@ CLAIMS = [
                 "2e6, μ = 0.5", "differ (Sec. III E)", "nonzero",
           ours=[Diff(Rung(0.5, "z", 2e6), Find("z", {"mu": 0.5, **PAPER20K, "k_n": 2e6},
                                                        label="poured 2e6"))],
-          also=[Diff(Ext(LADDER_DEV, "S07", label="N 2000 stiffened"), Ext(LADDER_DEV, "S06", label="poured")),
+          also=[Diff(Window("S30", "10-30"), Window("S35", "10-30"), "10–30 d"),
+                Diff(Ext(LADDER_DEV, "S07", label="N 2000 stiffened"), Ext(LADDER_DEV, "S06", label="poured")),
                 Diff(Ext(LADDER_DEV, "S11", label="N 2000 stiffened 2e7"), Ext(LADDER_DEV, "S10", label="poured"))],
-          note="N = 2000: one ladder (seed 4) against one or two poured seeds; the paper-size ladder at μ = 0.5 "
-               "and piles poured at 2e6 are to settle it"),
+          note="paper size: one stiffened pile (seed 1's ladder) against one pour (seed 1; seed 2's running); on "
+               "the 10–30 d window each one-run side takes the seed scatter pooled over the paper-size μ = 0.5 "
+               "sets; N = 2000: one ladder (seed 4) against one or two poured seeds"),
     Claim("26b", "at μ = 0 they commute: z stiffened − z poured at 2e6", "equal", "compare", 0.0, None,
           tolerance=NO_NUMBER.format(w="commute"),
           ours=[Diff(Rung(0.0, "z", 2e6), S("S17"))],

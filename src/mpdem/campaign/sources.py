@@ -161,7 +161,10 @@ class Diff:
                 # the contrast's pooled scatter, not the other side's alone
                 lent = "; its 1 run with the sets' pooled seed scatter" if lent else ""
         if not lent and (ma.borrowed or mb.borrowed):
-            lent = "; " + "; ".join(x.borrowed for x in (ma, mb) if x.borrowed)
+            if ma.borrowed == mb.borrowed:      # both sides one run, their error from the same place
+                lent = "; each side's " + ma.borrowed.removeprefix("its ")
+            else:
+                lent = "; " + "; ".join(x.borrowed for x in (ma, mb) if x.borrowed)
         return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs" + lent, where, k_n=ma.k_n)
 
 
