@@ -319,14 +319,15 @@ CLAIMS = [
           tolerance="the paper writes α_f ≈ −1/4, no error; read as 0.25 to two digits, the strictest reading "
                     "(a looser one could only widen what counts as reproduced)",
           ours=[ExtFit(DEV, "eq7", "alpha_n", "S20", label="N 2000 [0.5, 0.88] poured, eq. 7 free")],
-          also=[ExtFit(DEV, "eq7", "alpha_n", "S38", label="N 2000 [0.5, 0.5]"),
+          also=[Fit("eq7", "alpha_n", "S15", label="paper size [0.5, 0.88] poured"),
+                ExtFit(DEV, "eq7", "alpha_n", "S38", label="N 2000 [0.5, 0.5]"),
                 ExtFit(DEV, "eq7", "alpha_n", "S06", label="N 2000 [0.5, 0.26]"),
                 Fit("ladder", "alpha_n", mu=0.5, label=STIFFENED),
                 Fit("ladder", "alpha_n", mu=0.5, part="set_means", label=f"{STIFFENED}, {MEANS}")],
           rival=RIVAL_FRICTIONLESS,
           note="the paper pours each k_n (docs/model.md 6.6); with friction a stiffened pile is another packing "
-               "(row 26), so the paper-size stiffening ladder stands beside, not in its place; N = 2000 poured "
-               "families only"),
+               "(row 26), so the paper-size stiffening ladder stands beside, not in its place; the paper-size poured "
+               "family (beside: 2e5 and 2e6 so far, a 2e7 pour queued) is fitted once it has the k_n"),
     Claim("24", "frictional z_∞ > 4 ([0.5, 0.88], α_n = 1/4 fixed)", "> 4", "bound", 4.0,
           ours=[_frictional_z_inf("S20", "N 2000 poured")],
           also=[_frictional_z_inf("S38", "N 2000 [0.5, 0.5]"), _frictional_z_inf("S06", "N 2000 [0.5, 0.26]"),
