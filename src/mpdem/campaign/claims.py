@@ -295,9 +295,10 @@ CLAIMS = [
                "10^α_n, z_∞ dropping out; the errors from a pile's noise from rung to rung, measured on few "
                "degrees of freedom (Fig. 7's ladder line), so themselves uncertain",
           if_differs=("open", "the rise sits in the step from 2e7 to 2e8, a few thousandths of z: a 2e8 rung left "
-                              "high by that much would make it, but seed 1's 2e8 rung, settled further, kept its z "
-                              "(NOTES.md, 2026-11-29); the paper's own rungs reach 2e9, where this work has none "
-                              "(a GPU's run): whether the steepening goes on is not known")),
+                              "high by that much would make it, but both piles' 2e8 rungs, settled further with a "
+                              "100 times stricter stop, kept their z (NOTES.md, 2026-11-29); the paper's own "
+                              "rungs reach 2e9, where this work has none (a GPU's run): whether the steepening "
+                              "goes on is not known")),
     Claim("21", "eq. 8: α_n = 1 − α, μ = 0 (α_n − (1 − α))", "0.498 against 0.48 ± 0.03", "compare", 0.0, 0.03,
           tolerance="the paper's own α_n and 1 − α differ by 0.018, within its α error 0.03",
           ours=[Diff(Fit("ladder", "alpha_n", mu=0.0), OneMinus(S("S12", "alpha")))],
