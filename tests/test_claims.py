@@ -740,6 +740,11 @@ def test_a_piles_exponent_change_is_zero_for_one_law_and_its_error_is_the_propag
     assert math.isclose(b["change"], (w1 * p1["change"] + w2 * p2["change"]) / (w1 + w2))
     assert math.isclose(b["change_err"], (w1 + w2) ** -0.5)
     assert b["change_err"] < min(p1["change_err"], p2["change_err"])
+    # the noise measured on 6 dof: Student's t gives a larger p than the normal reading of the same ratio
+    r = b["change"] / b["change_err"]
+    assert math.isclose(b["p_normal"], math.erfc(r / math.sqrt(2)), rel_tol=1e-9)
+    assert b["p_student"] > b["p_normal"]
+    assert math.isnan(ladder.exponent_change(bent, 1e-4, 0)["p_student"])
     # what cannot be read says why
     assert ladder.exponent_change(one[:3], 1e-4)["status"] == "not fitted"
     assert "noise" in ladder.exponent_change(one, math.nan)["reason"]

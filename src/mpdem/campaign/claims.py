@@ -282,10 +282,10 @@ CLAIMS = [
                 Fit("ladder", "high", mu=0.0, part="bend", label=HIGHEST_RUNGS),
                 ExtFit(DEV, "eq7", "alpha_n", "S15", label="N 2000 eq. 7 free")],
           note=LADDER_NOTE,
-          if_differs=("open", "the exponent comes from how each pile changes from rung to rung, and it is not one "
-                              "number over the rungs: through each pile's lowest three rungs it is the paper's, "
-                              "through its highest it is larger (beside; row 20b), so the one α_n of eq. 7 over "
-                              "2e5–2e8 lies between them")),
+          if_differs=("open", "the exponent comes from how each pile changes from rung to rung: through each "
+                              "pile's lowest three rungs it is the paper's, through its highest it is larger in "
+                              "both piles (beside), so the one α_n of eq. 7 over 2e5–2e8 may lie between them; how "
+                              "sure that rise is rests on noise measured on a few dof (row 20b)")),
     Claim("20b", "eq. 7 is one power law over k_n, μ = 0: the exponent through a pile's highest three rungs − "
                  "through its lowest", "one α_n over 2e5–2e9 (Fig. 7a)", "compare", 0.0, None,
           tolerance=NO_NUMBER.format(w="one α_n"),
@@ -293,7 +293,9 @@ CLAIMS = [
           also=[ExtFit(LADDER_DEV, "ladder", "change", "S02", part="bend", label="N 2000")],
           note="each pile's exponent through three rungs a decade apart, (z(k) − z(10k)) / (z(10k) − z(100k)) = "
                "10^α_n, z_∞ dropping out; the errors from a pile's noise from rung to rung, measured on few "
-               "degrees of freedom (Fig. 7's ladder line), so themselves uncertain",
+               "degrees of freedom, so themselves uncertain: Fig. 7's ladder line gives the change's p against "
+               "Student's t on them beside the normal reading the rule uses; the two-way table that measures the "
+               "noise cannot see an error common to both piles at one rung",
           if_differs=("open", "the rise sits in the step from 2e7 to 2e8, a few thousandths of z: a 2e8 rung left "
                               "high by that much would make it, but both piles' 2e8 rungs, settled further with a "
                               "100 times stricter stop, kept their z (NOTES.md, 2026-11-29); the paper's own "

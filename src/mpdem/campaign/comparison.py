@@ -298,7 +298,9 @@ def _ladder_lines(e):
                          for x in bend["piles"])
         line += (f". The exponent's change from a pile's lowest three rungs to its highest, pooled over "
                  f"{bend['n_piles']} piles: {fmt_pm(bend['change'], bend['change_err'])} ({each}; the noise from "
-                 f"{bend['s_within_dof']} dof; one power law gives 0); the lowest three rungs' exponent pooled "
+                 f"{bend['s_within_dof']} dof; one power law gives 0; two-sided p = {bend['p_normal']:.2g} with that "
+                 f"noise known, {bend.get('p_student', NAN):.2g} against Student's t on its dof, the noise itself "
+                 f"measured); the lowest three rungs' exponent pooled "
                  f"{fmt_pm(bend['low'], bend['low_err'])}, the highest's {fmt_pm(bend['high'], bend['high_err'])}")
     sm = e.get("set_means") or {}
     if sm.get("status") == "fitted":

@@ -22,6 +22,7 @@ import tomllib
 import warnings
 
 import numpy as np
+from scipy.stats import norm, t as t_dist
 
 from ..analysis import fits
 from . import paper
@@ -248,7 +249,9 @@ def exponent_change(points, s_within, s_within_dof=0):
     law gives 0. {'status': 'fitted', 'change', 'low', 'high' (the exponent through the lowest and the
     highest three rungs, pooled alike), each with its '_err', 'n_piles', 'n_runs', 'piles' [{'pile', 'k_n'
     (lowest rungs of the two triples), 'n_rungs', 'change', 'low', 'high', each with its '_err'}], 's_within',
-    's_within_dof'}, or status 'not fitted' with a reason (no pile with two triples, no noise, z not falling)."""
+    's_within_dof', 'p_normal' and 'p_student' (the change's two-sided p against 0, the noise taken as known,
+    and against Student's t on s_within_dof, the noise being measured)}, or status 'not fitted' with a reason
+    (no pile with two triples, no noise, z not falling)."""
     rows = []
     for p, d in _by_pile(points).items():
         ks = _triples(d)
@@ -281,6 +284,10 @@ def exponent_change(points, s_within, s_within_dof=0):
     for key in ("change", "low", "high"):
         w = [1 / r[f"{key}_err"] ** 2 for r in good]
         out.update({key: sum(wi * r[key] for wi, r in zip(w, good)) / sum(w), f"{key}_err": 1 / math.sqrt(sum(w))})
+    # the error scales with s_within, itself measured on s_within_dof: Student's t beside the normal reading
+    ratio = abs(out["change"]) / out["change_err"]
+    out["p_normal"] = float(2 * norm.sf(ratio))
+    out["p_student"] = float(2 * t_dist.sf(ratio, s_within_dof)) if s_within_dof >= 1 else math.nan
     return out
 
 
