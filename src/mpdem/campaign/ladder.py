@@ -228,6 +228,12 @@ def _triples(d):
     return [k for k in sorted(d) if 10 * k in d and 100 * k in d]
 
 
+def _triple(d, k, s_within):
+    """(alpha_n, its error) through a pile's rungs k, 10 k, 100 k of {k_n: z}."""
+    z = [d[k], d[10 * k], d[100 * k]]
+    return _triple_alpha(z), _propagated(_triple_alpha, z, s_within)
+
+
 def local_exponents(points, s_within=math.nan):
     """Each pile's eq. 7 exponent through three rungs a decade apart: z_inf drops out of
     (z(k) - z(10 k)) / (z(10 k) - z(100 k)) = 10^alpha_n. One power law gives the same alpha_n for every
@@ -236,9 +242,8 @@ def local_exponents(points, s_within=math.nan):
     out = []
     for p, d in _by_pile(points).items():
         for k in _triples(d):
-            z = [d[k], d[10 * k], d[100 * k]]
-            out.append({"pile": list(p), "k_n": [k, 10 * k, 100 * k], "alpha_n": _triple_alpha(z),
-                        "alpha_n_err": _propagated(_triple_alpha, z, s_within)})
+            a, err = _triple(d, k, s_within)
+            out.append({"pile": list(p), "k_n": [k, 10 * k, 100 * k], "alpha_n": a, "alpha_n_err": err})
     return out
 
 
@@ -268,8 +273,7 @@ def exponent_change(points, s_within, s_within_dof=0):
         z = [d[k] for k in rungs]
         ends = {}
         for end, k in (("low", lo), ("high", hi)):
-            zz = [d[k], d[10 * k], d[100 * k]]
-            ends.update({end: _triple_alpha(zz), f"{end}_err": _propagated(_triple_alpha, zz, s_within)})
+            ends[end], ends[f"{end}_err"] = _triple(d, k, s_within)
         rows.append({"pile": list(p), "k_n": [lo, hi], "n_rungs": len(rungs), "change": change(z),
                      "change_err": _propagated(change, z, s_within), **ends})
     base = {"piles": rows, "s_within": s_within, "s_within_dof": s_within_dof}

@@ -47,7 +47,7 @@ class Measure:
     k_n: float = NAN
     assumption: str = ""                        # what the number rests on (``Assumes``)
     alts: list = field(default_factory=list)    # [(label, Measure)]: the same made with each alternative
-    borrowed: str = ""                          # where a value of one run takes its error from, in words
+    borrowed: str = ""                          # where a value of one run takes its error from ("1 run with …")
     source: object = None                       # the source that made it (a test's rival part: ``claimtable``)
 
     @property
@@ -135,7 +135,7 @@ class Window:
         why = ("the seed scatter pooled over its N and μ's sets" if pooled else "the jackknife over its columns") \
             if n == 1 else ""
         return Measure(r["mean"], err, n, _runs(n) + (f", its error {why}" if why else ""), where,
-                       borrowed=f"its 1 run with {why}" if why else "")
+                       borrowed=f"1 run with {why}" if why else "")
 
 
 @dataclass
@@ -162,9 +162,9 @@ class Diff:
                 lent = "; its 1 run with the sets' pooled seed scatter" if lent else ""
         if not lent and (ma.borrowed or mb.borrowed):
             if ma.borrowed == mb.borrowed:      # both sides one run, their error from the same place
-                lent = "; each side's " + ma.borrowed.removeprefix("its ")
+                lent = "; each side's " + ma.borrowed
             else:
-                lent = "; " + "; ".join(x.borrowed for x in (ma, mb) if x.borrowed)
+                lent = "; " + "; ".join("its " + x.borrowed for x in (ma, mb) if x.borrowed)
         return Measure(ma.value - mb.value, err, ma.n + mb.n, f"{ma.n} + {mb.n} runs" + lent, where, k_n=ma.k_n)
 
 
