@@ -29,10 +29,11 @@ JOB_LIST=(
   "ladder-mu0-s2-2e7|rows 19-22: the second mu = 0 ladder's 2e7 rung|job_l0s2_2e7|"
   "ladder-mu0-s2-2e8|rows 19-22: the second mu = 0 ladder's 2e8 rung (does eq. 7 bend by 2e8?)|job_l0s2_2e8|ladder-mu0-s2-2e7"
   "ladder-hooke-dev|row 34: the Hookean ladders at N = 2000 from the same seeds' poured piles, to 2e8: the same protocol as the Hertzian ones|job_hooke_dev|"
-  "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2 (the row's other side is the ladder's 2e6 rung); then row 23 at paper size: seed 1 poured at 2e7|job_stiff05|"
-  "flow|rows 38-38d: the flow arrest kept on the incline (a second seed at 18 degrees, then 16), beside the levelled one|job_flow|"
+  "stiff-friction|row 26: piles poured at 2e6 with friction, seeds 1 and 2 (the row's other side is the ladder's 2e6 rung)|job_stiff05|"
   "ladder-mu0.5-s1|rows 23-25 beside (with friction a stiffened pile is another protocol than the paper's pours): the mu = 0.5 ladder of seed 1 to 2e8|job_l05s1|"
   "ladder-mu0.5-s2|row 26's second stiffened seed (its 2e6 rung), rows 23-25 beside: the second mu = 0.5 ladder (its pour at 2e5 first)|job_l05s2|"
+  "flow|rows 38-38d: the flow arrest kept on the incline (a second seed at 18 degrees, then 16), beside the levelled one|job_flow|"
+  "stiff-2e7|row 23 at paper size: seed 1 poured at 2e7 with friction|job_stiff05_2e7|"
   "friction-seeds|rows 7, 7b, 8, 12: second seeds of mu = 0.1 and 1|job_size_d|"
   "strict|row 1: the stricter stop (E_stop = 1e-10) on seeds 2 and 3|job_strict|"
   "mu10-and-mu0-s4|rows 1, 9: a fourth mu = 0 seed, and mu = 10|job_size_c|"
@@ -65,6 +66,7 @@ job_hertz() { CAP_FACTOR=4 dev_ladders _hertz _modelhertz 2e6; }
 job_hertz_top() { CAP_FACTOR=4 dev_ladders _hertz _modelhertz 2e7 2e8; }
 job_hooke_dev() { dev_ladders "" "" 2e6 2e7 2e8; }
 job_stiff05() { sweep size-stiff-friction.tsv size.toml size; }
+job_stiff05_2e7() { sweep size-stiff-2e7.tsv size.toml size; }
 job_l05s2() { STOP_ENERGY=translational ladder 0.5 2 "$R/ladder-size/mu0.5_s2" 2e8; }
 job_l0s2_2e8() { from0s2 2e8; }
 job_strict() { sweep size-strict.tsv size.toml size; }
