@@ -617,6 +617,9 @@ def test_within_pile_noise_is_the_residual_of_the_piles_on_their_common_rungs():
     assert math.isnan(one) and none == 0
     tot, tdof = ladder.total_scatter(pts)
     assert tdof == 2 and math.isclose(tot, float(np.std([6.13, 6.126, 6.14], ddof=1)))
+    # one pile measured twice at one rung would count twice in the noise and the exponents: refused
+    with pytest.raises(ValueError, match=r"pile \(1, 1\) has two runs at k_n = 2e\+06"):
+        ladder.within_pile_noise(pts + [(2e6, 6.051, (1, 1))])
 
 
 # ---------------------------------------------------------------- the claims themselves

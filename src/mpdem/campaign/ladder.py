@@ -177,10 +177,15 @@ def total_scatter(points):
 
 
 def _by_pile(points):
-    """{pile: {k_n: value}} of (k_n, value, pile) points."""
+    """{pile: {k_n: value}} of (k_n, value, pile) points. A pile has one run at a k_n (``collect.group``
+    keeps one run of a seed in a set, and a ladder has one set at each k_n): a second is an error, not a
+    value to keep or average."""
     by = {}
     for k, v, p in points:
-        by.setdefault(p, {})[k] = v
+        d = by.setdefault(p, {})
+        if k in d:
+            raise ValueError(f"pile {p} has two runs at k_n = {k:g}: one pile at one rung counts once")
+        d[k] = v
     return by
 
 
