@@ -748,6 +748,17 @@ def test_a_piles_exponent_change_is_zero_for_one_law_and_its_error_is_the_propag
     assert math.isclose(b["p_normal"], math.erfc(r / math.sqrt(2)), rel_tol=1e-9)
     assert b["p_student"] > b["p_normal"]
     assert math.isnan(ladder.exponent_change(bent, 1e-4, 0)["p_student"])
+    # a pile whose z rises at a step has no exponent there: it is left out of the pooling, and the ladder
+    # line says so beside the pile that counts
+    risen = [(k, law(k) + (0.02 if k == 2e8 else 0.0), (3, 3)) for k in ks] + one[4:]
+    b = ladder.exponent_change(risen, 1e-4, 6)
+    assert b["n_piles"] == 1 and b["n_runs"] == 4 and abs(b["change"]) < 1e-9
+    assert math.isnan(b["piles"][0]["change"])
+    from mpdem.campaign import comparison
+    e = {"family": {"mu": 0.0, "epsilon": 0.88, "N": 20000}, "base": "S12", "rungs": [], "status": "not fitted",
+         "reason": "r", "bend": b}
+    line = comparison._ladder_lines(e)
+    assert "seed 3 left out (z does not fall at every step)" in line and "pooled over 1 of 2 piles" in line
     # what cannot be read says why
     assert ladder.exponent_change(one[:3], 1e-4)["status"] == "not fitted"
     assert "noise" in ladder.exponent_change(one, math.nan)["reason"]

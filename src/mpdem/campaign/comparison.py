@@ -294,10 +294,13 @@ def _ladder_lines(e):
     bend = e.get("bend") or {}
     if bend.get("status") == "fitted":
         each = ", ".join(_pile_name(x["pile"]) + (f" {fmt_pm(x['change'], x['change_err'])}"
-                                                  if math.isfinite(x["change"]) else " none")
+                                                  if math.isfinite(x["change"])
+                                                  else " left out (z does not fall at every step)")
                          for x in bend["piles"])
+        n, of = bend["n_piles"], len(bend["piles"])
+        over = f"{n if n == of else f'{n} of {of}'} pile{'s' if of > 1 else ''}"
         line += (f". The exponent's change from a pile's lowest three rungs to its highest, pooled over "
-                 f"{bend['n_piles']} piles: {fmt_pm(bend['change'], bend['change_err'])} ({each}; the noise from "
+                 f"{over}: {fmt_pm(bend['change'], bend['change_err'])} ({each}; the noise from "
                  f"{bend['s_within_dof']} dof; one power law gives 0; two-sided p = {bend['p_normal']:.2g} with that "
                  f"noise known, {bend.get('p_student', NAN):.2g} against Student's t on its dof, the noise itself "
                  f"measured); the lowest three rungs' exponent pooled "
