@@ -418,6 +418,42 @@ def test_a_value_that_rests_on_an_assumed_choice_is_not_determined_where_an_alte
     assert u.kind == "not determined" and "with 2/3: not measured (no part)" in u.why
     # a primary without a number keeps its own status
     assert src.Assumes(Fixed(src.missing("w", "no set")), "x", [("1/3", ms(0.1))]).resolve(None).alts == []
+    # an alternative of another kind (a fit's p beside a value): judged by its own kind, its p named once
+    mixed = src.Assumes(ms(0.1), "the change", [("the fit", Fixed(src.Measure(0.33, math.nan, 4, "4 runs", "f")),
+                                                  "test")]).resolve(None)
+    x = ct.judge(c, mixed)
+    assert x.kind == "not determined"
+    assert x.why == "it rests on the change: with it differs by +0.100 (10.0 σ); with the fit: reproduced; p = 0.33"
+    rejected = src.Assumes(ms(0.1), "the change", [("the fit", Fixed(src.Measure(0.01, math.nan, 4, "4 runs", "f")),
+                                                    "test")]).resolve(None)
+    y = ct.judge(c, rejected)
+    assert y.kind == "differs" and y.why == "the same with the fit (p = 0.01) in place of the change"
+
+
+def test_a_paper_error_read_two_ways_judges_each_number_against_both():
+    """``Claim.err_alternatives``: every measure of the row (the judged one and those beside) is judged against
+    the paper's error and each other reading its text allows; a verdict that changes is not determined."""
+    c = _claim(value=6.024, paper_err=0.02, err_alternatives=(("±0.002", 0.002),), err_assumption="±0.02")
+    near, far = (src.Measure(v, 0.0024, 2, "2 runs", "w") for v in (6.023, 6.0173))
+    assert ct.judge(c, near).kind == "reproduced" and "the same with ±0.002 (0.3 σ) in place of ±0.02" in \
+        ct.judge(c, near).why
+    v = ct.judge(c, far)
+    assert v.kind == "not determined"
+    assert v.why == "it rests on ±0.02: with it reproduced (0.3 σ); with ±0.002: differs by -0.0067 (2.1 σ)"
+    # a claim without other readings is judged once, as before
+    assert ct.judge(_claim(value=6.024, paper_err=0.02), far).kind == "reproduced"
+
+
+def test_alpha_on_the_default_window_is_judged_on_both_decades_with_the_same_window_on_both_sides():
+    a = claims._alpha("S17", diff_with="S12")
+    assert a.assumption == claims.ALPHA_DEFAULT
+    assert a.src == src.Diff(src.S("S17", "alpha"), src.S("S12", "alpha"))
+    assert [(label, alt) for label, alt in a.alternatives] == [
+        (label, src.Diff(src.AlphaWindow("S17", lo), src.AlphaWindow("S12", lo))) for label, lo in claims.ALPHA_DECADES]
+    one = claims._alpha("S12", one_minus=True)
+    assert one.src == src.OneMinus(src.S("S12", "alpha"))
+    assert [alt for _, alt in one.alternatives] == [src.OneMinus(src.AlphaWindow("S12", lo))
+                                                    for _, lo in claims.ALPHA_DECADES]
 
 
 def test_eq7_over_the_runs_of_piles_follows_each_piles_change_not_its_offset():
@@ -574,8 +610,8 @@ def test_row_34_reads_its_alternative_exponents_from_the_committed_ladder_fits()
     c = next(c for c in claims.CLAIMS if c.id == "34")
     a = next(x for x in c.ours if isinstance(x, src.Assumes))
     m = a.resolve(src.Context([], {}, [], str(ROOT / "analysis/results/paper")))
-    assert m.ok and len(m.alts) == 2 and all(am.ok and am.value != m.value for _, am in m.alts)
-    assert [label for label, _ in m.alts] == ["1/3 for both", "2/3 for both"]
+    assert m.ok and len(m.alts) == 2 and all(am.ok and am.value != m.value for _, am, _ in m.alts)
+    assert [label for label, *_ in m.alts] == ["1/3 for both", "2/3 for both"]
     for x in ("19", "27"):              # the Hookean overlap fit that stands in for eq. 7 rests on it too
         row = next(c for c in claims.CLAIMS if c.id == x)
         assert isinstance(row.ours[1], src.Assumes) and len(row.ours[1].alternatives) == 2
@@ -786,3 +822,17 @@ def test_a_difference_of_two_one_run_windows_says_once_where_both_errors_come_fr
     assert m.count == "1 + 1 runs; each side's 1 run with the seed scatter pooled over its N and μ's sets"
     one = src.Diff(src.Window("S30", "10-30"), src.Window("S15", "10-30")).resolve(ctx)
     assert one.count == "1 + 3 runs; its 1 run with the seed scatter pooled over its N and μ's sets"
+
+
+def test_a_collapse_test_reads_one_quantity_or_all_of_them_at_once(tmp_path):
+    """``sources.ExtTest``: a quantity's p, or with ``ALL_QUANTITIES`` the family's Bonferroni p."""
+    other = tmp_path / "dev"
+    other.mkdir()
+    e = {"sets": ["S23", "S24"], "n_seeds": [3, 3], "p_min": 0.017, "p_bonferroni": 0.084,
+         "quantities": {"ratio_mean": {"p": 0.073}}}
+    (other / "fits.json").write_text(json.dumps({"ratio": [e]}))
+    ctx = src.Context([], {}, out=str(tmp_path))
+    one = src.ExtTest("dev", "ratio", "S24", "ratio_mean").resolve(ctx)
+    every = src.ExtTest("dev", "ratio", "S24", src.ALL_QUANTITIES).resolve(ctx)
+    assert (one.value, every.value, every.n) == (0.073, 0.084, 6)
+    assert src.ExtTest("dev", "ratio", "S99", src.ALL_QUANTITIES).resolve(ctx).status == "not measured"

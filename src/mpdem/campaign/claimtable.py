@@ -59,30 +59,40 @@ def _against_rival(claim, m, v, ctx):
 
 def _judge_assumed(claim, m):
     v = _judge_one(claim, m)
-    if not m.alts or v.kind not in ("reproduced", "differs"):
+    if not (m.alts or claim.err_alternatives) or v.kind not in ("reproduced", "differs"):
         return v
-    alts = [(label, a, _judge_one(claim, a) if a.ok else None) for label, a in m.alts]
+    alts = [(label, a, _judge_one(claim, a, kind) if a.ok else None, kind or claim.kind)
+            for label, a, kind in m.alts]
+    # the paper's error read otherwise (``Claim.err_alternatives``): the same number against each
+    alts += [(label, m, _judge_one(dataclasses.replace(claim, paper_err=err), m), "tolerance")
+             for label, err in claim.err_alternatives]
+    assumption = m.assumption if m.alts else claim.err_assumption
 
-    def value(a):
-        return _mtext(a, claim.digits, where=False)
+    def value(a, av, kind):
+        # a test's number is its p, which its verdict names; another tolerance's, its distance
+        return av.why if kind == "test" else f"{av.n_sigma:.1f} σ" if kind == "tolerance" \
+            else _mtext(a, claim.digits, where=False)
 
-    if all(av is not None and av.kind == v.kind for _, _, av in alts):
-        same = ", ".join(f"{label} ({value(a)})" for label, a, _ in alts)
-        v.why = "; ".join(w for w in (v.why, f"the same with {same} in place of {m.assumption}") if w)
+    if all(av is not None and av.kind == v.kind for _, _, av, _ in alts):
+        same = ", ".join(f"{label} ({value(a, av, k)})" for label, a, av, k in alts)
+        v.why = "; ".join(w for w in (v.why, f"the same with {same} in place of {assumption}") if w)
         return v
-    # a 'differs by X' names its value already; any other verdict takes the value before it
+    # a 'differs by X' names its value already, a test's verdict its p; any other verdict takes the value
     each = "; ".join(f"with {label}: " + (
-        f"{a.status} ({a.why})" if av is None else av.text() if av.kind == "differs" and math.isfinite(av.diff)
-        else f"{value(a)}, {av.text()}") for label, a, av in alts)
-    return V.Verdict("not determined", why=f"it rests on {m.assumption}: with it {v.text()}; {each}")
+        f"{a.status} ({a.why})" if av is None
+        else av.text() if k in ("test", "tolerance") or av.kind == "differs" and math.isfinite(av.diff)
+        else f"{value(a, av, k)}, {av.text()}") for label, a, av, k in alts)
+    return V.Verdict("not determined", why=f"it rests on {assumption}: with it {v.text()}; {each}")
 
 
-def _judge_one(claim, m):
+def _judge_one(claim, m, kind=None):
+    """The rule for measure ``m`` by the claim's kind, or by ``kind`` (an alternative measure of another kind:
+    ``sources.Assumes``)."""
     if m.status in ("not measured", "running"):
         return V.Verdict("not measured", why=("running: " if m.status == "running" else "") + m.why)
     if m.status == "not determined":
         return V.Verdict("not determined", why=m.why)
-    kind = claim.kind
+    kind = kind or claim.kind
     if kind == "compare":
         target = claim.value(m) if callable(claim.value) else claim.value
         return V.compare(m.value, m.err, target, claim.paper_err)

@@ -354,6 +354,9 @@ def _fit_lines(e, kind):
     pts = ", ".join((fmt_kn(x) if kind == "eq7" else f"{x:g}") + f" ({n})" for x, n in zip(xs, e["n_seeds"]))
     head = f"- {_fam_text(e['family'], ('k_n',) if kind == 'eq7' else ('phi_i',))} [sets {' '.join(e['sets'])}]; " \
            f"points (seeds): {pts}: "
+    if "stiffened x" in e["family"]:
+        # a ladder's rungs without the poured pile they climbed from: the ladder's line fits them with it
+        head += "stiffened rungs alone, without their base (the stiffening ladders below fit them with it): "
     if e["status"] != "fitted":
         return head + f"**{e['status']}**: {e['reason']}" + _fixed_text(e)
     if kind == "eq7":

@@ -19,11 +19,12 @@ import numpy as np
 
 from ..analysis.fits import one_way_anova
 from .runs import families, fmt_pm, md_table, read_table
+from .verdict import P_K
 
 POINTS = (0.1, 0.2, 0.3, 0.5)        # F_t / F_n at which the cumulative fraction is compared
 QUANTITIES = ("ratio_mean",) + tuple(f"below_{x:g}" for x in POINTS)   # tested for the collapse
 CONTROL = "zeta_mean"                 # must differ across mu if the ratio collapses
-LEVEL = 0.05                          # the family's verdict: Bonferroni over QUANTITIES at this level
+LEVEL = P_K                           # the family's verdict: Bonferroni over QUANTITIES, by the claim rule
 
 
 def run_numbers(run):
@@ -127,7 +128,8 @@ def section(entries, fam_text):
          + "; per family of sets differing in μ (μ ≥ 1), a one-way analysis of variance of each across the sets "
          "against the seed scatter pooled over them (± below: that scatter / √seeds). The paper says the curves "
          f"collapse: p large. Verdict: the smallest p of the {len(QUANTITIES)} times {len(QUANTITIES)} "
-         f"(Bonferroni) against {LEVEL:g}. Mean ζ = F_t/(μF_n) is the control: it must differ.", ""]
+         f"(Bonferroni) against {LEVEL:g} (the claim table's rule: two-sided 2 σ). Mean ζ = F_t/(μF_n) is the "
+         "control: it must differ.", ""]
     if not entries:
         return L + ["No family has two sets of μ ≥ 1.", ""]
     for e in entries:

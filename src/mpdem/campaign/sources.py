@@ -46,7 +46,7 @@ class Measure:
     why: str = ""
     k_n: float = NAN
     assumption: str = ""                        # what the number rests on (``Assumes``)
-    alts: list = field(default_factory=list)    # [(label, Measure)]: the same made with each alternative
+    alts: list = field(default_factory=list)    # [(label, Measure, kind or None)]: the same made with each alternative
     borrowed: str = ""                          # where a value of one run takes its error from ("1 run with …")
     source: object = None                       # the source that made it (a test's rival part: ``claimtable``)
 
@@ -217,8 +217,10 @@ class Fit:
 class Assumes:
     """A source whose number rests on an assumed choice (``assumption``, e.g. the exponent of the overlap
     law for Hertzian contacts), with the same number made with each alternative choice: ``alternatives``
-    [(label, source)]. The claim is judged with each as well (``claimtable.judge``): where they disagree
-    on the verdict, the row is not determined, and says which choice gives which."""
+    [(label, source)], or [(label, source, kind)] where the alternative is another kind of measure of the
+    same claim (a fit's p, kind 'test', beside a value). The claim is judged with each as well
+    (``claimtable.judge``): where they disagree on the verdict, the row is not determined, and says which
+    choice gives which."""
     src: object
     assumption: str
     alternatives: list = field(default_factory=list)
@@ -227,7 +229,7 @@ class Assumes:
         m = self.src.resolve(ctx)
         if m.ok:
             m.assumption = self.assumption
-            m.alts = [(label, a.resolve(ctx)) for label, a in self.alternatives]
+            m.alts = [(label, a.resolve(ctx), kind[0] if kind else None) for label, a, *kind in self.alternatives]
         return m
 
 
@@ -390,10 +392,14 @@ class ExtFit:
         return dataclasses.replace(self, fixed=False, part=part)
 
 
+ALL_QUANTITIES = "all"     # ExtTest: every quantity of the test at once (Bonferroni)
+
+
 @dataclass
 class ExtTest:
     """The p value of a test in another collect's ``fits.json`` (the F_t/F_n collapse, 'ratio'): the
-    entry whose sets include ``set``, quantity ``q``."""
+    entry whose sets include ``set``, quantity ``q``, or with ``q`` ``ALL_QUANTITIES`` the entry's smallest p
+    over its quantities times their number (Bonferroni: 'p_bonferroni')."""
     results: str
     kind: str
     set: str
@@ -404,7 +410,8 @@ class ExtTest:
         e = next((x for x in ctx.ext_fits(self.results).get(self.kind, []) if self.set in (x.get("sets") or [])),
                  None)
         where = f"{self.label} [{' '.join(ext_id(self.results, x) for x in (e or {}).get('sets') or [])}]"
-        t = ((e or {}).get("quantities") or {}).get(self.q) or {}
+        t = {"p": (e or {}).get("p_bonferroni")} if self.q == ALL_QUANTITIES \
+            else ((e or {}).get("quantities") or {}).get(self.q) or {}
         if not finite(t.get("p")):
             return missing(where, "no test")
         n = sum((e or {}).get("n_seeds") or [])
