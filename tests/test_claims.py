@@ -617,6 +617,33 @@ def test_row_34_reads_its_alternative_exponents_from_the_committed_ladder_fits()
         assert isinstance(row.ours[1], src.Assumes) and len(row.ours[1].alternatives) == 2
 
 
+def test_the_rows_judged_on_alternatives_read_every_alternative_from_the_committed_tables():
+    """Rows 16-18 and 21 (α's window), 20b (one law by its fit's p) and 22-22c (the paper's curve error):
+    every alternative resolves against the committed fits (were one lost, the row would read not determined
+    for want of a number, not for a verdict that changes)."""
+    import json
+    out = ROOT / "analysis/results/paper"
+    fit_res = json.loads((out / "fits.json").read_text())
+    ctx = src.Context([], fit_res, [], str(out))
+    by_id = {c.id: c for c in claims.CLAIMS}
+    for cid in ("16", "17", "18", "21", "20b"):
+        a = by_id[cid].ours[0]
+        assert isinstance(a, src.Assumes)
+        alts = [(label, alt.resolve(ctx)) for label, alt, *_ in a.alternatives]
+        assert alts and all(m.ok for _, m in alts), (cid, [(lb, m.status, m.why) for lb, m in alts])
+    kinds = [k for _, _, *k in by_id["20b"].ours[0].alternatives]
+    assert kinds == [["test"]]
+    for cid in ("22", "22b", "22c"):
+        c = by_id[cid]
+        assert c.err_alternatives == (("±0.002, the paper's error of one measured z", 0.002),) and c.paper_err == 0.02
+    with pytest.raises(ValueError, match="err_alternatives need kind 'compare'"):
+        claims.Claim("x", "c", "p", "bound", 4.0, err_alternatives=(("±1", 1.0),), err_assumption="±2")
+    with pytest.raises(ValueError, match="an err_assumption"):
+        claims.Claim("x", "c", "p", "compare", 4.0, 0.1, err_alternatives=(("±1", 1.0),))
+    with pytest.raises(ValueError, match="'test'"):
+        src.Assumes(src.S("S1"), "x", [("y", src.S("S2"), "bound")])
+
+
 def test_a_fit_part_that_is_not_fitted_gives_its_own_reason_and_ids_of_other_collects_name_them():
     e = {"sets": ["S12", "S27"], "status": "fitted", "z_inf": 6.0, "z_inf_err": 0.004,
          "set_means": {"status": "not determined", "reason": "correlation 1", "z_inf": 6.1}}
@@ -674,7 +701,7 @@ def test_the_claims_are_well_formed_and_cite_sets_the_campaign_has():
         for v in vars(x).values():
             if hasattr(v, "resolve"):
                 walk(v)
-            if isinstance(v, list):     # an assumption's alternatives: [(label, source)]
+            if isinstance(v, list):     # an assumption's alternatives: [(label, source)] or [(label, source, kind)]
                 for item in v:
                     walk(item[1])
     for c in claims.CLAIMS:
@@ -836,3 +863,12 @@ def test_a_collapse_test_reads_one_quantity_or_all_of_them_at_once(tmp_path):
     every = src.ExtTest("dev", "ratio", "S24", src.ALL_QUANTITIES).resolve(ctx)
     assert (one.value, every.value, every.n) == (0.073, 0.084, 6)
     assert src.ExtTest("dev", "ratio", "S99", src.ALL_QUANTITIES).resolve(ctx).status == "not measured"
+
+
+def test_an_eq7_family_of_stiffened_rungs_alone_points_to_the_ladder_that_fits_them_with_their_base():
+    from mpdem.campaign import comparison
+    e = {"family": {"mu": 0.0, "epsilon": 0.88, "N": 20000}, "sets": ["S27", "S28"], "k_n": [2e6, 2e7],
+         "n_seeds": [2, 2], "status": "not fitted", "reason": "r"}
+    poured = comparison._fit_lines(e, "eq7")
+    stiff = comparison._fit_lines(dict(e, family={**e["family"], "stiffened x": 10.0}), "eq7")
+    assert "stiffened rungs alone" not in poured and "stiffened rungs alone" in stiff

@@ -13,7 +13,7 @@ from scipy import stats
 
 from mpdem import config
 from mpdem.analysis import fits, mobilisation, report
-from mpdem.campaign import ratio
+from mpdem.campaign import ratio, verdict
 from mpdem.campaign.runs import AnalysedRun, Set, families
 from mpdem.io import rundir
 
@@ -124,6 +124,7 @@ def test_one_distribution_for_every_mu_collapses_and_zeta_does_not(tmp_path):
     e = ratio.family_test(members)
     assert e["status"] == "tested" and e["mu"] == [1, 2, 10] and e["n_seeds"] == [3, 3, 3]
     assert e["collapses"] and e["p_bonferroni"] > ratio.LEVEL
+    assert ratio.LEVEL == verdict.P_K           # the family's word and the claim table's rows 30, 30b agree
     assert e["quantities"][ratio.CONTROL]["p"] < 1e-6
     z = e["quantities"][ratio.CONTROL]["mean"]
     assert z[0] / z[1] == pytest.approx(2.0, rel=0.05) and z[0] / z[2] == pytest.approx(10.0, rel=0.05)

@@ -79,6 +79,9 @@ class Claim:
     err_assumption: str = ""
 
     def __post_init__(self):
+        if self.err_alternatives and (self.kind != "compare" or not self.err_assumption):
+            raise ValueError(f"claim {self.id}: err_alternatives need kind 'compare' (not {self.kind!r}) and an "
+                             f"err_assumption naming the paper error they replace")
         if self.rival is not None:
             ok = {"compare": lambda r: isinstance(r, (int, float)),
                   "test": lambda r: isinstance(r, str) or hasattr(r, "resolve")}.get(self.kind)
@@ -192,7 +195,7 @@ def _alpha(sid, diff_with=None, one_minus=False):
 # can be, the error of one measured z (row 1's 0.002) the least; judged against both
 EQ7_POINT = dict(tolerance="eq. 7's z_∞ error carried to the curve, the most the paper's curve at one k_n can be "
                            "off; judged against its error of one measured z, ±0.002 (row 1), as well",
-                 err_alternatives=(("±0.002 (the paper's error of one measured z)", 0.002),),
+                 err_alternatives=(("±0.002, the paper's error of one measured z", 0.002),),
                  err_assumption="the paper's curve's error taken as z_∞'s (±0.02)")
 MEANS = "sets' means as if independent:"
 LADDER_OVERLAP = "the ladder's piles at every rung, z − z_c = A (δ/d)^(1/2) over their depth bands:"
@@ -208,7 +211,7 @@ def _alpha_n_against_alpha():
     """Row 21: the ladder's α_n − (1 − α of S12), α on the default window and on each decade of ξ (``_alpha``)."""
     one = _alpha("S12", one_minus=True)
     return Assumes(Diff(Fit("ladder", "alpha_n", mu=0.0), one.src), one.assumption,
-                   [(label, Diff(Fit("ladder", "alpha_n", mu=0.0), a)) for label, a in one.alternatives])
+                   [(label, Diff(Fit("ladder", "alpha_n", mu=0.0), a), *kind) for label, a, *kind in one.alternatives])
 
 
 CLAIMS = [

@@ -21,9 +21,11 @@ from .sources import diff_error, finite, missing
 
 def judge(claim, m, ctx=None):
     """The rule (``verdict``) for measure ``m`` of ``claim`` (a ``claims.Claim``). A number that rests on an
-    assumed choice (``m.alts``: ``sources.Assumes``) is judged with each alternative too: where every one
-    gives the same verdict it stands, and says so; where one gives another, or has no number, the claim is
-    not determined by it, and the verdict gives each. A claim with a ``rival`` is reproduced only where the
+    assumed choice (``m.alts``: ``sources.Assumes``, an alternative of the claim's kind or a fit's p beside
+    a value) or a paper error its text allows to read otherwise (``Claim.err_alternatives``) is judged with
+    each alternative too (``_judge_assumed``): where every one gives the same verdict it stands, and says
+    so; where one gives another, or has no number, the claim is not determined by it, and the verdict
+    gives each. A claim with a ``rival`` is reproduced only where the
     rival is not (``_against_rival``; ``ctx`` resolves a rival source)."""
     return _against_rival(claim, m, _judge_assumed(claim, m), ctx)
 
@@ -58,9 +60,13 @@ def _against_rival(claim, m, v, ctx):
 
 
 def _judge_assumed(claim, m):
+    """``_judge_one`` of ``m``, then of each alternative of ``m`` (``m.alts``) or of the paper's error
+    (``claim.err_alternatives``, the same ``m`` against another error; a claim has one kind or the other)."""
     v = _judge_one(claim, m)
     if not (m.alts or claim.err_alternatives) or v.kind not in ("reproduced", "differs"):
         return v
+    if m.alts and claim.err_alternatives:
+        raise ValueError(f"claim {claim.id}: alternative measures and alternative paper errors at once")
     alts = [(label, a, _judge_one(claim, a, kind) if a.ok else None, kind or claim.kind)
             for label, a, kind in m.alts]
     # the paper's error read otherwise (``Claim.err_alternatives``): the same number against each

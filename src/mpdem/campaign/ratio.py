@@ -70,7 +70,7 @@ def family_test(members):
     ``quantities`` {name: {``mean`` [per set], ``err`` [pooled scatter / sqrt(seeds)], ``F``,
     ``dof``, ``p``}} for QUANTITIES and CONTROL; ``status`` ("tested", or "not tested" with
     ``reason``); when tested ``p_min`` (the smallest p of QUANTITIES), ``p_bonferroni``
-    (p_min x their number, at most 1) and ``collapses`` (p_bonferroni > LEVEL).
+    (p_min x their number, at most 1) and ``collapses`` (p_bonferroni >= LEVEL, the claim rule's test).
     """
     left_out, use = [], []
     for s in members:
@@ -105,7 +105,7 @@ def family_test(members):
         return dict(e, status="not tested", reason="no seed scatter (identical runs)")
     p_min = min(ps)
     pb = min(1.0, p_min * len(QUANTITIES))
-    return dict(e, status="tested", p_min=p_min, p_bonferroni=pb, collapses=pb > LEVEL)
+    return dict(e, status="tested", p_min=p_min, p_bonferroni=pb, collapses=pb >= LEVEL)
 
 
 def tests(sets):

@@ -225,6 +225,12 @@ class Assumes:
     assumption: str
     alternatives: list = field(default_factory=list)
 
+    def __post_init__(self):
+        for alt in self.alternatives:
+            if len(alt) not in (2, 3) or len(alt) == 3 and alt[2] != "test":
+                raise ValueError(f"Assumes: an alternative is (label, source) or (label, source, 'test'), not "
+                                 f"{alt!r}")
+
     def resolve(self, ctx):
         m = self.src.resolve(ctx)
         if m.ok:

@@ -12,10 +12,12 @@ value lies inside it or within two errors of it. A value of one seed (no error o
 other side's seed scatter in a difference (``sources.diff_error``), and alone is judged on the paper's
 error, or by its side of a bound or sign. A test's p value (one law, one curve) is reproduced at
 p >= 0.0455, the two-sided 2 sigma level. A value that rests on an assumed choice the measurements
-here do not fix (an exponent taken from theory, where the data fit others as well) is judged with each
-alternative its row names as well (``claimtable.judge``); an alternative without a number leaves the
-row not determined too. A claim set against a rival answer (``claims.Claim.rival``) is reproduced only
-where the rival is not: a value within two errors of both, or a test that both pass, is not determined.
+here do not fix (an exponent taken from theory, where the data fit others as well; a window the paper
+does not name; a second reading of the paper's error its text allows; a claim of one law tested both as
+a value and by its fit's p) is judged with each alternative its row names as well (``claimtable.judge``);
+an alternative without a number leaves the row not determined too. A claim set against a rival answer
+(``claims.Claim.rival``) is reproduced only where the rival is not: a value within two errors of both,
+or a test that both pass, is not determined.
 A row with nothing measured reads "not measured"; a fit that cannot tell its parameters apart, or a
 value whose verdict changes with the assumed choice, "not determined".
 
@@ -48,7 +50,8 @@ RULE = (
     "may give a Student reading beside where its scatter rests on few seeds); a test's p is its own "
     "statistic's (F where the noise is measured). A value that rests on an assumed choice the measurements "
     "here do not fix (an exponent taken from theory, where the data fit others as well; a window the paper "
-    "does not name; a reading of the paper's error its text allows; one of two tests of one claim) is "
+    "does not name; a reading of the paper's error its text allows; a claim of one law tested both as a "
+    "value and by its fit's χ² against F) is "
     "judged with each alternative the row names, with its reason, as well; none is dropped for its verdict. "
     "A claim the row sets against a rival answer (k_n^(−1/4) with friction against the frictionless k_n^(−1/2)) is "
     "reproduced only where the rival would not be. **not measured**: nothing of this work measures it (or "
