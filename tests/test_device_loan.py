@@ -50,7 +50,34 @@ def test_pack_takes_a_rungs_small_files_and_its_newest_checkpoint_only(tmp_path)
     # a rung without a checkpoint is refused, naming it
     write(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8" / "config.toml")
     p = loan(repo, "pack", str(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8"))
-    assert p.returncode == 2 and "kn2e8 has no checkpoint" in p.stderr
+    assert p.returncode == 2 and "kn2e8 has no checkpoint (and has not converged)" in p.stderr
+
+
+def test_a_converged_rung_travels_as_what_it_is_stiffened_from(tmp_path):
+    """A converged rung goes to be stiffened into the next there: a frictionless pile as its committed
+    packing (not its final.h5, which git does not keep), a frictional one with its final.h5; a frictional
+    one without a final state is refused."""
+    repo = checkout(tmp_path)
+    done = json.dumps({"status": "converged"})
+    ice = repo / "runs" / "ladder-x" / "mu0_s2" / "kn2e8"
+    write(ice / "config.toml", "[contact]\nmu = 0.0\n")
+    for f, text in (("summary.json", done), ("packing.npz", "p"), ("final.h5", "f"), ("final.xmf", "x")):
+        write(ice / f, text)
+    grip = repo / "runs" / "ladder-x" / "mu0.5_s1" / "kn2e8"
+    write(grip / "config.toml", "[contact]\nmu = 0.5\n")
+    for f, text in (("summary.json", done), ("packing.npz", "p"), ("final.h5", "f")):
+        write(grip / f, text)
+    p = loan(repo, "pack", str(ice), str(grip))
+    assert p.returncode == 0, p.stderr
+    got = {str(q.relative_to(repo / ".ladder")) for q in (repo / ".ladder").rglob("*") if q.is_file()}
+    assert got == {"ladder-x/mu0_s2/kn2e8/config.toml", "ladder-x/mu0_s2/kn2e8/summary.json",
+                   "ladder-x/mu0_s2/kn2e8/packing.npz", "ladder-x/mu0.5_s1/kn2e8/config.toml",
+                   "ladder-x/mu0.5_s1/kn2e8/summary.json", "ladder-x/mu0.5_s1/kn2e8/packing.npz",
+                   "ladder-x/mu0.5_s1/kn2e8/final.h5"}
+    assert p.stdout.count("converged: it is stiffened into the next rung there") == 2
+    (grip / "final.h5").unlink()
+    p = loan(repo, "pack", str(grip))
+    assert p.returncode == 2 and "converged with friction but has no final.h5" in p.stderr
 
 
 def test_a_call_steps_a_rung_to_its_stop_stiffens_the_next_and_unpack_puts_both_back(tmp_path):

@@ -9,7 +9,9 @@
 #   here:  bash tools/device_slim.sh off; cat FILES_AT/ladder.tgz.* > /tmp/ladder.tgz; bash tools/device_loan.sh unpack /tmp/ladder.tgz
 # A RUNG_DIR is a rung of a ladder (analysis/sweeps/paper/ladder.sh) with a checkpoint: it travels as its
 # small files and its newest checkpoint, restarts there on the GPU, and on converging is stiffened tenfold
-# into the next rung (k_n <= LADDER_TOP) for as long as the call allows; each stops with a checkpoint
+# into the next rung (k_n <= LADDER_TOP) for as long as the call allows; a converged rung travels without
+# one (frictionless: its packing.npz, not its final.h5; with friction its final.h5) and is stiffened at once
+# (LADDER_TOP=2e9 for the paper's top rung); each stops with a checkpoint
 # (--walltime) in time to be packed. Unpacked, each rung directory replaces its files here (its checkpoints
 # here deleted first: a ladder running here must be stopped before).
 # Env (call): UNTIL=530 (s), PROBE_BUDGET=260 (s), VARIANTS (gpu_probe's names, likeliest first),
@@ -28,6 +30,9 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 RUNS_ROOT=${RUNS_ROOT:-analysis/results/paper/runs}
 
+status_of() { python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
+# a run's friction as its config.toml says (0 where it does not say: the default)
+mu_of() { python3 -c "import sys, tomllib; print(f\"{tomllib.load(open(sys.argv[1], 'rb')).get('contact', {}).get('mu', 0.0):g}\")" "$1/config.toml" 2>/dev/null; }
 rel() { python3 -c "import os,sys; print(os.path.relpath(sys.argv[1], sys.argv[2]))" "$1" "$2"; }
 
 pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's table into .devdata/
@@ -35,14 +40,28 @@ pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's ta
     [ -f .devdata/landed20k.txt.gz ] || cp ../shared/bench/landed20k.txt.gz .devdata/ 2>/dev/null ||
         echo "device_loan: no ../shared/bench/landed20k.txt.gz: put the bench's table in .devdata/ for the probe" >&2
     for d in "$@"; do
-        local ck r
+        local ck r skip=()
         ck=$(ls "$d"/checkpoints/ckpt-*.h5 2>/dev/null | sort | tail -1)
-        [ -n "$ck" ] || { echo "device_loan: $d has no checkpoint" >&2; exit 2; }
         r=$(rel "$d" "$RUNS_ROOT")
+        if [ -z "$ck" ] && [ "$(status_of "$d")" = converged ]; then
+            # a converged rung, to be stiffened into the next there: a frictionless pile from its committed
+            # packing (what anyone can start from), a frictional one from its final state (git keeps none)
+            if [ -f "$d/packing.npz" ] && [ "$(mu_of "$d")" = 0 ]; then
+                skip=(! -name 'final.*')
+            elif [ ! -f "$d/final.h5" ]; then
+                echo "device_loan: $d converged with friction but has no final.h5 to stiffen from" >&2; exit 2
+            fi
+        elif [ -z "$ck" ]; then
+            echo "device_loan: $d has no checkpoint (and has not converged)" >&2; exit 2
+        fi
         mkdir -p ".ladder/$r/checkpoints"
-        find "$d" -maxdepth 1 -type f ! -name '.*' -exec cp -p {} ".ladder/$r/" \;
-        cp -p "$ck" ".ladder/$r/checkpoints/"
-        echo "device_loan: packed $r at $(basename "$ck")"
+        find "$d" -maxdepth 1 -type f ! -name '.*' "${skip[@]}" -exec cp -p {} ".ladder/$r/" \;
+        if [ -n "$ck" ]; then
+            cp -p "$ck" ".ladder/$r/checkpoints/"
+            echo "device_loan: packed $r at $(basename "$ck")"
+        else
+            echo "device_loan: packed $r, converged: it is stiffened into the next rung there (LADDER_TOP)"
+        fi
     done
     du -sh .ladder .devdata .whl 2>/dev/null || true
 }
@@ -65,7 +84,6 @@ unpack() {  # TGZ: each rung directory back under RUNS_ROOT
 
 hms() { printf '%02d:%02d:%02d' $(($1 / 3600)) $(($1 % 3600 / 60)) $(($1 % 60)); }
 
-status_of() { python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
 
 ladder() {  # each carried rung, then the next ones, until the deadline (seconds since the start)
     local deadline=$1 top=${LADDER_TOP:-2e8} d k next left
