@@ -46,7 +46,7 @@ def test_pack_takes_a_rungs_small_files_and_its_newest_checkpoint_only(tmp_path)
     assert p.returncode == 0, p.stderr
     got = {str(q.relative_to(repo / ".ladder")) for q in (repo / ".ladder").rglob("*") if q.is_file()}
     r = "ladder-x/mu0_s1/kn2e7"
-    assert got == {f"{r}/config.toml", f"{r}/log.txt", f"{r}/thermo.csv", f"{r}/checkpoints/ckpt-00004.h5"}
+    assert got == {f"{r}/config.toml", f"{r}/log.txt", f"{r}/thermo.csv", f"{r}/checkpoints/ckpt-00004.h5", "order"}
     # a rung without a checkpoint is refused, naming it
     write(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8" / "config.toml")
     p = loan(repo, "pack", str(repo / "runs" / "ladder-x" / "mu0_s1" / "kn2e8"))
@@ -73,7 +73,9 @@ def test_a_converged_rung_travels_as_what_it_is_stiffened_from(tmp_path):
     assert got == {"ladder-x/mu0_s2/kn2e8/config.toml", "ladder-x/mu0_s2/kn2e8/summary.json",
                    "ladder-x/mu0_s2/kn2e8/packing.npz", "ladder-x/mu0.5_s1/kn2e8/config.toml",
                    "ladder-x/mu0.5_s1/kn2e8/summary.json", "ladder-x/mu0.5_s1/kn2e8/packing.npz",
-                   "ladder-x/mu0.5_s1/kn2e8/final.h5"}
+                   "ladder-x/mu0.5_s1/kn2e8/final.h5", "order"}
+    # the call steps them in the order named (the paper's top rung first here), not of their paths
+    assert (repo / ".ladder" / "order").read_text().split() == ["ladder-x/mu0_s2/kn2e8", "ladder-x/mu0.5_s1/kn2e8"]
     assert p.stdout.count("converged: it is stiffened into the next rung there") == 2
     (grip / "final.h5").unlink()
     p = loan(repo, "pack", str(grip))

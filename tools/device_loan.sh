@@ -55,6 +55,7 @@ pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's ta
             echo "device_loan: $d has no checkpoint (and has not converged)" >&2; exit 2
         fi
         mkdir -p ".ladder/$r/checkpoints"
+        echo "$r" >> .ladder/order          # the call steps the rungs in this order
         find "$d" -maxdepth 1 -type f ! -name '.*' "${skip[@]}" -exec cp -p {} ".ladder/$r/" \;
         if [ -n "$ck" ]; then
             cp -p "$ck" ".ladder/$r/checkpoints/"
@@ -87,7 +88,10 @@ hms() { printf '%02d:%02d:%02d' $(($1 / 3600)) $(($1 % 3600 / 60)) $(($1 % 60));
 
 ladder() {  # each carried rung, then the next ones, until the deadline (seconds since the start)
     local deadline=$1 top=${LADDER_TOP:-2e8} d k next left
-    for d in $(find .ladder -name config.toml -printf '%h\n' | sort); do
+    # in the order packed (.ladder/order), else of their paths
+    local order
+    order=$( { [ -f .ladder/order ] && sed 's|^|.ladder/|' .ladder/order; } || find .ladder -name config.toml -printf '%h\n' | sort)
+    for d in $order; do
         while :; do
             left=$((deadline - SECONDS - 15))
             [ "$left" -gt 60 ] || { echo "ladder: no time left for $d"; break; }
