@@ -9,7 +9,7 @@ What it does
     as 1/k_n, and z falls toward the isostatic 6 of a frictionless packing as k_n grows.
 
 What it prints
-    One line a rung: ``k_n = 2e+05: z = 6.12, phi = 0.639, median overlap 2.1e-05 d, 123456 steps``;
+    One line a rung: ``k_n = 200000: z = 6.121, phi = 0.6392, median overlap 2.10e-05 d, 123456 steps (converged)``;
     last ``wrote OUT/z_of_kn.png``.
 
 Cost

@@ -175,6 +175,7 @@ for m, zz, p in zip(MUS, z, phi):
 #
 # - The paper's size: `pour.N = 20000`, `box.L_x = box.L_y = 20`, the default k_n and stop rule
 #   (hours a run on one core; minutes on a GPU: `engine.device = "gpu"`).
-# - Many runs: `mpdem sweep TABLE --collect DIR` and `mpdem collect` (examples/friction_sweep.py).
+# - Many runs: `mpdem sweep TABLE --out RUNS` (collected into RUNS/collect, or `--collect DIR`) and
+#   `mpdem collect RUNS --out DIR` (examples/friction_sweep.py).
 # - Stiffer springs from the same packing: `mpdem.stiffen_config` (examples/stiffen_pile.py).
 # - The API reference: `make docs`, then build/docs/html/reference.html.
