@@ -71,11 +71,14 @@ def test_bounds_ranges_and_signs():
     r = V.in_range(2.0e6, 0.4e6, 3e6, 8e6)
     assert r.kind == "differs" and r.diff == -1.0e6 and math.isclose(r.n_sigma, 2.5)
     assert V.in_range(2.4e6, 0.4e6, 3e6, 8e6).kind == "reproduced"
-    assert V.sign([(-0.6, 0.01), (-0.5, 0.02)]).kind == "reproduced"
+    both = V.sign([(-0.6, 0.01), (-0.5, 0.02)])
+    assert both.kind == "reproduced" and both.why == "the nearest step to 0 (step 2) 25.0 σ"
     assert V.sign([(-0.6, 0.01), (0.5, 0.02)]).kind == "differs"
     assert V.sign([(-0.6, 0.01), (-0.01, 0.02)]).kind == "differs"   # a fall within 2 sigma is not resolved
     one = V.sign([(-0.6, NAN)])
-    assert one.kind == "reproduced" and "judged by sign" in one.why
+    assert one.kind == "reproduced" and one.why == "steps 1 without an error (1 seed): judged by sign"
+    mixed = V.sign([(-0.6, NAN), (-0.1, 0.02)])
+    assert mixed.why == "the nearest step to 0 (step 2) 5.0 σ; steps 1 without an error (1 seed): judged by sign"
 
 
 # ---------------------------------------------------------------- rows from sources

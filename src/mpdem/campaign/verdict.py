@@ -178,5 +178,10 @@ def sign(steps, want=-1):
         i = weak[0]
         d, e = steps[i]
         return Verdict("differs", d, e, abs(d) / e, f"step {i + 1} within 2 σ of zero")
-    return Verdict("reproduced", why="steps " + ", ".join(str(i + 1) for i in no_err)
-                   + " without an error (1 seed): judged by sign" if no_err else "")
+    judged = [(i, abs(d) / e) for i, (d, e) in enumerate(steps) if i not in no_err]
+    # the step nearest to zero, in errors: how far the weakest step stands
+    least = min(judged, key=lambda t: t[1]) if judged else None
+    whys = ([f"the nearest step to 0 (step {least[0] + 1}) {least[1]:.1f} σ"] if least else []) + \
+        (["steps " + ", ".join(str(i + 1) for i in no_err) + " without an error (1 seed): judged by sign"]
+         if no_err else [])
+    return Verdict("reproduced", why="; ".join(whys))
