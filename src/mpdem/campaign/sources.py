@@ -432,7 +432,7 @@ class OneMinus:
     def resolve(self, ctx):
         m = self.src.resolve(ctx)
         if m.ok:
-            m.value, m.where = 1.0 - m.value, f"1 − {m.where}"
+            m.value, m.where = 1.0 - m.value, f"(1 − {m.where})"
         return m
 
 
