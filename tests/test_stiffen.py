@@ -263,3 +263,53 @@ def test_the_api_stiffen_config_is_the_command_lines_rung(soft):
     assert cfg.run.initial_file == str(soft / "final.h5") and cfg.contact.mu == 0.5 and cfg.pour.N == 120
     with pytest.raises(InputError, match="--k_n 500000.*up to 200000"):
         mpdem.stiffen_config(soft, 5e5)
+
+
+def test_the_ladder_script_keeps_the_pours_stop_rule_and_sets_stop_energy_on_the_rungs_only(tmp_path):
+    """STOP_ENERGY=translational: the stiffened rungs start and restart on the translational energy, the pour
+    (the poured set's pile, its bits) keeps the config's rule, whether it starts or restarts. A stand-in for
+    python records each mpdem command and ends each run converged."""
+    import os
+    import stat
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "analysis" / "sweeps" / "paper" / "ladder.sh"
+    journal = tmp_path / "journal"
+    stub = tmp_path / "py"
+    stub.write_text(f"""#!/usr/bin/env bash
+[ "$1" = -c ] && exec {sys.executable} "$@"
+echo "$*" >> {journal}
+out=""; prev=""
+for a in "$@"; do [ "$prev" = --out ] && out=$a; prev=$a; done
+[ "$3" = restart ] && out=$4
+[ -n "$out" ] && mkdir -p "$out/analysis" && echo '{{"status": "converged"}}' > "$out/summary.json" \\
+    && echo '{{}}' > "$out/analysis/summary.json"
+exit 0
+""")
+    stub.chmod(stub.stat().st_mode | stat.S_IEXEC)
+    out = tmp_path / "lad"
+
+    def ladder():
+        env = {**os.environ, "PY": str(stub), "STOP_ENERGY": "translational"}
+        return subprocess.run(["bash", str(script), "0.5", "2", str(out), "2e7"], env=env, capture_output=True,
+                              text=True, timeout=60)
+
+    p = ladder()
+    assert p.returncode == 0, p.stdout + p.stderr
+    lines = journal.read_text().splitlines()
+    pour, *rungs = [ln for ln in lines if " run " in ln or " stiffen " in ln]
+    assert "-m mpdem run" in pour and "stop.energy" not in pour
+    assert len(rungs) == 2 and all("--set stop.energy=translational" in r for r in rungs)
+    # a pour restarted from its checkpoint keeps its rule too; a rung restarted takes the translational one
+    for d in ("kn2e5", "kn2e6"):
+        (out / d / "summary.json").unlink()
+        (out / d / "checkpoints").mkdir(parents=True, exist_ok=True)
+        (out / d / "checkpoints" / "ckpt-00001.h5").write_text("x")
+    journal.unlink()
+    assert ladder().returncode == 0
+    restarts = [ln for ln in journal.read_text().splitlines() if " restart " in ln]
+    assert len(restarts) == 2
+    assert "kn2e5" in restarts[0] and "stop.energy" not in restarts[0]
+    assert "kn2e6" in restarts[1] and "--set stop.energy=translational" in restarts[1]

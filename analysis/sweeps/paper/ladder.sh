@@ -13,17 +13,18 @@
 # A committed run keeps its packing.npz, not its final.h5: at MU = 0 the ladder starts from that packing at rest
 # (no tangential force needs a history); a frictional pile needs its final.h5 (pour it again: the same bits).
 # CAP_FACTOR multiplies each new rung's cap on steps (below). DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
-# before that much wall time (exit 75: run the script again to go on). STOP_ENERGY=translational stops each rung
-# it starts or restarts on the translational energy (docs/config.md `stop.energy`): for a frictional pile whose
-# total energy a sphere spinning about its contacts holds above E_stop (docs/model.md 5.4).
+# before that much wall time (exit 75: run the script again to go on). STOP_ENERGY=translational stops each
+# stiffened rung it starts or restarts on the translational energy (docs/config.md `stop.energy`): for a frictional
+# pile whose total energy a sphere spinning about its contacts holds above E_stop (docs/model.md 5.4). The pour
+# keeps the config's rule: it is the poured set's pile (the same bits), the ladder's base.
 # Each converged rung is analysed (mpdem analyze --packing). The committed rungs of analysis/results/paper keep
 # their summary.json, config.toml, analysis/ and packing.npz;
 # final.h5 (needed by the next rung) stays in the run directory, not in git.
 set -uo pipefail
 mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
 PY=${PY:-.venv/bin/python}
-opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"}
-      ${STOP_ENERGY:+--set stop.energy="$STOP_ENERGY"})
+opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"})
+stop_opts=(${STOP_ENERGY:+--set stop.energy="$STOP_ENERGY"})     # the stiffened rungs' only
 mkdir -p "$out"
 status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }
 analyse() {  # dir: its analysis and packing.npz (what git keeps of a rung), once
@@ -31,14 +32,16 @@ analyse() {  # dir: its analysis and packing.npz (what git keeps of a rung), onc
 }
 rung() {  # dir max_steps command...: the rung, unless it converged; a restart where it has a checkpoint
     local dir=$1 cap=$2; shift 2
+    local extra=("${stop_opts[@]}")
+    [ "$dir" = "$out/kn2e5" ] && extra=()      # the pour: the config's stop rule
     case "$(status "$dir")" in
         converged) echo "ladder: $dir converged before"; analyse "$dir"; return 0 ;;
         max_steps) echo "ladder: $dir ended at its cap without converging: the ladder stops here"; return 3 ;;
     esac
     if ls "$dir"/checkpoints/ckpt-*.h5 > /dev/null 2>&1; then
-        "$PY" -m mpdem restart "$dir" "${opts[@]}"
+        "$PY" -m mpdem restart "$dir" "${opts[@]}" "${extra[@]}"
     else
-        "$@" --out "$dir" --force "${opts[@]}" --set run.max_steps="$cap"
+        "$@" --out "$dir" --force "${opts[@]}" "${extra[@]}" --set run.max_steps="$cap"
     fi
     local rc=$?
     echo "ladder: $dir exit status $rc"
