@@ -267,8 +267,8 @@ def test_the_api_stiffen_config_is_the_command_lines_rung(soft):
 
 def test_the_ladder_script_keeps_the_pours_stop_rule_and_sets_stop_energy_on_the_rungs_only(tmp_path):
     """STOP_ENERGY=translational: the stiffened rungs start and restart on the translational energy, the pour
-    (the poured set's pile, its bits) keeps the config's rule, whether it starts or restarts. A stand-in for
-    python records each mpdem command and ends each run converged."""
+    (the poured set's pile, its bits) keeps the config's rule, whether it starts or restarts. THREADS=2 reaches
+    every run, rung and restart. A stand-in for python records each mpdem command and ends each run converged."""
     import os
     import stat
     import subprocess
@@ -292,7 +292,7 @@ exit 0
     out = tmp_path / "lad"
 
     def ladder():
-        env = {**os.environ, "PY": str(stub), "STOP_ENERGY": "translational"}
+        env = {**os.environ, "PY": str(stub), "STOP_ENERGY": "translational", "THREADS": "2"}
         return subprocess.run(["bash", str(script), "0.5", "2", str(out), "2e7"], env=env, capture_output=True,
                               text=True, timeout=60)
 
@@ -302,6 +302,7 @@ exit 0
     pour, *rungs = [ln for ln in lines if " run " in ln or " stiffen " in ln]
     assert "-m mpdem run" in pour and "stop.energy" not in pour
     assert len(rungs) == 2 and all("--set stop.energy=translational" in r for r in rungs)
+    assert all("--threads 2" in r for r in (pour, *rungs))
     # a pour restarted from its checkpoint keeps its rule too; a rung restarted takes the translational one
     for d in ("kn2e5", "kn2e6"):
         (out / d / "summary.json").unlink()
@@ -313,3 +314,4 @@ exit 0
     assert len(restarts) == 2
     assert "kn2e5" in restarts[0] and "stop.energy" not in restarts[0]
     assert "kn2e6" in restarts[1] and "--set stop.energy=translational" in restarts[1]
+    assert all("--threads 2" in r for r in restarts)

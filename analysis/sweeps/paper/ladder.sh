@@ -13,7 +13,8 @@
 # A committed run keeps its packing.npz, not its final.h5: at MU = 0 the ladder starts from that packing at rest
 # (no tangential force needs a history); a frictional pile needs its final.h5 (pour it again: the same bits).
 # CAP_FACTOR multiplies each new rung's cap on steps (below). DEVICE=gpu runs each rung on the GPU engine (the same bits), WALLTIME=HH:MM:SS stops a rung with a checkpoint
-# before that much wall time (exit 75: run the script again to go on). STOP_ENERGY=translational stops each
+# before that much wall time (exit 75: run the script again to go on). THREADS=T steps each rung on T threads (the
+# same bits; a ladder that should finish first gets both cores of a two-core machine). STOP_ENERGY=translational stops each
 # stiffened rung it starts or restarts on the translational energy (docs/config.md `stop.energy`): for a frictional
 # pile whose total energy a sphere spinning about its contacts holds above E_stop (docs/model.md 5.4). The pour
 # keeps the config's rule: it is the poured set's pile (the same bits), the ladder's base.
@@ -23,7 +24,7 @@
 set -uo pipefail
 mu=$1 seed=$2 out=$3 top=${4:-2e8} cfg=${5:-analysis/sweeps/paper/size.toml}
 PY=${PY:-.venv/bin/python}
-opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"})
+opts=(--quiet ${DEVICE:+--device "$DEVICE"} ${WALLTIME:+--walltime "$WALLTIME"} ${THREADS:+--threads "$THREADS"})
 stop_opts=(${STOP_ENERGY:+--set stop.energy="$STOP_ENERGY"})     # the stiffened rungs' only
 mkdir -p "$out"
 status() { "$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" "$1/summary.json" 2>/dev/null; }

@@ -5,7 +5,8 @@
 # command goes on after any stop: a job whose work is done ends at once and the next one starts.
 #   bash analysis/sweeps/paper/queue.sh                      # JOBS=2, logs in /tmp/mpdem-queue/<job>.log
 #   JOBS=1 LOGS=DIR ONLY="flow ladder-mu0.5-s1" DEVICE=gpu bash analysis/sweeps/paper/queue.sh
-# DEVICE (default cpu) is the ladders' rungs' device; a sweep's rows run as their run directories' configs say
+# DEVICE (default cpu) is the ladders' rungs' device, THREADS (default 1) their threads (one ladder on both cores:
+# JOBS=1 THREADS=2 ONLY=ladder-mu0.5-s2); a sweep's rows run as their run directories' configs say
 #   bash analysis/sweeps/paper/queue.sh --list               # the jobs, in order, and what each decides
 # A job's entry may name one it waits for: the rungs of one ladder never run twice at once.
 # SIGTERM or SIGINT to the queue goes to every running job's processes: each run writes a checkpoint and
