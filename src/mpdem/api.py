@@ -177,7 +177,7 @@ def check_out(out, net, force=False):
         raise AgreedError(f"--out {out}: {why}")
     if held and not force:
         raise AgreedError(f"--out {out}: already holds a run (config.toml); choose another directory or "
-                          f"pass --force")
+                          f"overwrite it (--force; force=True from Python)")
 
 
 def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, walltime_margin=None, net=None,
@@ -225,17 +225,18 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
         work, leaving no run directory behind.
     """
     from . import config as config_mod
-    from .io import lammps
     from .build import InputError
     from .driver.schedule import Logger
     from .driver.simulation import Run
     _threads(threads)
     net = _net(net)
-    from .initial import check_file
+    from .errors import PackingFileError, StateFileError
+    from .initial import check_file, config_for
     try:
-        cfg, initial = lammps.initial_for(config)
+        cfg, initial = config_for(config)
         check_file(cfg)
-    except (config_mod.ConfigError, InputError) as e:   # the same inputs on every rank: the same error
+    except (config_mod.ConfigError, InputError, StateFileError, PackingFileError) as e:
+        # the same inputs on every rank: the same error
         raise AgreedError(str(e)) from None
     if cfg.engine.device == "gpu":
         from .engine import gpu

@@ -102,6 +102,24 @@ def table_config(sets=()):
     return cfg.replace(**{"contact.gamma_t": cfg.contact.gamma_n / 2})
 
 
+def table_box(cfg, path, sets=()):
+    """The table bench's config in the box of an mpdem state or packing file (``initial.file_facts``): the
+    pile is timed as it lies. A text table keeps no box: the bench's 20 x 20 d (or ``--set box.*``) stays.
+
+    Raises
+    ------
+    InputError
+        A ``--set box.*`` that disagrees with the file's box, naming both.
+    """
+    box = {k: v for k, v in initial.file_facts(path).items() if k.startswith("box.")}
+    user = {config.parse_set(item)[0] for item in sets}
+    for key, length in box.items():
+        if key in user and cfg.values[key] != length:
+            raise InputError(f"--set {key}={cfg.values[key]!r}, but the box of --table {path} is {length!r} long "
+                             f"in {key[-1]}; leave {key} unset to take the file's box")
+    return cfg.replace(**box) if box else cfg
+
+
 def rss_peak():
     """Peak resident set size of this process so far [bytes] (ru_maxrss, KiB on Linux)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
@@ -149,7 +167,7 @@ def load_table(path, cfg, tile=(1, 1), say=print):
         A text table (``tables.read_table``, plain or gzip), read as
         ``run.initial_file`` is (``initial.particles``).
     cfg : Config
-        Box (``box.L_x``, ``box.L_y``) and ``checks.overlap_warn``.
+        Box (``box.L_x``, ``box.L_y``: a state file's, ``table_box``) and ``checks.overlap_warn``.
     tile : (int, int)
         Copies along x and y (``tables.tile_table``).
     say : callable
@@ -285,7 +303,7 @@ def run_table_bench(args, net):
     counts them. Returns X.
     """
     set_up_process()
-    cfg = table_config(args.set)
+    cfg = table_box(table_config(args.set), args.table, args.set)
     net = channel(net)
     rank = net.rank
     say = print if rank == 0 else (lambda msg: None)

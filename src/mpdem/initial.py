@@ -129,6 +129,54 @@ def check_file(cfg):
                          f" and settle again; accepted: contact.mu = 0, or a state file (final.h5, a checkpoint)")
 
 
+def file_facts(path, lammps_table=None):
+    """What an initial file says of the run it starts: ``{'box.L_x', 'box.L_y', 'pour.N'}`` from an mpdem
+    state or packing file (its attributes), ``{'pour.N'}`` from a LAMMPS file already read (its box is
+    ``lammps.initial_for``'s), ``{}`` from a text table (which keeps no box) or a missing file."""
+    if not path or not os.path.exists(path):
+        return {}
+    if lammps_table is not None:
+        return {"pour.N": int((np.asarray(lammps_table["fixed"]) == 0).sum())}
+    if checkpoint.is_state_file(path):
+        attrs = checkpoint.read_attrs(path)
+    elif packing.is_packing(path):
+        attrs = packing.read_attrs(path)
+    else:
+        return {}
+    facts = {"box.L_x": attrs.get("L_x"), "box.L_y": attrs.get("L_y"), "pour.N": attrs.get("n_mobile")}
+    return {k: (int(v) if k == "pour.N" else float(v)) for k, v in facts.items() if v is not None}
+
+
+def config_for(cfg):
+    """The config of a new run with its ``run.initial_file``'s box and sphere count, and a LAMMPS file's
+    particles already read (``lammps.initial_for``).
+
+    The file's pile is the run's: ``box.L_x``, ``box.L_y`` and ``pour.N`` (its mobile spheres, the count
+    ``collect`` groups runs by) are taken from it where the user did not give them, and must agree with
+    it where given. A text table keeps no box: the config's is used.
+
+    Returns
+    -------
+    (Config, dict or None)
+
+    Raises
+    ------
+    ConfigError
+        A given key that disagrees with the file, naming both values.
+    """
+    from .config import ConfigError
+    cfg, table = lammps.initial_for(cfg)
+    path = cfg.run.initial_file
+    facts = file_facts(path, table)
+    for key, value in facts.items():
+        if key in cfg.given and cfg.values[key] != value:
+            what = "mobile spheres" if key == "pour.N" else f"long in {key[-1]}"
+            raise ConfigError(f"{key} = {cfg.values[key]!r}, but run.initial_file {path} has {value!r} {what}; "
+                              f"leave {key} unset to take the file's")
+    missing = {k: v for k, v in facts.items() if k not in cfg.given and cfg.values[k] != v}
+    return (cfg.replace(**missing) if missing else cfg), table
+
+
 def from_packing(path, cfg, log=print):
     """The particles of a packing file (``io.packing``, a run's kept ``packing.npz``), at rest.
 

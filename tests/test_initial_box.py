@@ -1,0 +1,74 @@
+"""A run's initial file sets its box and sphere count (``initial.config_for``), and so does the table
+bench's state file (``bench.table_box``): a pile is never stepped in another box than its own."""
+import numpy as np
+import pytest
+
+from mpdem import bench, config, initial
+from mpdem.errors import ConfigError, InputError
+from mpdem.io import checkpoint, packing, tables
+
+from helpers import SQUEEZE, simple_cubic, write_crystal
+
+
+@pytest.fixture
+def crystal(tmp_path):
+    """A 4 d x 4 d simple cubic pile (its lowest layer bed) as a state file and as a packing file."""
+    x, L = simple_cubic(4, 5, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    h5 = tmp_path / "final.h5"
+    write_crystal(h5, x, fixed, L)
+    npz = tmp_path / "packing.npz"
+    packing.write(str(npz), *checkpoint.read_state(str(h5), pairs=True))
+    return {"h5": str(h5), "npz": str(npz), "L": L, "n_mobile": int((fixed == 0).sum()), "x": x, "fixed": fixed}
+
+
+@pytest.mark.parametrize("kind", ["h5", "npz"])
+def test_a_state_or_packing_file_gives_the_run_its_box_and_count(crystal, kind):
+    # the built-in example's 10 x 10 box and 1500 spheres are defaults, not given: the file's replace them
+    cfg = config.load_run_config(None, [f"run.initial_file={crystal[kind]}", "contact.mu=0"])
+    assert (cfg.box.L_x, cfg.box.L_y, cfg.pour.N) == (10.0, 10.0, 1500)
+    got, table = initial.config_for(cfg)
+    assert table is None
+    assert (got.box.L_x, got.box.L_y) == (crystal["L"], crystal["L"])
+    assert got.pour.N == crystal["n_mobile"]
+    # what the run records is the file's pile
+    assert f"L_x = {crystal['L']!r}" in got.to_toml()
+
+
+@pytest.mark.parametrize("key,value", [("box.L_x", 12.0), ("box.L_y", 3.0), ("pour.N", 7)])
+def test_a_given_box_or_count_that_disagrees_with_the_file_is_refused(crystal, key, value):
+    cfg = config.load_run_config(None, [f"run.initial_file={crystal['h5']}", f"{key}={value}"])
+    with pytest.raises(ConfigError) as e:
+        initial.config_for(cfg)
+    msg = str(e.value)
+    assert key in msg and repr(value) in msg.split(",")[0] and crystal["h5"] in msg
+    assert "leave" in msg and "unset" in msg
+
+
+def test_given_values_that_agree_are_kept_and_a_text_table_keeps_the_configs_box(crystal, tmp_path):
+    L = crystal["L"]
+    cfg = config.load_run_config(None, [f"run.initial_file={crystal['h5']}", f"box.L_x={L}", f"box.L_y={L}",
+                                        f"pour.N={crystal['n_mobile']}"])
+    assert initial.config_for(cfg)[0].values == cfg.values
+    table = tmp_path / "pile.txt"
+    tables.write_table(str(table), np.arange(1, len(crystal["x"]) + 1), crystal["x"], fixed=crystal["fixed"])
+    cfg = config.load_run_config(None, [f"run.initial_file={table}"])
+    got, _ = initial.config_for(cfg)
+    assert (got.box.L_x, got.box.L_y, got.pour.N) == (10.0, 10.0, 1500)
+
+
+def test_the_table_bench_times_a_state_file_in_its_own_box(crystal, tmp_path):
+    cfg = bench.table_config()
+    assert cfg.box.L_x == 20.0
+    got = bench.table_box(cfg, crystal["h5"])
+    assert (got.box.L_x, got.box.L_y) == (crystal["L"], crystal["L"])
+    whole, L_x, L_y = bench.load_table(crystal["h5"], got)
+    assert (L_x, L_y) == (crystal["L"], crystal["L"]) and len(whole["id"]) == len(crystal["x"])
+    # a --set box that disagrees with the file: one error naming both
+    sets = ["box.L_x=10"]
+    with pytest.raises(InputError, match=r"box\.L_x=10\.0.*--table .*final\.h5 is 3\.99+6 long in x"):
+        bench.table_box(bench.table_config(sets), crystal["h5"], sets)
+    # a text table keeps no box: the bench's stays
+    table = tmp_path / "pile.txt"
+    tables.write_table(str(table), np.arange(1, len(crystal["x"]) + 1), crystal["x"], fixed=crystal["fixed"])
+    assert bench.table_box(cfg, str(table)).box.L_x == 20.0
