@@ -204,7 +204,7 @@ def _wait_for(path, text, timeout=120):
 
 
 @pytest.mark.validation
-@pytest.mark.parametrize("sig,n,rank", [(signal.SIGUSR1, 2, 1), (signal.SIGTERM, 1, 0)])
+@pytest.mark.parametrize("sig,n,rank", [(signal.SIGUSR1, 2, 1), (signal.SIGTERM, 1, 0), (signal.SIGINT, 1, 0)])
 def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, sig, n, rank):
     run, ref, steps = straight
     out = tmp_path / "sig"
@@ -221,6 +221,21 @@ def test_signal_on_one_rank_checkpoints_and_restart_matches(straight, tmp_path, 
     mpdem("restart", out, "--quiet", n=2, check=0)
     s = summary(out)
     assert (s["digest"], s["steps"]) == (ref, steps)
+
+
+def test_a_second_ctrl_c_stops_at_once_and_other_signals_only_add_up():
+    """Ctrl-C once while stepping is a stop with a checkpoint (above); twice, KeyboardInterrupt at once
+    (``mpdem: interrupted``), for a user who will not wait for the checkpoint. SIGTERM and SIGUSR1 again
+    only record themselves."""
+    from types import SimpleNamespace
+    from mpdem.driver.simulation import STOP_SIGNALS, Run
+    assert signal.SIGINT in STOP_SIGNALS
+    run = SimpleNamespace(signals=[])
+    for sig in (signal.SIGTERM, signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
+        Run._on_stop_signal(run, sig, None)
+    assert run.signals == [signal.SIGTERM, signal.SIGUSR1, signal.SIGTERM, signal.SIGINT]
+    with pytest.raises(KeyboardInterrupt):
+        Run._on_stop_signal(run, signal.SIGINT, None)
 
 
 def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path):

@@ -39,9 +39,9 @@ from .runstate import History, RunState
 from .schedule import Checkpoints, Checks, Logger, Progress, Snapshots, StopRule, Thermo, quiet_span
 from ..state import State
 
-# the signals that stop a run early with a checkpoint and exit status EXIT_RESTART
-# ("not finished, restart me", EX_TEMPFAIL)
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+# the signals that stop a stepping run early with a checkpoint and exit status EXIT_RESTART
+# ("not finished, restart me", EX_TEMPFAIL); SIGINT (Ctrl-C) among them, a second one stops at once
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)
 # steps an engine may run in one go between the driver's looks at signals and the wall clock (``run_quiet``)
 QUIET_MOST = 2000
 # and at most this many sphere-steps of this rank's rows (a few seconds: a stop signal is honoured
@@ -126,7 +126,7 @@ def file_start(t, out, domain, log):
         rundir.write_atomic(os.path.join(out, "config.toml"), t.cfg.to_toml())
         rundir.truncate_thermo(os.path.join(out, "thermo.csv"), st.step)
     log(f"restart: from {t.path} at step {st.step} (t = {st.time:.6g}), segment {rec.history.segments}, "
-        f"{domain.size} ranks (written by {attrs.get('ranks', '?')})")
+        f"{domain.size} rank(s) (written by {attrs.get('ranks', '?')})")
     for w in t.cfg.warnings:
         log.warn(w)
     return Start(st, int(attrs["n_mobile"]), int(attrs["n_bed"]), rec, True)
@@ -280,8 +280,7 @@ class Run:
             self.checks.fatal(info, st.step)
             progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps,
                                 N, st.step, self.t0)
-            handlers = {s: signal.signal(s, lambda signum, frame: self.signals.append(int(signum)))
-                        for s in STOP_SIGNALS}
+            handlers = {s: signal.signal(s, self._on_stop_signal) for s in STOP_SIGNALS}
             quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
                 if quiet_runs:
@@ -379,6 +378,14 @@ class Run:
         if hint:
             self.log.warn(f"{hint}. {spin.describe(*spin.spinners(self.state, self.domain))}")
         return False
+
+    def _on_stop_signal(self, signum, frame):
+        """Record a stop signal for the next step's flags; a second SIGINT (Ctrl-C twice) stops at once,
+        without the checkpoint (KeyboardInterrupt: ``mpdem: interrupted``, exit 1)."""
+        if signum == signal.SIGINT and int(signal.SIGINT) in self.signals:
+            raise KeyboardInterrupt
+        # nothing is written here: a handler may run in the middle of the log's own write
+        self.signals.append(int(signum))
 
     def _interrupt(self, sig):
         """Checkpoint and stop early (a signal or the wall time): status "interrupted"."""
