@@ -30,6 +30,12 @@ def test_load_config_takes_keys_by_name_and_raises_on_bad_values():
         mpdem.load_config(**{"contact.muu": 1.0})
 
 
+def test_dir_lists_the_lazily_loaded_api():
+    """Tab completion and dir(mpdem) show the functions ``import mpdem`` loads on first use."""
+    names = dir(mpdem)
+    assert set(mpdem.API) <= set(names) and "__version__" in names
+
+
 def test_run_read_analyze_and_restart_as_the_command_line_does(tmp_path):
     cfg = mpdem.load_config(**SMALL)
     r = mpdem.run(cfg, str(tmp_path / "api"))

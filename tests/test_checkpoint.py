@@ -274,3 +274,12 @@ def test_a_new_sidecar_is_one_entry_in_the_table(tmp_path, monkeypatch):
     assert seen == [("snap-00000.h5", False), ("snap-00001.h5", False), ("final.h5", True)]
     assert (out / "snapshots" / "snap-00001.step").read_text() == "20000\n"
     assert (out / "final.xmf").exists() and (out / "snapshots" / "series.xmf").exists()
+
+
+def test_a_missing_file_or_a_run_directory_is_named_before_hdf5_tries_it(tmp_path):
+    """``mpdem info``, ``export`` and every reader: one short line, not HDF5's error stack."""
+    for read in (checkpoint.read_state, checkpoint.read_attrs):
+        with pytest.raises(StateFileError, match=r"nope\.h5: no such file$"):
+            read(str(tmp_path / "nope.h5"))
+        with pytest.raises(StateFileError, match=r"a directory, not a state file \(a finished run's is .*final\.h5\)"):
+            read(str(tmp_path))

@@ -209,6 +209,10 @@ def test_contact_network_for_paraview_and_ovito_reads_back(tmp_path):
     P = len(arr["id_i"])
     xmf = export_file(str(tmp_path / "f.h5"), "contacts")
     assert xmf == str(tmp_path / "f.contacts.xmf")
+    # the command line names both files it wrote
+    from mpdem.io.export import export
+    assert export(str(tmp_path / "f.h5"), "contacts")[1] == [f"wrote {tmp_path / 'f.contacts.h5'} (the data the "
+                                                              f".xmf points to)"]
     root = ET.parse(xmf).getroot()
     grid = root.find("Domain/Grid")
     topo = grid.find("Topology")

@@ -74,6 +74,7 @@ def test_the_estimate_bounds_a_small_runs_measured_peak(tmp_path):
     # the log says it first
     first = (tmp_path / "run" / "log.txt").read_text().splitlines()[0]
     assert first.startswith(f"memory: pour.N = {n} spheres (+ bed) on 1 rank(s) need about")
+    assert "on another" not in first        # one rank: no other rank to speak of
 
 
 def test_a_run_that_cannot_fit_is_refused_in_one_line_before_any_work(tmp_path):

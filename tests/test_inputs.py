@@ -173,6 +173,16 @@ def test_version_and_nearest_key(tmp_path):
     toml.write_text("[contact]\nepsilom = 0.5\n")
     p = mpdem("run", str(toml))
     assert p.returncode == 1 and "unknown key contact.epsilom (did you mean contact.epsilon?)" in p.stderr
+    # the right key in the wrong section is named; an unknown key lists its section's keys, not all
+    toml.write_text("[run]\nmax_steps = 10\n[contact]\nmax_steps = 10\n")
+    p = mpdem("run", str(toml))
+    assert p.returncode == 1 and "unknown key contact.max_steps (did you mean run.max_steps?)" in p.stderr
+    p = mpdem("run", "--set", "contact.muu=0.3", "--out", str(tmp_path / "x"))
+    assert p.returncode == 1 and "keys of [contact]: model, k_n" in p.stderr and "max_steps" not in p.stderr
+    # a space for '=': the item is named, not taken for the config file
+    p = mpdem("run", "--set", "contact.mu", "-0.3", "--out", str(tmp_path / "x"))
+    assert p.returncode == 1 and "--set 'contact.mu': expected section.key=value" in p.stderr, p.stderr
+    assert "config file" not in p.stderr
     assert not (tmp_path / "x").exists()
 
 

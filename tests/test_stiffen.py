@@ -179,6 +179,9 @@ def test_the_command_line_names_a_rise_past_a_decade(soft, tmp_path):
     p = cli("stiffen", soft, "--k_n", "5e5", "--out", tmp_path / "x", check=1)
     assert "--k_n 500000" in p.stderr and "up to 200000" in p.stderr and not (tmp_path / "x").exists()
     p = cli("stiffen", tmp_path / "nothing", "--k_n", "2e5", check=1)
+    assert "nothing: no such run directory" in p.stderr
+    (tmp_path / "empty").mkdir()
+    p = cli("stiffen", tmp_path / "empty", "--k_n", "2e5", check=1)
     assert "neither final.h5 nor packing.npz" in p.stderr
 
 

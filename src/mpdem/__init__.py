@@ -45,3 +45,8 @@ def __getattr__(name):
         from . import api
         return getattr(api, name)
     raise AttributeError(f"module 'mpdem' has no attribute {name!r}")
+
+
+def __dir__():
+    # the lazily loaded API among the names, so that tab completion and dir() show it
+    return sorted(set(globals()) | set(API))

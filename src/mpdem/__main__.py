@@ -13,8 +13,9 @@
     python -m mpdem bench --io|--analysis [--N 1000000]
 
 Exit status: 0 finished (converged), 3 finished at run.max_steps without
-converging, 75 stopped early by --walltime, SIGTERM or SIGUSR1 after writing
-a checkpoint ("not finished, restart me"), 1 error, 2 usage error, 128 + the
+converging, 75 stopped early by --walltime, SIGTERM, SIGUSR1 or SIGINT after
+writing a checkpoint ("not finished, restart me"; a second SIGINT stops at once,
+without it: 1), 1 error, 2 usage error, 128 + the
 signal (143 SIGTERM, 130 SIGINT) stopped before the first step, nothing saved
 (``watch``).
 
@@ -215,7 +216,7 @@ def cmd_sweep(args):
     try:
         collect([args.out], args.collect or os.path.join(args.out, "collect"))
     except AnalysisError as e:
-        sys.stderr.write(f"mpdem: error: collect: {e}\n")
+        sys.stderr.write(f"mpdem: error: {e}\n")   # the message starts "collect: "
         return EXIT_ERROR
     return rc
 
@@ -301,9 +302,9 @@ def parser():
     b = sub.add_parser("bench", help="benchmark: ns per atom-step from a particle table (--table), "
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",
-                   help="particle table to time (id x y z [vx vy vz] [fixed], plain or gzip), "
-                        "e.g. path/to/landed20k.txt.gz; run with the settings of the LAMMPS comparison: "
-                        "Hooke, k_n 2e5, epsilon 0.88, gamma_t = gamma_n/2, mu 0.5, dt 1e-4, skin 0.2")
+                   help="particle table to time (id x y z [vx vy vz] [fixed], plain or gzip; or an mpdem state "
+                        "file, in its own box), e.g. path/to/landed20k.txt.gz; run with the settings of the LAMMPS "
+                        "comparison: Hooke, k_n 2e5, epsilon 0.88, gamma_t = gamma_n/2, mu 0.5, dt 1e-4, skin 0.2")
     b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
     b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",
                    help="numba threads per rank (default 1 with --table; numba's default otherwise)")

@@ -56,7 +56,9 @@ SCHEMA = (
        "start from this configuration instead of building one: an mpdem HDF5 state file, a run's packing.npz "
        "(at rest, no contact histories: contact.mu = 0 only), a text table `id x y z [vx vy vz] [omegax omegay "
        "omegaz] [fixed]` (a header line names the columns), or a LAMMPS data file (atom_style sphere) or text "
-       "dump (recognised by their content)", str, physics=False),
+       "dump (recognised by their content); the file's box and mobile count are the run's box.L_x, box.L_y and "
+       "pour.N (taken where not given, refused where given and different; a text table keeps no box)", str,
+       physics=False),
     _k("run", "fixed_types", (),
        "atom types of the bed (frozen) spheres in a LAMMPS initial_file, e.g. [2]; required for one",
        tuple, physics=False),
@@ -472,6 +474,10 @@ def did_you_mean(name, known):
     """
     import difflib
     known = list(known)
+    if "." in name:     # the right name in another section (``[contact] max_steps``: run.max_steps)
+        same = [k for k in known if "." in k and k.split(".", 1)[1] == name.split(".", 1)[1] and k != name]
+        if same:
+            return f" (did you mean {same[0]}?)"
     hit = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
     if not hit and "." not in name:
         tails = {k.split(".", 1)[1]: k for k in known if "." in k}
@@ -520,12 +526,13 @@ def raw_from_toml(text, origin="config"):
 def parse_set(item):
     """'section.key=value' -> ('section.key', value); value parsed as TOML if it can be."""
     if "=" not in item:
-        raise ConfigError(f"--set {item!r}: expected section.key=value")
+        raise ConfigError(f"--set {item!r}: expected section.key=value (with '=', no space: "
+                          f"--set contact.mu=0.3)")
     key, text = (s.strip() for s in item.split("=", 1))
     if key in RETIRED:
         raise ConfigError(f"--set {key}: the key is retired ({RETIRED[key]})")
     if key not in KEYS:
-        raise ConfigError(f"--set {key}: unknown key{did_you_mean(key, KEYS)}; known keys: {', '.join(KEYS)}")
+        raise ConfigError(f"--set {key}: unknown key{did_you_mean(key, KEYS)}; {_known_near(key)}")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
@@ -533,8 +540,18 @@ def parse_set(item):
     return key, value
 
 
+def _known_near(key):
+    """The keys of ``key``'s section, or the sections when it names none: what an unknown key's error lists."""
+    sec = key.split(".", 1)[0] if "." in key else ""
+    if sec in SECTIONS:
+        return f"keys of [{sec}]: {', '.join(k.name for k in SCHEMA if k.section == sec)}"
+    return f"keys are section.key, the sections: {', '.join(SECTIONS)}"
+
+
 def load(path=None, sets=(), base=None):
     """Read a TOML file (or start from ``base``), apply ``--set`` items, resolve."""
+    # the items first: a malformed one (``--set contact.mu -0.3``) is named as such, not as the config file
+    parsed = [parse_set(item) for item in sets]
     raw = dict(base or {})
     if path is not None:
         try:
@@ -545,9 +562,7 @@ def load(path=None, sets=(), base=None):
         except tomllib.TOMLDecodeError as e:
             raise ConfigError(f"config file {path}: not valid TOML: {e}") from None
         raw.update(flatten(doc, origin=str(path)))
-    for item in sets:
-        k, v = parse_set(item)
-        raw[k] = v
+    raw.update(parsed)
     return resolve(raw)
 
 

@@ -376,8 +376,9 @@ def verdict(cfg, ranks, local, n_file=None, env=None, label=None):
     avail, where = available(local, env)
     need = est.node(local)
     share = f"{local} ranks of this node {words(need)}, " if local > 1 else ""
+    other = f", {words(est.other())} on another" if ranks > 1 else ""
     line = (f"memory: {what(cfg, n_file, label)} (+ bed) on {ranks} rank(s) need about {words(est.rank0())} on rank 0 "
-            f"(its peak at {est.peak_phase()}), {words(est.other())} on another; {share}available "
+            f"(its peak at {est.peak_phase()}){other}; {share}available "
             f"{words(avail) if avail is not None else '?'} ({where})")
     if avail is None or need <= avail:
         return line, None

@@ -161,6 +161,8 @@ def rung_config(run, k_n, sets=()):
         From the config's own checks. (A frictional pile's packing is refused when the run starts,
         ``initial.check_file``, before any work.)
     """
+    if not os.path.isdir(run):
+        raise InputError(f"{run}: no such run directory; stiffen accepts a finished run's directory")
     final = rundir.final_path(run)
     if not os.path.exists(final):
         final = os.path.join(run, "packing.npz")

@@ -142,7 +142,7 @@ def restart_config(attrs, path, run, sets):
         if bad:
             raise config.ConfigError(
                 f"--set {bad[0]}={new.values[bad[0]]!r}: a restart can change only "
-                f"{config.key_summary(config.RESTART_KEYS)}; "
+                f"{config.key_summary(config.RESTART_KEYS)} (and flow.time while the flow runs); "
                 f"to continue with other physics start a new run with --set run.initial_file={path}")
         cfg = new
     return cfg

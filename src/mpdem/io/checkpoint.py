@@ -303,6 +303,16 @@ def parallel_hdf5():
     return bool(h5py.get_config().mpi)
 
 
+def _not_a_file(path):
+    """Why ``path`` cannot be a state file, said before HDF5 tries it (its own words for these are long),
+    or None."""
+    if os.path.isdir(path):
+        return f"{path}: a directory, not a state file (a finished run's is {os.path.join(path, 'final.h5')})"
+    if not os.path.exists(path):
+        return f"{path}: no such file"
+    return None
+
+
 def _open(path, mode, net):
     """The file, opened by every rank of ``net`` with parallel HDF5 (one rank, or no ``mpio``: plainly)."""
     if net.parallel and parallel_hdf5():
@@ -602,11 +612,12 @@ def read(path, net=None, pairs=False):
     attrs : dict
     """
     net = channel(net)
-    err, f = None, None
-    try:
-        f = _open(path, "r", net)
-    except (OSError, ValueError) as e:
-        err = f"{path}: cannot open as HDF5 ({e})"
+    err, f = _not_a_file(path), None
+    if err is None:
+        try:
+            f = _open(path, "r", net)
+        except (OSError, ValueError) as e:
+            err = f"{path}: cannot open as HDF5 ({e})"
     net.agree(err, StateFileError)
     with f:
         groups, err = _check_layout(f, path)
@@ -664,6 +675,9 @@ def read_state(path, pairs=False):
 
 def read_attrs(path):
     """The attributes of a state file, after the layout checks (no data read)."""
+    err = _not_a_file(path)
+    if err:
+        raise StateFileError(err)
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as e:

@@ -250,7 +250,8 @@ def _packing(path, out):
 def _contacts(path, out):
     # the contact network for ParaView: <name>.contacts.h5 and .xmf (mpdem.io.network)
     from .network import write_contacts_xdmf
-    return write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None), []
+    xmf = write_contacts_xdmf(path, os.path.splitext(out)[0] if out else None)
+    return xmf, [f"wrote {os.path.splitext(xmf)[0]}.h5 (the data the .xmf points to)"]
 
 
 def _lammps_local(path, out):
