@@ -54,7 +54,38 @@ def test_given_values_that_agree_are_kept_and_a_text_table_keeps_the_configs_box
     tables.write_table(str(table), np.arange(1, len(crystal["x"]) + 1), crystal["x"], fixed=crystal["fixed"])
     cfg = config.load_run_config(None, [f"run.initial_file={table}"])
     got, _ = initial.config_for(cfg)
-    assert (got.box.L_x, got.box.L_y, got.pour.N) == (10.0, 10.0, 1500)
+    # a table keeps no box, but its count is the run's
+    assert (got.box.L_x, got.box.L_y, got.pour.N) == (10.0, 10.0, crystal["n_mobile"])
+
+
+def test_every_rank_gets_rank_0s_reading_and_odd_files_are_named(crystal, tmp_path):
+    from mpdem.parallel import channel
+    cfg = config.load_run_config(None, [f"run.initial_file={crystal['h5']}"])
+    assert initial.config_for(cfg, channel(None))[0].values == initial.config_for(cfg)[0].values
+    # a pile without a mobile sphere: said of the file, not as pour.N = 0
+    x, L = simple_cubic(4, 2, SQUEEZE)
+    write_crystal(tmp_path / "bed.h5", x, np.ones(len(x), np.uint8), L, sets=["pour.N=1"])
+    with pytest.raises(InputError, match=r"bed\.h5: no mobile sphere: every sphere is a bed sphere"):
+        initial.config_for(config.load_run_config(None, [f"run.initial_file={tmp_path / 'bed.h5'}"]))
+    # a box the config refuses (below 3 d) names the file it came from
+    x, L = simple_cubic(2, 3, SQUEEZE)
+    write_crystal(tmp_path / "narrow.h5", x, (x[:, 2] < 1).astype(np.uint8), L, sets=["box.L_x=3", "box.L_y=3"])
+    with pytest.raises(ConfigError, match=r"box\.L_x = 1\.99.*\(from run\.initial_file .*narrow\.h5\)"):
+        initial.config_for(config.load_run_config(None, [f"run.initial_file={tmp_path / 'narrow.h5'}"]))
+
+
+def test_stiffening_a_run_started_from_a_file_takes_the_piles_box_and_count(crystal, tmp_path):
+    """A run started from a file may have recorded the config's box and count (a text table keeps no box,
+    and runs before the file's were taken): its rung is the pile's."""
+    from mpdem import stiffen
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "final.h5").write_bytes(open(crystal["h5"], "rb").read())
+    cfg = config.load_run_config(None, ["contact.mu=0", "run.max_steps=10"])    # 10 x 10, 1500 spheres
+    (run / "config.toml").write_text(cfg.to_toml())
+    rung = stiffen.rung_config(str(run), 2e6, [])
+    assert (rung.box.L_x, rung.pour.N) == (crystal["L"], crystal["n_mobile"])
+    assert initial.config_for(rung)[0].values == rung.values
 
 
 def test_the_table_bench_times_a_state_file_in_its_own_box(crystal, tmp_path):

@@ -238,6 +238,47 @@ def test_a_second_ctrl_c_stops_at_once_and_other_signals_only_add_up():
         Run._on_stop_signal(run, signal.SIGINT, None)
 
 
+@pytest.mark.validation
+def test_ctrl_c_in_python_raises_keyboardinterrupt_after_the_checkpoint(straight, tmp_path):
+    """``mpdem.run`` stopped by SIGINT (a notebook's interrupt): the checkpoint is written, then Python's
+    KeyboardInterrupt (a loop over runs stops too), and ``mpdem.restart`` ends on the straight run's bits."""
+    import sys
+    run, ref, steps = straight
+    out = tmp_path / "py"
+    items = [kv.split("=", 1) for kv in PILE + ["output.progress_every=2000"]]
+    script = (f"import mpdem, tomllib\n"
+              f"cfg = mpdem.load_config(**{{k: tomllib.loads('v = ' + v)['v'] for k, v in {items!r}}})\n"
+              f"try:\n    mpdem.run(cfg, {str(out)!r})\n    print('returned')\n"
+              f"except KeyboardInterrupt as e:\n    print('KeyboardInterrupt:', e)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=child_env())
+    _wait_for(out / "log.txt", "step      2000")
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=300)
+    assert "KeyboardInterrupt:" in stdout and "with a checkpoint" in stdout, stdout + stderr
+    assert "mpdem: SIGINT: a checkpoint" in stderr
+    assert "stop: signal SIGINT" in (out / "log.txt").read_text() and not (out / "final.h5").exists()
+    mpdem("restart", out, "--quiet", check=0)
+    assert (summary(out)["digest"], summary(out)["steps"]) == (ref, steps)
+
+
+@pytest.mark.validation
+def test_a_run_started_with_sigint_ignored_keeps_ignoring_it(tmp_path):
+    """A background job of a script starts with SIGINT ignored: the terminal's Ctrl-C must not stop it."""
+    out = tmp_path / "bg"
+    # a stop rule that never holds: the run is still stepping when the signals come
+    proc = subprocess.Popen(mpdem_argv("run", *sets("stop.E_stop=1e-30"), "--out", out), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=child_env(),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    _wait_for(out / "log.txt", "step      2000")
+    proc.send_signal(signal.SIGINT)
+    time.sleep(3)
+    assert proc.poll() is None, "SIGINT, ignored by the parent, stopped the run"
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 75 and "signal SIGTERM" in (out / "log.txt").read_text(), stdout + stderr
+
+
 def test_walltime_stops_with_a_checkpoint_and_restart_matches(straight, tmp_path):
     run, ref, steps = straight
     out = tmp_path / "wall"

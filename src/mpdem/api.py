@@ -16,6 +16,7 @@ the same arguments.
 from __future__ import annotations
 
 import os
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -137,6 +138,10 @@ def _go(run):
     """Run to the end (final state) or to an early stop (checkpoint); the RunRecord."""
     if run.run() == "interrupted":
         run.log.close()
+        if run.stop_signal == signal.SIGINT and run.python_caller:
+            # Python's word for Ctrl-C, after the checkpoint: a loop over runs stops here too
+            raise KeyboardInterrupt(f"{run.out}: stopped by SIGINT at step {run.state.step} with a checkpoint; "
+                                    f"mpdem.restart({run.out!r}) goes on")
         return _result(run, None)
     return _result(run, run.finish())
 
@@ -233,7 +238,7 @@ def run(config, out, threads=1, *, force=False, quiet=True, walltime=None, wallt
     from .errors import PackingFileError, StateFileError
     from .initial import check_file, config_for
     try:
-        cfg, initial = config_for(config)
+        cfg, initial = config_for(config, net)
         check_file(cfg)
     except (config_mod.ConfigError, InputError, StateFileError, PackingFileError) as e:
         # the same inputs on every rank: the same error

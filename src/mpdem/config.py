@@ -475,8 +475,10 @@ def did_you_mean(name, known):
     import difflib
     known = list(known)
     if "." in name:     # the right name in another section (``[contact] max_steps``: run.max_steps)
-        same = [k for k in known if "." in k and k.split(".", 1)[1] == name.split(".", 1)[1] and k != name]
-        if same:
+        sec, tail = name.split(".", 1)
+        near = difflib.get_close_matches(name, [k for k in known if k.startswith(sec + ".")], n=1, cutoff=0.8)
+        same = [k for k in known if "." in k and k.split(".", 1)[1] == tail and k != name]
+        if same and not near:
             return f" (did you mean {same[0]}?)"
     hit = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
     if not hit and "." not in name:

@@ -132,8 +132,8 @@ def check_file(cfg):
 def file_facts(path, lammps_table=None):
     """What an initial file says of the run it starts: ``{'box.L_x', 'box.L_y', 'pour.N'}`` from an mpdem
     state or packing file (its attributes), ``{'pour.N'}`` from a LAMMPS file already read (its box is
-    ``lammps.initial_for``'s), ``{}`` from a text table (which keeps no box) or a missing file."""
-    if not path or not os.path.exists(path):
+    ``lammps.initial_for``'s) or a text table (which keeps no box), ``{}`` for a path that is no file."""
+    if not path or not os.path.isfile(path):
         return {}
     if lammps_table is not None:
         return {"pour.N": int((np.asarray(lammps_table["fixed"]) == 0).sum())}
@@ -142,18 +142,19 @@ def file_facts(path, lammps_table=None):
     elif packing.is_packing(path):
         attrs = packing.read_attrs(path)
     else:
-        return {}
+        return {"pour.N": int((np.asarray(tables.read_table(path)["fixed"]) == 0).sum())}
     facts = {"box.L_x": attrs.get("L_x"), "box.L_y": attrs.get("L_y"), "pour.N": attrs.get("n_mobile")}
     return {k: (int(v) if k == "pour.N" else float(v)) for k, v in facts.items() if v is not None}
 
 
-def config_for(cfg):
+def config_for(cfg, net=None):
     """The config of a new run with its ``run.initial_file``'s box and sphere count, and a LAMMPS file's
     particles already read (``lammps.initial_for``).
 
     The file's pile is the run's: ``box.L_x``, ``box.L_y`` and ``pour.N`` (its mobile spheres, the count
     ``collect`` groups runs by) are taken from it where the user did not give them, and must agree with
-    it where given. A text table keeps no box: the config's is used.
+    it where given. A text table keeps no box: the config's is used. Rank 0 of ``net`` reads what the
+    file says, so every rank has the same config (collective).
 
     Returns
     -------
@@ -163,18 +164,30 @@ def config_for(cfg):
     ------
     ConfigError
         A given key that disagrees with the file, naming both values.
+    InputError
+        A file without a mobile sphere.
     """
     from .config import ConfigError
+    from .errors import PackingFileError, StateFileError
     cfg, table = lammps.initial_for(cfg)
     path = cfg.run.initial_file
-    facts = file_facts(path, table)
+    catch = (InputError, StateFileError, PackingFileError)
+    facts = net.on_root(file_facts, path, table, catch=catch) if net is not None else file_facts(path, table)
+    if facts.get("pour.N") == 0:
+        how = f"of types {list(cfg.run.fixed_types)}" if table is not None else "fixed = 1"
+        raise InputError(f"initial file {path}: no mobile sphere: every sphere is a bed sphere ({how})")
     for key, value in facts.items():
         if key in cfg.given and cfg.values[key] != value:
             what = "mobile spheres" if key == "pour.N" else f"long in {key[-1]}"
             raise ConfigError(f"{key} = {cfg.values[key]!r}, but run.initial_file {path} has {value!r} {what}; "
                               f"leave {key} unset to take the file's")
     missing = {k: v for k, v in facts.items() if k not in cfg.given and cfg.values[k] != v}
-    return (cfg.replace(**missing) if missing else cfg), table
+    if not missing:
+        return cfg, table
+    try:
+        return cfg.replace(**missing), table
+    except ConfigError as e:    # a file's box the config refuses (below 3 d): say where it came from
+        raise ConfigError(f"{e} (from run.initial_file {path})") from None
 
 
 def from_packing(path, cfg, log=print):

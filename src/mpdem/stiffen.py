@@ -170,6 +170,10 @@ def rung_config(run, k_n, sets=()):
         raise InputError(f"{run}: neither final.h5 nor packing.npz; stiffen accepts a finished run's directory")
     with open(os.path.join(run, "config.toml")) as fh:
         raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
+    # the pile's box and count are its final state's (``initial.config_for``): a run started from a file
+    # may have recorded the config's, which need not be the pile's
+    from .initial import file_facts
+    raw.update(file_facts(final))
     was = config.resolve(raw).contact.k_n
     if not 1 < k_n / was <= config.MAX_RISE:
         raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "

@@ -179,6 +179,10 @@ class Run:
         self.t_end = None if walltime is None else t_start + walltime
         self.margin = (min(60.0, walltime / 20) if margin is None else margin) if walltime else 0.0
         self.signals = [] if signals is None else signals
+        # a Python caller (no command line's signal list) gets KeyboardInterrupt after a Ctrl-C's checkpoint
+        self.python_caller = signals is None
+        # the signal the ranks agreed to stop on (0: none, or the wall time)
+        self.stop_signal = 0
         # the set-up's watch (``watch``): progress lines and stop signals until the first step
         again = (f"restart it again (`python -m mpdem restart {out_dir}`)" if target is not None
                  else "start the run again (with --force to reuse its directory)")
@@ -280,7 +284,9 @@ class Run:
             self.checks.fatal(info, st.step)
             progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps,
                                 N, st.step, self.t0)
-            handlers = {s: signal.signal(s, self._on_stop_signal) for s in STOP_SIGNALS}
+            # a SIGINT ignored by whoever started us (a background job of a script) stays ignored
+            handlers = {s: signal.signal(s, self._on_stop_signal) for s in STOP_SIGNALS
+                        if not (s == signal.SIGINT and signal.getsignal(s) == signal.SIG_IGN)}
             quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
                 if quiet_runs:
@@ -384,13 +390,17 @@ class Run:
         without the checkpoint (KeyboardInterrupt: ``mpdem: interrupted``, exit 1)."""
         if signum == signal.SIGINT and int(signal.SIGINT) in self.signals:
             raise KeyboardInterrupt
-        # nothing is written here: a handler may run in the middle of the log's own write
+        if signum == signal.SIGINT:
+            # os.write, not the log's buffered file: the handler may run in the middle of its write
+            os.write(2, b"mpdem: SIGINT: a checkpoint at the next look, then a stop (Ctrl-C again: at once, "
+                        b"without it)\n")
         self.signals.append(int(signum))
 
     def _interrupt(self, sig):
         """Checkpoint and stop early (a signal or the wall time): status "interrupted"."""
         self.thermo.flush()
         path = self.checkpoints.write(self.state.step)
+        self.stop_signal = int(sig)
         why = f"signal {signal.Signals(int(sig)).name}" if sig else "the wall time"
         self.log(f"stop: {why} at step {self.state.step}; wrote {path}. Not finished: continue with "
                  f"`python -m mpdem restart {self.out}` (exit status {EXIT_RESTART})")

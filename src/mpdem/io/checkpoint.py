@@ -612,12 +612,13 @@ def read(path, net=None, pairs=False):
     attrs : dict
     """
     net = channel(net)
-    err, f = _not_a_file(path), None
-    if err is None:
-        try:
-            f = _open(path, "r", net)
-        except (OSError, ValueError) as e:
-            err = f"{path}: cannot open as HDF5 ({e})"
+    # agreed before the open, which is collective under parallel HDF5: no rank waits in it alone
+    net.agree(_not_a_file(path), StateFileError)
+    err, f = None, None
+    try:
+        f = _open(path, "r", net)
+    except (OSError, ValueError) as e:
+        err = f"{path}: cannot open as HDF5 ({e})"
     net.agree(err, StateFileError)
     with f:
         groups, err = _check_layout(f, path)
