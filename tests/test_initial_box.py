@@ -103,3 +103,16 @@ def test_the_table_bench_times_a_state_file_in_its_own_box(crystal, tmp_path):
     table = tmp_path / "pile.txt"
     tables.write_table(str(table), np.arange(1, len(crystal["x"]) + 1), crystal["x"], fixed=crystal["fixed"])
     assert bench.table_box(cfg, str(table)).box.L_x == 20.0
+
+
+def test_an_initial_file_that_is_a_directory_or_nothing_is_refused_before_the_run_directory(tmp_path):
+    from helpers import mpdem
+    for path, said in ((tmp_path, "a directory, not a file (a finished run's state is"),
+                       (tmp_path / "nope.h5", "no such file")):
+        with pytest.raises(InputError, match=r"run\.initial_file .*: " + said.replace("(", r"\(")):
+            initial.config_for(config.load_run_config(None, [f"run.initial_file={path}"]))
+    p = mpdem("run", "--set", f"run.initial_file={tmp_path / 'nope.h5'}", "--set", "run.max_steps=10",
+              "--out", str(tmp_path / "out"), check=1)
+    assert "run.initial_file" in p.stderr and "no such file" in p.stderr and not (tmp_path / "out").exists()
+    with pytest.raises(InputError, match=r"--table .*nope\.h5: no such file"):
+        bench.table_box(bench.table_config(), str(tmp_path / "nope.h5"))

@@ -111,7 +111,7 @@ def table_box(cfg, path, sets=()):
     InputError
         A ``--set box.*`` that disagrees with the file's box, naming both.
     """
-    box = {k: v for k, v in initial.file_facts(path).items() if k.startswith("box.")}
+    box = {k: v for k, v in initial.file_facts(path, what="--table").items() if k.startswith("box.")}
     user = {config.parse_set(item)[0] for item in sets}
     for key, length in box.items():
         if key in user and cfg.values[key] != length:

@@ -129,12 +129,23 @@ def check_file(cfg):
                          f" and settle again; accepted: contact.mu = 0, or a state file (final.h5, a checkpoint)")
 
 
-def file_facts(path, lammps_table=None):
+def file_facts(path, lammps_table=None, what="run.initial_file"):
     """What an initial file says of the run it starts: ``{'box.L_x', 'box.L_y', 'pour.N'}`` from an mpdem
     state or packing file (its attributes), ``{'pour.N'}`` from a LAMMPS file already read (its box is
-    ``lammps.initial_for``'s) or a text table (which keeps no box), ``{}`` for a path that is no file."""
-    if not path or not os.path.isfile(path):
+    ``lammps.initial_for``'s) or a text table (which keeps no box), ``{}`` without a path.
+
+    Raises
+    ------
+    InputError
+        A path that is a directory or nothing (named as ``what``), before a run directory is made.
+    """
+    if not path:
         return {}
+    if os.path.isdir(path):
+        raise InputError(f"{what} {path}: a directory, not a file (a finished run's state is "
+                         f"{os.path.join(path, 'final.h5')})")
+    if not os.path.isfile(path):
+        raise InputError(f"{what} {path}: no such file")
     if lammps_table is not None:
         return {"pour.N": int((np.asarray(lammps_table["fixed"]) == 0).sum())}
     if checkpoint.is_state_file(path):
