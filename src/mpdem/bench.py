@@ -33,7 +33,7 @@ import numpy as np
 from . import build, config, initial, memory, threads
 from .errors import InputError
 from .io import tables
-from .io import checkpoint
+from .io import checkpoint, pilefile
 from .decomp import Domain
 from .engine import gpu_options, make_engine
 from .engine.base import Physics
@@ -103,7 +103,7 @@ def table_config(sets=()):
 
 
 def table_box(cfg, path, sets=()):
-    """The table bench's config in the box of an mpdem state or packing file (``initial.file_facts``): the
+    """The table bench's config in the box of an mpdem state or packing file (``io.pilefile.file_facts``): the
     pile is timed as it lies. A text table keeps no box: the bench's 20 x 20 d (or ``--set box.*``) stays.
 
     Raises
@@ -111,7 +111,7 @@ def table_box(cfg, path, sets=()):
     InputError
         A ``--set box.*`` that disagrees with the file's box, naming both.
     """
-    box = {k: v for k, v in initial.file_facts(path, what="--table").items() if k.startswith("box.")}
+    box = {k: v for k, v in pilefile.file_facts(path, what="--table").items() if k.startswith("box.")}
     user = {config.parse_set(item)[0] for item in sets}
     for key, length in box.items():
         if key in user and cfg.values[key] != length:

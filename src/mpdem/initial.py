@@ -18,6 +18,7 @@ from .errors import InputError
 from .watch import Watch
 from .io import tables
 from .io import checkpoint, lammps, packing
+from .io.pilefile import file_facts
 
 
 @dataclass
@@ -127,35 +128,6 @@ def check_file(cfg):
         raise InputError(f"run.initial_file {path}: a packing file keeps no contact histories, so a frictional "
                          f"pile (contact.mu = {cfg.contact.mu:g}) would start with every tangential spring at zero"
                          f" and settle again; accepted: contact.mu = 0, or a state file (final.h5, a checkpoint)")
-
-
-def file_facts(path, lammps_table=None, what="run.initial_file"):
-    """What an initial file says of the run it starts: ``{'box.L_x', 'box.L_y', 'pour.N'}`` from an mpdem
-    state or packing file (its attributes), ``{'pour.N'}`` from a LAMMPS file already read (its box is
-    ``lammps.initial_for``'s) or a text table (which keeps no box), ``{}`` without a path.
-
-    Raises
-    ------
-    InputError
-        A path that is a directory or nothing (named as ``what``), before a run directory is made.
-    """
-    if not path:
-        return {}
-    if os.path.isdir(path):
-        raise InputError(f"{what} {path}: a directory, not a file (a finished run's state is "
-                         f"{os.path.join(path, 'final.h5')})")
-    if not os.path.isfile(path):
-        raise InputError(f"{what} {path}: no such file")
-    if lammps_table is not None:
-        return {"pour.N": int((np.asarray(lammps_table["fixed"]) == 0).sum())}
-    if checkpoint.is_state_file(path):
-        attrs = checkpoint.read_attrs(path)
-    elif packing.is_packing(path):
-        attrs = packing.read_attrs(path)
-    else:
-        return {"pour.N": int((np.asarray(tables.read_table(path)["fixed"]) == 0).sum())}
-    facts = {"box.L_x": attrs.get("L_x"), "box.L_y": attrs.get("L_y"), "pour.N": attrs.get("n_mobile")}
-    return {k: (int(v) if k == "pour.N" else float(v)) for k, v in facts.items() if v is not None}
 
 
 def config_for(cfg, net=None):

@@ -27,6 +27,7 @@ import os
 from . import config
 from .errors import InputError
 from .io import checkpoint, packing, rundir
+from .io.pilefile import file_facts
 
 class Ramp:
     """The laws of a stiffening run, step by step.
@@ -172,7 +173,6 @@ def rung_config(run, k_n, sets=()):
         raw = config.raw_from_toml(fh.read(), origin=os.path.join(run, "config.toml"))
     # the pile's box and count are its final state's (``initial.config_for``): a run started from a file
     # may have recorded the config's, which need not be the pile's
-    from .initial import file_facts
     raw.update(file_facts(final))
     was = config.resolve(raw).contact.k_n
     if not 1 < k_n / was <= config.MAX_RISE:
