@@ -108,7 +108,13 @@ def load_config(path=None, **sets):
         Naming the key, the value and what is accepted (an unknown key, a value out of range).
     """
     from . import config
-    return config.load_run_config(path, [f"{k}={config.toml_value(v)}" for k, v in sets.items()])
+    try:
+        return config.load_run_config(path, [f"{k}={config.toml_value(v)}" for k, v in sets.items()])
+    except config.ConfigError as e:
+        # the keys came as keywords, not as the command line's --set items: say so
+        if str(e).startswith("--set "):
+            raise config.ConfigError(f"load_config key {str(e)[len('--set '):]}") from None
+        raise
 
 
 def _net(net):
