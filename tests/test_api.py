@@ -36,6 +36,24 @@ def test_dir_lists_the_lazily_loaded_api():
     assert set(mpdem.API) <= set(names) and "__version__" in names
 
 
+def test_a_run_called_from_another_thread_runs(tmp_path):
+    """Only the main thread may set signal handlers: a run from another thread (a GUI's, a notebook
+    extension's) steps without them (it stops on its cap, its stop rule or its wall time)."""
+    import threading
+    got = {}
+
+    def go():
+        try:
+            got["run"] = mpdem.run(mpdem.load_config(**dict(SMALL, **{"run.max_steps": 300})), str(tmp_path / "t"))
+        except BaseException as e:      # noqa: BLE001 (handed to the test's thread)
+            got["error"] = e
+    t = threading.Thread(target=go)
+    t.start()
+    t.join(300)
+    assert "error" not in got, repr(got.get("error"))
+    assert got["run"].status == "max_steps" and got["run"].steps == 300
+
+
 def test_run_read_analyze_and_restart_as_the_command_line_does(tmp_path):
     cfg = mpdem.load_config(**SMALL)
     r = mpdem.run(cfg, str(tmp_path / "api"))

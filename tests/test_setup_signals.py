@@ -118,3 +118,20 @@ def test_the_watch_says_a_line_when_its_time_has_come_and_stops_on_a_stop_signal
     with pytest.raises(Interrupted, match="^stopped by SIGINT during the pour's insertion, before the first step") as e:
         w("not said")
     assert e.value.status == 130 and e.value.agreed
+
+
+def test_the_set_up_leaves_a_sigint_its_parent_ignored_ignored():
+    """A background job of a script starts with SIGINT ignored: the terminal's Ctrl-C must not stop its
+    set-up (the stepping run keeps it ignored too: tests/test_restart.py); SIGTERM is still the set-up's."""
+    from mpdem.watch import Watch
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        w = Watch(lambda msg: None).__enter__()
+        try:
+            assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) == w._record
+        finally:
+            w.__exit__()
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, old)

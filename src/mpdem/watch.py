@@ -100,7 +100,9 @@ class Watch:
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            self._old = {s: signal.signal(s, self._record) for s in STOP}
+            # a SIGINT ignored by whoever started us (a background job of a script) stays ignored
+            self._old = {s: signal.signal(s, self._record) for s in STOP
+                         if not (s == signal.SIGINT and signal.getsignal(s) == signal.SIG_IGN)}
             self._start_guard()
         return self
 

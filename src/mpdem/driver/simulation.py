@@ -15,6 +15,7 @@ import dataclasses
 import math
 import os
 import signal
+import threading
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -284,9 +285,11 @@ class Run:
             self.checks.fatal(info, st.step)
             progress = Progress(self.cfg.output.progress_every, self.log, self.domain, self.physics.dt, max_steps,
                                 N, st.step, self.t0)
-            # a SIGINT ignored by whoever started us (a background job of a script) stays ignored
+            # a SIGINT ignored by whoever started us (a background job of a script) stays ignored; only the
+            # main thread may set handlers (a run called from another thread stops on the wall time alone)
+            main = threading.current_thread() is threading.main_thread()
             handlers = {s: signal.signal(s, self._on_stop_signal) for s in STOP_SIGNALS
-                        if not (s == signal.SIGINT and signal.getsignal(s) == signal.SIG_IGN)}
+                        if main and not (s == signal.SIGINT and signal.getsignal(s) == signal.SIG_IGN)}
             quiet_runs = hasattr(eng, "run_quiet")
             while self.status is None and st.step < max_steps:
                 if quiet_runs:
