@@ -208,3 +208,24 @@ def test_a_sweep_runs_stops_resumes_and_skips(tmp_path):
     s = mpdem(*args[:2], *args[3:], clean=True, cwd=tmp_path, timeout=300)   # without the broken table
     assert "1 already finished" in s.stdout, s.stdout
     assert (run1 / "sweep.log").read_text() == before
+
+
+def test_a_row_whose_count_disagrees_with_its_initial_file_is_refused_before_any_run(tmp_path):
+    """The sweep resolves each row as the run will (``initial.config_for``): a row's pour.N that is not its
+    initial file's is refused at the plan, not when the row starts hours later; a row that agrees is
+    costed by the file's count."""
+    import numpy as np
+    from mpdem.errors import SweepError
+    from helpers import SQUEEZE, simple_cubic, write_crystal
+    x, L = simple_cubic(4, 5, SQUEEZE)
+    fixed = (x[:, 2] < 1).astype(np.uint8)
+    h5 = tmp_path / "pile.h5"
+    write_crystal(h5, x, fixed, L)
+    n = int((fixed == 0).sum())
+    t = tmp_path / "t.tsv"
+    t.write_text(f"pour.N\tseed\n{n}\t1\n7\t2\n")
+    with pytest.raises(SweepError, match=rf"row 2 .*pour\.N = 7, but run\.initial_file .*pile\.h5 has {n} mobile"):
+        sweep.plan([str(t)], None, [f"run.initial_file={h5}", "contact.mu=0"])
+    t.write_text("seed\n1\n")
+    row, = sweep.plan([str(t)], None, [f"run.initial_file={h5}", "contact.mu=0"])
+    assert row.cost == n / 1e-4

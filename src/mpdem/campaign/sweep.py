@@ -26,9 +26,9 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from .. import config
+from .. import config, initial
 from ..io import rundir
-from ..errors import EXIT_RESTART, SweepError
+from ..errors import EXIT_RESTART, InputError, PackingFileError, StateFileError, SweepError
 
 # table column -> (config key, the short name used in run directory names)
 COLUMNS = {"mu": ("contact.mu", "mu"), "epsilon": ("contact.epsilon", "eps"), "k_n": ("contact.k_n", "kn"),
@@ -116,8 +116,8 @@ def plan(tables, config_path=None, sets=()):
     """Every row of ``tables``, checked against the config, cheapest first.
 
     Each row's config (``config_path`` or the built-in example, then ``sets``,
-    then the row's values) is resolved now, so a bad value stops the sweep
-    before any run starts. Two rows naming the same run directory are an error.
+    then the row's values; an initial file's box and count, ``initial.config_for``) is resolved now, so a
+    bad value stops the sweep before any run starts. Two rows naming the same run directory are an error.
 
     Returns
     -------
@@ -131,8 +131,9 @@ def plan(tables, config_path=None, sets=()):
                                  f"both make run directory {r.name}")
             seen[r.name] = (t, r.line)
             try:
-                cfg = config.load_run_config(config_path, list(sets) + r.sets)
-            except config.ConfigError as e:
+                # an initial file's box and count are the row's (a disagreement is refused now, not at the row)
+                cfg, _ = initial.config_for(config.load_run_config(config_path, list(sets) + r.sets))
+            except (config.ConfigError, InputError, StateFileError, PackingFileError) as e:
                 raise SweepError(f"sweep table {t} row {r.line} ({r.name}): {e}") from None
             r.cost = cfg.pour.N / cfg.integration.dt
             rows.append(r)
