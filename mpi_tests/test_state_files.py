@@ -73,6 +73,19 @@ def test_damaged_file_is_refused_on_every_rank(comm, landed):
     comm.Barrier()
 
 
+def test_a_file_one_rank_cannot_see_is_refused_on_every_rank(comm, landed, monkeypatch):
+    """A rank that finds no file (a stale view of a shared file system) while the others do: every rank
+    refuses it, before the open that parallel HDF5 makes collective, where the others would wait alone."""
+    r, _ = landed
+    path = rundir.checkpoint_path(r.out, 0)
+    last = comm.Get_size() - 1
+    if comm.Get_rank() == last:
+        monkeypatch.setattr(checkpoint, "_not_a_file", lambda p: f"{p}: no such file")
+    with pytest.raises(StateFileError, match="no such file"):
+        checkpoint.read(path, comm)
+    comm.Barrier()
+
+
 def test_without_parallel_hdf5_rank_0_writes_the_same_file(comm, landed, monkeypatch):
     """h5py without ``mpio`` (pip's wheel, docs/install.md): the rows go to rank 0, which writes the
     file alone, and every rank reads its share plainly; the datasets and attributes are those of the
