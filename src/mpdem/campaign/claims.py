@@ -401,9 +401,8 @@ CLAIMS = [
           also=[Diff(Window("S30", "10-30"), Window("S35", "10-30"), "10–30 d"),
                 Diff(Ext(LADDER_DEV, "S07", label="N 2000 stiffened"), Ext(LADDER_DEV, "S06", label="poured")),
                 Diff(Ext(LADDER_DEV, "S11", label="N 2000 stiffened 2e7"), Ext(LADDER_DEV, "S10", label="poured"))],
-          note="paper size: one stiffened pile (seed 1's ladder; seed 2's is climbing) against two pours (seeds 1 "
-               "and 2), the stiffened side with the poured side's seed scatter; on the 10–30 d window it takes "
-               "the seed scatter pooled over the paper-size μ = 0.5 sets; N = 2000: one ladder (seed 4) against "
+          note="paper size: two stiffened piles (the seed 1 and seed 2 ladders' 2e6 rungs) against two pours "
+               "(seeds 1 and 2), each side with its own seed scatter; N = 2000: one ladder (seed 4) against "
                "one or two poured seeds"),
     Claim("26b", "at μ = 0 they commute: z stiffened − z poured at 2e6", "equal", "compare", 0.0, None,
           tolerance=NO_NUMBER.format(w="commute"),
