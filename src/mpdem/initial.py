@@ -161,9 +161,9 @@ def config_for(cfg, net=None):
         raise InputError(f"initial file {path}: no mobile sphere: every sphere is a bed sphere ({how})")
     for key, value in facts.items():
         if key in cfg.given and cfg.values[key] != value:
-            what = "mobile spheres" if key == "pour.N" else f"long in {key[-1]}"
-            raise ConfigError(f"{key} = {cfg.values[key]!r}, but run.initial_file {path} has {value!r} {what}; "
-                              f"leave {key} unset to take the file's")
+            said = (f"run.initial_file {path} has {value!r} mobile spheres" if key == "pour.N"
+                    else f"the box of {path} is {value!r} long in {key[-1]}")
+            raise ConfigError(f"{key} = {cfg.values[key]!r}, but {said}; leave {key} unset to take the file's")
     missing = {k: v for k, v in facts.items() if k not in cfg.given and cfg.values[k] != v}
     if not missing:
         return cfg, table

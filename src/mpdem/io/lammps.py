@@ -90,14 +90,13 @@ def read(path, fixed_types, what="run.initial_file"):
 def initial_for(cfg):
     """The config of a run whose ``run.initial_file`` may be a LAMMPS file, and that file's particles.
 
-    A LAMMPS file needs ``run.fixed_types``; its box is the run's: ``box.L_x``
-    and ``box.L_y`` are taken from it when the user did not give them, and
-    must agree with it when given. ``run.fixed_types`` with any other initial
-    file is an error (a table or state file says which spheres are bed).
+    A LAMMPS file needs ``run.fixed_types``; ``run.fixed_types`` with any other initial file is an
+    error (a table or state file says which spheres are bed). The file's box and count become the
+    run's in ``initial.config_for``, as any initial file's do.
 
     Returns
     -------
-    (Config, dict or None) : the config (box filled in) and ``read``'s result.
+    (Config, dict or None) : the config and ``read``'s result (with the box, ``L_x`` and ``L_y``).
     """
     from ..config import ConfigError
     path, types = cfg.run.initial_file, cfg.run.fixed_types
@@ -111,14 +110,7 @@ def initial_for(cfg):
         present = sorted(set(read(path, ()).get("types_present", [])))
         raise ConfigError(f"run.fixed_types is not set: {path} is a LAMMPS file with atom types {present}; "
                           f"name the bed's types, e.g. --set run.fixed_types=[{present[-1]}]")
-    got = read(path, types)
-    box = {"box.L_x": got["L_x"], "box.L_y": got["L_y"]}
-    for key, length in box.items():
-        if key in cfg.given and cfg.values[key] != length:
-            raise ConfigError(f"{key} = {cfg.values[key]!r}, but the box of {path} is {length!r} long in "
-                              f"{key[-1]}; leave {key} unset to take the file's box")
-    missing = {k: v for k, v in box.items() if k not in cfg.given}
-    return (cfg.replace(**missing) if missing else cfg), got
+    return cfg, read(path, types)
 
 
 def _numbers(lines, path, where, ncols):

@@ -13,8 +13,8 @@ from . import checkpoint, packing, tables
 
 def file_facts(path, lammps_table=None, what="run.initial_file"):
     """What an initial file says of the run it starts: ``{'box.L_x', 'box.L_y', 'pour.N'}`` from an mpdem
-    state or packing file (its attributes), ``{'pour.N'}`` from a LAMMPS file already read (its box is
-    ``lammps.initial_for``'s) or a text table (which keeps no box), ``{}`` without a path.
+    state or packing file (its attributes) or a LAMMPS file already read (``lammps.initial_for``),
+    ``{'pour.N'}`` from a text table (which keeps no box), ``{}`` without a path.
 
     Raises
     ------
@@ -29,8 +29,9 @@ def file_facts(path, lammps_table=None, what="run.initial_file"):
     if not os.path.isfile(path):
         raise InputError(f"{what} {path}: no such file")
     if lammps_table is not None:
-        return {"pour.N": int((np.asarray(lammps_table["fixed"]) == 0).sum())}
-    if checkpoint.is_state_file(path):
+        attrs = {"L_x": lammps_table["L_x"], "L_y": lammps_table["L_y"],
+                 "n_mobile": (np.asarray(lammps_table["fixed"]) == 0).sum()}
+    elif checkpoint.is_state_file(path):
         attrs = checkpoint.read_attrs(path)
     elif packing.is_packing(path):
         attrs = packing.read_attrs(path)
