@@ -246,3 +246,24 @@ def test_a_row_whose_count_disagrees_with_its_initial_file_is_refused_before_any
     t.write_text("seed\n1\n")
     row, = sweep.plan([str(t)], None, [f"run.initial_file={h5}", "contact.mu=0"])
     assert row.cost == n / 1e-4
+
+
+@pytest.mark.parametrize("left", ["final.h5", "checkpoints/ckpt-00003.h5"])
+def test_a_begun_row_is_not_judged_by_an_initial_file_it_will_not_read(tmp_path, left):
+    """A row that is finished or has a checkpoint is analysed or restarted, never started from its initial
+    file again: the plan goes on where that file has gone (moved, another machine); a row that would
+    start from it is still refused before any run."""
+    from mpdem.errors import SweepError
+    t = tmp_path / "t.tsv"
+    t.write_text("seed\n1\n2\n")
+    out = tmp_path / "runs"
+    sets = [f"run.initial_file={tmp_path / 'gone.h5'}", "contact.mu=0"]
+    with pytest.raises(SweepError, match=r"row 1 \(s1\): run\.initial_file .*gone\.h5: no such file"):
+        sweep.plan([str(t)], None, sets, out=str(out))
+    for name in ("s1", "s2"):
+        (out / name / left).parent.mkdir(parents=True)
+        (out / name / left).write_bytes(b"")
+    assert [r.name for r in sweep.plan([str(t)], None, sets, out=str(out))] == ["s1", "s2"]
+    (out / "s2" / left).unlink()
+    with pytest.raises(SweepError, match=r"row 2 \(s2\): run\.initial_file"):
+        sweep.plan([str(t)], None, sets, out=str(out))

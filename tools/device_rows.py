@@ -41,7 +41,7 @@ def pack(runs, tables, config_path, into):
     shutil.rmtree(into, ignore_errors=True)
     os.makedirs(into)
     packed = {}
-    for row in plan(tables, config_path):
+    for row in plan(tables, config_path, out=runs):
         src, dst = os.path.join(runs, row.name), os.path.join(into, row.name)
         if finished(src) and os.path.exists(os.path.join(src, SUMMARY)):
             os.makedirs(os.path.join(dst, "analysis"))

@@ -202,7 +202,7 @@ def cmd_sweep(args):
     from .campaign import sweep
     from .config import ConfigError
     try:
-        rows = sweep.plan(args.tables, args.config, args.set)
+        rows = sweep.plan(args.tables, args.config, args.set, out=args.out)
     except ConfigError as e:
         sys.stderr.write(f"mpdem: error: {e}\n")
         return EXIT_ERROR

@@ -112,12 +112,19 @@ def read_table(path):
     return rows
 
 
-def plan(tables, config_path=None, sets=()):
+def plan(tables, config_path=None, sets=(), out=None):
     """Every row of ``tables``, checked against the config, cheapest first.
 
     Each row's config (``config_path`` or the built-in example, then ``sets``,
     then the row's values; an initial file's box and count, ``initial.config_for``) is resolved now, so a
     bad value stops the sweep before any run starts. Two rows naming the same run directory are an error.
+
+    Parameters
+    ----------
+    out : str or None
+        The sweep's directory of run directories. A row whose directory there is finished or has a
+        checkpoint never reads its initial file again (it is analysed or restarted), so that file is not
+        judged: a sweep goes on where the file has gone (moved, another machine).
 
     Returns
     -------
@@ -130,9 +137,13 @@ def plan(tables, config_path=None, sets=()):
                 raise SweepError(f"sweep: row {r.line} of {t} and row {seen[r.name][1]} of {seen[r.name][0]} "
                                  f"both make run directory {r.name}")
             seen[r.name] = (t, r.line)
+            d = os.path.join(out, r.name) if out is not None else None
+            begun = d is not None and (finished(d) or bool(rundir.checkpoints(d)))
             try:
-                # an initial file's box and count are the row's (a disagreement is refused now, not at the row)
-                cfg, _ = initial.config_for(config.load_run_config(config_path, list(sets) + r.sets))
+                cfg = config.load_run_config(config_path, list(sets) + r.sets)
+                if not begun:
+                    # an initial file's box and count are the row's (a disagreement is refused now, not at the row)
+                    cfg, _ = initial.config_for(cfg)
             except (config.ConfigError, InputError, StateFileError, PackingFileError) as e:
                 raise SweepError(f"sweep table {t} row {r.line} ({r.name}): {e}") from None
             r.cost = cfg.pour.N / cfg.integration.dt
