@@ -105,6 +105,24 @@ def test_the_table_bench_times_a_state_file_in_its_own_box(crystal, tmp_path):
     assert bench.table_box(cfg, str(table)).box.L_x == 20.0
 
 
+@pytest.mark.parametrize("name", ["lammps_sphere.data", "lammps_sphere.dump.gz"])
+def test_the_table_bench_times_a_lammps_file_in_its_own_box(name):
+    """A LAMMPS data file or dump (10 d x 10 d, its bed type 2, a wall under it) is timed in its header's
+    box, its bed the spheres of run.fixed_types, as a run from it would step it."""
+    from pathlib import Path
+    path = str(Path(__file__).parent / "data" / name)
+    sets = ["run.fixed_types=[2]", "bed.wall=true"]
+    got = bench.table_box(bench.table_config(sets), path, sets)
+    assert (got.box.L_x, got.box.L_y) == (10.0, 10.0)
+    whole, L_x, L_y = bench.load_table(path, got)
+    assert (L_x, L_y) == (10.0, 10.0) and len(whole["id"]) == 369 and 0 < whole["fixed"].sum() < 369
+    run_cfg, _ = initial.config_for(config.load_run_config(None, [f"run.initial_file={path}", *sets]))
+    assert (run_cfg.box.L_x, run_cfg.box.L_y) == (got.box.L_x, got.box.L_y)
+    sets = ["box.L_x=20", "run.fixed_types=[2]"]
+    with pytest.raises(InputError, match=r"box\.L_x=20\.0.*--table .* is 10\.0 long in x"):
+        bench.table_box(bench.table_config(sets), path, sets)
+
+
 def test_an_initial_file_that_is_a_directory_or_nothing_is_refused_before_the_run_directory(tmp_path):
     from helpers import mpdem
     for path, said in ((tmp_path, "a directory, not a file (a finished run's state is"),

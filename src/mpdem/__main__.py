@@ -303,7 +303,8 @@ def parser():
                                       "or checkpoint IO (--io), or analysis (--analysis)")
     b.add_argument("--table", metavar="FILE",
                    help="particle table to time (id x y z [vx vy vz] [fixed], plain or gzip; or an mpdem state "
-                        "file, in its own box), e.g. path/to/landed20k.txt.gz; run with the settings of the LAMMPS "
+                        "or packing file, or a LAMMPS data file or dump with --set run.fixed_types=[T], in its "
+                        "own box), e.g. path/to/landed20k.txt.gz; run with the settings of the LAMMPS "
                         "comparison: Hooke, k_n 2e5, epsilon 0.88, gamma_t = gamma_n/2, mu 0.5, dt 1e-4, skin 0.2")
     b.add_argument("--steps", type=positive_int("--steps"), default=2000, help="timed steps (default 2000)")
     b.add_argument("--threads", type=positive_int("--threads"), default=None, metavar="T",

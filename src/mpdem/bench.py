@@ -33,7 +33,7 @@ import numpy as np
 from . import build, config, initial, memory, threads
 from .errors import InputError
 from .io import tables
-from .io import checkpoint, pilefile
+from .io import checkpoint, lammps, pilefile
 from .decomp import Domain
 from .engine import gpu_options, make_engine
 from .engine.base import Physics
@@ -103,15 +103,19 @@ def table_config(sets=()):
 
 
 def table_box(cfg, path, sets=()):
-    """The table bench's config in the box of an mpdem state or packing file (``io.pilefile.file_facts``): the
-    pile is timed as it lies. A text table keeps no box: the bench's 20 x 20 d (or ``--set box.*``) stays.
+    """The table bench's config in the box of an mpdem state or packing file or a LAMMPS file
+    (``io.pilefile.file_facts``): the pile is timed as it lies. A text table keeps no box: the bench's
+    20 x 20 d (or ``--set box.*``) stays.
 
     Raises
     ------
     InputError
         A ``--set box.*`` that disagrees with the file's box, naming both.
     """
-    box = {k: v for k, v in pilefile.file_facts(path, what="--table").items() if k.startswith("box.")}
+    # a LAMMPS file's box is in its header; read as load_table reads it (run.fixed_types: the bed's types)
+    lammps_table = lammps.read(path, cfg.run.fixed_types, what="--table") if (
+        os.path.isfile(path) and lammps.kind(path)) else None
+    box = {k: v for k, v in pilefile.file_facts(path, lammps_table, what="--table").items() if k.startswith("box.")}
     user = {config.parse_set(item)[0] for item in sets}
     for key, length in box.items():
         if key in user and cfg.values[key] != length:
@@ -164,8 +168,8 @@ def load_table(path, cfg, tile=(1, 1), say=print):
     Parameters
     ----------
     path : str
-        A text table (``tables.read_table``, plain or gzip), read as
-        ``run.initial_file`` is (``initial.particles``).
+        A text table (``tables.read_table``, plain or gzip), a state or packing file or a LAMMPS data
+        file or dump (its bed by ``run.fixed_types``), read as ``run.initial_file`` is (``initial.particles``).
     cfg : Config
         Box (``box.L_x``, ``box.L_y``: a state file's, ``table_box``) and ``checks.overlap_warn``.
     tile : (int, int)
