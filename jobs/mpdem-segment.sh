@@ -269,6 +269,11 @@ if [[ $got == *TERM* ]]; then  # (Open MPI's mpiexec exits 1 here even when the 
   exit "$rc"
 fi
 if (( rc != 75 )); then log "error: exit $rc; not resubmitting"; exit "$rc"; fi
+# SIGINT is a person's stop (Ctrl-C, `scancel -s INT`, which reaches the ranks, not this script):
+# mpdem checkpoints and exits 75 as for the batch system's warning, and its log's stop line says which
+if [[ -e $run_dir/log.txt ]] && [[ $(grep '^stop: ' "$run_dir/log.txt" | tail -n 1) == "stop: signal SIGINT "* ]]; then
+  log "stop: the ranks got SIGINT (an interrupt); checkpoint $after written; not resubmitting"; exit 75
+fi
 if (( after <= before )); then
   log "stop: exit 75 but no new checkpoint (newest $after, before $before); not resubmitting"; exit 1
 fi

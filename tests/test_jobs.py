@@ -72,6 +72,11 @@ if act == "ckpt75":
     done(75)
 if act == "noprog75":
     done(75)
+if act == "int75":  # SIGINT reached the ranks: checkpoint, the log's stop line, exit 75
+    checkpoint()
+    with open(run_dir / "log.txt", "a") as f:
+        f.write("step 100\nstop: signal SIGINT at step 100; wrote ckpt. Not finished\n")
+    done(75)
 if act.startswith("noisy"):  # a launcher's report of a non-zero exit on stderr (noisyN: exit N)
     sys.stderr.write("srun: error: node1: tasks 0-1: Exited with exit code " + act[5:] + "\n" + "-" * 74 + "\n"
                      "Primary job  terminated normally, but 1 process returned\n"
@@ -278,6 +283,7 @@ STOPS = {  # plan: (segments, exit codes of the jobs, words in jobs.log)
     "launch-failed": (("ckpt75", "exit0"), ["run", "restart"], [0, 1], "exit 0 but no runs/c/summary.json"),
     "no-progress": (("ckpt75", "noprog75"), ["run", "restart"], [0, 1], "no new checkpoint"),
     "no-first-checkpoint": (("noprog75",), ["run"], [1], "no new checkpoint"),
+    "interrupted": (("ckpt75", "int75"), ["run", "restart"], [0, 75], "got SIGINT (an interrupt)"),
 }
 
 
