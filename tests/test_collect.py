@@ -514,9 +514,11 @@ def test_figures_in_several_formats(tree, tmp_path):
     assert b"<svg" in (tmp_path / "out" / "fig7_z_vs_kn.svg").read_bytes()[:2000]
     assert not list((tmp_path / "out").glob("*.png")) and not list((tmp_path / "out").glob("*.tmp"))
     assert "(fig7_z_vs_kn.pdf)" in (tmp_path / "out" / "README.md").read_text()
-    with pytest.raises(AnalysisError, match="figure format 'jpg'"):
-        co.collect([str(tree["root"] / "kn")], str(tmp_path / "bad"), analyze_missing=False, log=lambda m: None,
+    said = []
+    with pytest.raises(AnalysisError, match="^collect: --figure-format 'jpg': accepted png, pdf or svg"):
+        co.collect([str(tree["root"] / "kn")], str(tmp_path / "bad"), analyze_missing=False, log=said.append,
                    figure_format="jpg")
+    assert said == [] and not (tmp_path / "bad").exists()     # refused before any run is read
 
 
 def test_the_isostatic_count_comes_from_n_m_in_old_and_new_summaries():

@@ -541,6 +541,11 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png", cla
     AnalysisError when no usable run remains.
     """
     out = out or "paper"
+    from ..analysis.plots import formats_of
+    fmts = formats_of(figure_format)
+    if [f for f in fmts if f not in ("png", "pdf", "svg")] or not fmts:   # refused before any run is read
+        raise AnalysisError(f"collect: --figure-format {figure_format!r}: accepted png, pdf or svg, several "
+                            f"joined by commas")
     paths, skipped = find_runs(runs)
     log(f"collect: {len(paths)} run director{'y' if len(paths) == 1 else 'ies'} found")
     loaded = []
@@ -573,11 +578,6 @@ def collect(runs, out, analyze_missing=True, log=print, figure_format="png", cla
         for e in fit_res[kind]:
             why = f" ({e['reason']})" if "reason" in e else ""
             log(f"collect: {kind} [{' '.join(e['sets'])}]: {e['status']}{why}")
-    from ..analysis.plots import formats_of
-    fmts = formats_of(figure_format)
-    bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
-    if bad or not fmts:
-        raise AnalysisError(f"figure format {figure_format!r}: accepted png, pdf or svg, several joined by commas")
     figs = make_figures(sets, fit_res, out, log, fmts)
     rows = comparisons(sets, fit_res)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "inputs": [str(r) for r in runs], "out": out,
