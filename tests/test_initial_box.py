@@ -88,6 +88,26 @@ def test_stiffening_a_run_started_from_a_file_takes_the_piles_box_and_count(crys
     assert initial.config_for(rung)[0].values == rung.values
 
 
+def test_stiffening_a_run_started_from_a_lammps_file_starts_from_its_final_state(tmp_path):
+    """A run from a LAMMPS file names its bed's types (run.fixed_types); its rung starts from the run's
+    final.h5, whose own flags say which spheres are bed, so the types are not the rung's."""
+    from pathlib import Path
+    from mpdem import stiffen
+    from mpdem.io import lammps
+    dump = str(Path(__file__).parent / "data" / "lammps_sphere.dump.gz")
+    cfg, table = initial.config_for(config.load_run_config(None, [f"run.initial_file={dump}", "run.fixed_types=[2]",
+                                                                  "bed.wall=true", "contact.mu=0"]))
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.toml").write_text(cfg.to_toml())
+    t = lammps.read(dump, (2,))
+    write_crystal(run / "final.h5", t["x"], t["fixed"], t["L_x"], sets=["bed.wall=true"])
+    rung = stiffen.rung_config(str(run), 2e6, [])
+    assert rung.run.fixed_types == () and rung.run.initial_file == str(run / "final.h5")
+    got, _ = initial.config_for(rung)
+    assert (got.box.L_x, got.pour.N) == (10.0, int((t["fixed"] == 0).sum()))
+
+
 def test_the_table_bench_times_a_state_file_in_its_own_box(crystal, tmp_path):
     cfg = bench.table_config()
     assert cfg.box.L_x == 20.0

@@ -174,6 +174,9 @@ def rung_config(run, k_n, sets=()):
     # the pile's box and count are its final state's (``initial.config_for``): a run started from a file
     # may have recorded the config's, which need not be the pile's
     raw.update(file_facts(final))
+    # the rung starts from a state or packing file, whose own flags say which spheres are bed: a LAMMPS
+    # file's bed types, which the run needed, are not the rung's (lammps.initial_for refuses them then)
+    raw.pop("run.fixed_types", None)
     was = config.resolve(raw).contact.k_n
     if not 1 < k_n / was <= config.MAX_RISE:
         raise InputError(f"--k_n {k_n:g}: {run} was run at contact.k_n = {was:g}; accepted above it by at most ten "
