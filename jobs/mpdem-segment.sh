@@ -22,7 +22,8 @@
 #   75  interrupted, checkpoint written           -> run RESUBMIT, exit 0
 #       (no RESUBMIT: exit 75, restart it yourself). Instead stop, exit 1, if
 #       the newest checkpoint's number did not advance or MPDEM_MAX_SEGMENTS
-#       segments have run
+#       segments have run; exit 75, no resubmission, if the ranks stopped for
+#       SIGINT (scancel -s INT: a person's stop; RUN_DIR/log.txt's stop line)
 #   any code, if this job itself got SIGTERM (cancelled, or at its limit): stop,
 #       no resubmission (mpdem has checkpointed if it could: resubmit by hand)
 #   any other: error                              -> that code, no resubmission
@@ -269,7 +270,7 @@ if [[ $got == *TERM* ]]; then  # (Open MPI's mpiexec exits 1 here even when the 
   exit "$rc"
 fi
 if (( rc != 75 )); then log "error: exit $rc; not resubmitting"; exit "$rc"; fi
-# SIGINT is a person's stop (Ctrl-C, `scancel -s INT`, which reaches the ranks, not this script):
+# SIGINT is a person's stop (`scancel -s INT`, which reaches the ranks, not this script):
 # mpdem checkpoints and exits 75 as for the batch system's warning, and its log's stop line says which
 if [[ -e $run_dir/log.txt ]] && [[ $(grep '^stop: ' "$run_dir/log.txt" | tail -n 1) == "stop: signal SIGINT "* ]]; then
   log "stop: the ranks got SIGINT (an interrupt); checkpoint $after written; not resubmitting"; exit 75

@@ -264,6 +264,10 @@ def test_a_begun_row_is_not_judged_by_an_initial_file_it_will_not_read(tmp_path,
         (out / name / left).parent.mkdir(parents=True)
         (out / name / left).write_bytes(b"")
     assert [r.name for r in sweep.plan([str(t)], None, sets, out=str(out))] == ["s1", "s2"]
+    # a begun row is costed by the count its run recorded (the file's), not the sweep's config
+    (out / "s2" / "config.toml").write_text(config.load_run_config(None, ["pour.N=40", "contact.mu=0"]).to_toml())
+    first, second = sweep.plan([str(t)], None, sets, out=str(out))
+    assert (first.name, first.cost, second.name) == ("s2", 40 / 1e-4, "s1")
     (out / "s2" / left).unlink()
     with pytest.raises(SweepError, match=r"row 2 \(s2\): run\.initial_file"):
         sweep.plan([str(t)], None, sets, out=str(out))

@@ -110,11 +110,17 @@ def table_box(cfg, path, sets=()):
     Raises
     ------
     InputError
-        A ``--set box.*`` that disagrees with the file's box, naming both.
+        A ``--set box.*`` that disagrees with the file's box, naming both; a LAMMPS file without
+        ``run.fixed_types``.
     """
     # a LAMMPS file's box is in its header; read as load_table reads it (run.fixed_types: the bed's types)
-    lammps_table = lammps.read(path, cfg.run.fixed_types, what="--table") if (
-        os.path.isfile(path) and lammps.kind(path)) else None
+    lammps_table = None
+    if os.path.isfile(path) and lammps.kind(path):
+        if not cfg.run.fixed_types:   # every sphere mobile: a pile with no bed (a run refuses it too)
+            present = sorted(set(lammps.read(path, (), what="--table").get("types_present", [])))
+            raise InputError(f"--table {path}: a LAMMPS file with atom types {present}, and run.fixed_types is not "
+                             f"set; name the bed's types, e.g. --set run.fixed_types=[{present[-1]}]")
+        lammps_table = lammps.read(path, cfg.run.fixed_types, what="--table")
     box = {k: v for k, v in pilefile.file_facts(path, lammps_table, what="--table").items() if k.startswith("box.")}
     user = {config.parse_set(item)[0] for item in sets}
     for key, length in box.items():

@@ -146,9 +146,19 @@ def plan(tables, config_path=None, sets=(), out=None):
                     cfg, _ = initial.config_for(cfg)
             except (config.ConfigError, InputError, StateFileError, PackingFileError) as e:
                 raise SweepError(f"sweep table {t} row {r.line} ({r.name}): {e}") from None
-            r.cost = cfg.pour.N / cfg.integration.dt
+            r.cost = ((ran_count(d) if begun else None) or cfg.pour.N) / cfg.integration.dt
             rows.append(r)
     return sorted(rows, key=lambda r: r.cost)
+
+
+def ran_count(run_dir):
+    """The sphere count a begun row's run recorded (its config.toml, written after its initial file's count
+    was taken), or None where it is unreadable."""
+    try:
+        with open(os.path.join(run_dir, "config.toml")) as fh:
+            return int(config.raw_from_toml(fh.read(), origin=fh.name)["pour.N"])
+    except (OSError, KeyError, ValueError, config.ConfigError):
+        return None
 
 
 def finished(run_dir):
