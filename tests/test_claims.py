@@ -186,6 +186,30 @@ def test_a_step_of_a_sign_with_a_one_seed_side_takes_the_other_sides_seed_scatte
     assert r["verdict"].kind == "reproduced" and "judged by sign" in r["verdict"].why
 
 
+def test_two_one_seed_sides_take_the_seed_scatter_pooled_over_their_n_and_mu(tmp_path):
+    """The rule: a difference of two sets of one seed each takes one run's seed scatter pooled over the sets
+    of their N and μ, sqrt(2) times it, and says so; sets of another μ lend nothing (no error then: judged by
+    its side alone, as before). The same from another collect's sets.csv (each set's sem and seeds)."""
+    near, far = _set("S02", [4.84]), _set("S03", [4.75])
+    many, other_mu = _set("S01", [4.84, 4.85, 4.87]), _set("S04", [6.0, 6.3], **{"contact.mu": 0.0})
+    m = src.Diff(src.S("S02"), src.S("S03")).resolve(src.Context([near, far, many, other_mu], {}, []))
+    assert math.isclose(m.err, float(np.std([4.84, 4.85, 4.87], ddof=1)) * math.sqrt(2), rel_tol=1e-12)
+    assert m.count == "1 + 1 runs" + src.POOLED_BOTH
+    alone = src.Diff(src.S("S02"), src.S("S03")).resolve(src.Context([near, far, other_mu], {}, []))
+    assert math.isnan(alone.err) and alone.count == "1 + 1 runs"
+    (tmp_path / "dev").mkdir()
+    (tmp_path / "dev" / "sets.csv").write_text(
+        "set,mu,N,n_seeds,z_mean,z_sem\nS06,0.5,2000,1,4.963,\nS07,0.5,2000,1,4.570,\nS03,0.5,2000,5,4.98,0.012\n"
+        "S10,0.5,2000,2,4.86,0.0068\nS05,0.0,2000,4,6.05,0.0455\nS99,0.5,8000,3,4.9,0.1\n")
+    ctx = src.Context([], {}, [], out=str(tmp_path))
+    m = src.Diff(src.Ext("dev", "S07"), src.Ext("dev", "S06")).resolve(ctx)
+    sd = math.sqrt((0.012 ** 2 * 5 * 4 + 0.0068 ** 2 * 2 * 1) / (4 + 1))     # S03's and S10's: μ 0.5, N 2000
+    assert math.isclose(m.err, sd * math.sqrt(2), rel_tol=1e-12) and m.count.endswith(src.POOLED_BOTH)
+    r = ct.row(_claim(kind="nonzero", value=None, paper="differ", ours=[src.Diff(src.Ext("dev", "S07"),
+                                                                                src.Ext("dev", "S06"))]), ctx)
+    assert r["verdict"].kind == "reproduced" and math.isclose(r["verdict"].sigma, sd * math.sqrt(2), rel_tol=1e-12)
+
+
 def test_a_one_seed_value_beside_a_bound_is_judged_by_its_side_and_says_so():
     c = _claim(kind="bound", value=4.0, paper="> 4", ours=[src.S("S02")], also=[src.S("S02")])
     r = ct.row(c, src.Context([_set("S02", [5.47])], {}, []))
@@ -660,6 +684,18 @@ def test_a_fit_part_that_is_not_fitted_gives_its_own_reason_and_ids_of_other_col
         src.ExtFit("x", "overlap", "z_c", "S1", fixed=True, part="exponent 1/3").resolve(None)
     assert src.fit_measure(e, "z_inf", kind="ladder").value == 6.0
     assert src.ext_id("../dev", "S15") == "dev:S15" and src.ext_id("ladder-dev", "S07") == "ladder-dev:S07"
+
+
+def test_a_fit_whose_law_fails_its_test_says_so_unless_its_errors_are_widened():
+    """An error of a fit whose law fails its own χ² test (p below the rule's 0.0455) is the points' alone: the
+    row says the law's χ² and p beside the number; a fit whose errors are widened by its χ² ('scale') and
+    one whose law holds say nothing more."""
+    e = {"sets": ["S15", "S30"], "status": "fitted", "n_runs": 7, "z_inf": 4.26, "z_inf_err": 0.0066,
+         "chi2": 122.4, "dof": 2, "p_value": 2.6e-27}
+    said = src.fit_measure(e, "z_inf", kind="ladder").count
+    assert said == "2 sets, 7 runs; its law's χ² = 122 for 2 dof, p = 2.6e-27"
+    assert "χ²" not in src.fit_measure(dict(e, scale=7.8), "z_inf", kind="ladder").count
+    assert "χ²" not in src.fit_measure(dict(e, chi2=1.0, p_value=0.6), "z_inf", kind="ladder").count
 
 
 def test_a_contrasts_pooled_error_replaces_a_borrowed_one_and_the_count_says_which():

@@ -237,8 +237,8 @@ CLAIMS = [
                                  S("S03", "z", "N 2000")],
           if_differs=("open", "z falls with depth in a tall frictional pile (5–15 d against 10–30 d beside), so "
                               "the paper's unnamed window could hold the difference; not established; the paper "
-                              "poured with K0 = 20–100 or 0, and K0 = 20 or 50 raises z here by 0.008–0.028 on "
-                              "the slab, 0.025–0.039 on 10–30 d and some 0.15 on 5–15 d (row 33)")),
+                              "poured with K0 = 20–100 or 0, and K0 = 20 or 50 raises z here by 0.008–0.029 on "
+                              "the slab (S32, S26, S31), 0.025–0.039 on 10–30 d and some 0.15 on 5–15 d (row 33)")),
     Claim("5", "φ_f, μ = 0.5, ε = 0.88", "0.61", "compare", 0.61, T2, tolerance=TOL_DIGIT.format(q="0.01"),
           ours=[S("S15", "phi")], also=[S("S09", "phi", "N 5000"), S("S03", "phi", "N 2000")]),
     Claim("6", "φ_f, μ = 0, ε = 0.88 (random close packing)", "≈ 0.64", "compare", 0.64, T2,
@@ -336,9 +336,9 @@ CLAIMS = [
                "10^α_n, z_∞ dropping out; the errors from a pile's noise from rung to rung, measured on few "
                "degrees of freedom (Student's t on them: Fig. 7's ladder line); the two-way table that measures "
                "the noise cannot see an error common to both piles at one rung. The rise sits in the step from "
-               "2e7 to 2e8, a few thousandths of z; both piles' 2e8 rungs, settled further with a 100 times "
-               "stricter stop, kept their z (NOTES.md, 2026-11-29); the paper's rungs reach 2e9, this work's not "
-               "yet (a GPU's run)",
+               "2e7 to 2e8, a few thousandths of z; both piles' 2e8 rungs, run on towards a 100 times stricter "
+               "stop (neither reached it), moved by at most 0.001 (NOTES.md, 2026-11-29); the paper's rungs reach "
+               "2e9, this work's not yet (a GPU's run)",
           if_differs=("open", "whether the steepening goes on past 2e8 is not known")),
     Claim("21", "eq. 8: α_n = 1 − α, μ = 0 (α_n − (1 − α))", "0.498 against 0.48 ± 0.03", "compare", 0.0, 0.03,
           tolerance="the paper's own α_n and 1 − α differ by 0.018, within its α error 0.03",
@@ -508,7 +508,7 @@ CLAIMS = [
           note=ARREST_NOTE,
           if_differs=("open", "kept at 18° z lies above the paper's, levelled (beside) below it: the angle the "
                               "pile is kept at moves z more than the paper's rounding, and the paper names none "
-                              "(16° runs); one seed at 18° (a second runs)")),
+                              "(16° runs); one seed at 18° (a second has not come to rest yet)")),
     Claim("38b", "flow-arrest packing: φ, μ = 0.5", "0.594", "compare", 0.594, 0.0005,
           tolerance=TOL_DIGIT.format(q="0.001"), ours=[_kept_on_incline("phi")[0]],
           also=[S("S22", "phi", "levelled to 0°"), S("S10", "phi", "levelled, 400 τ of flow"),

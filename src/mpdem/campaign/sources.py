@@ -21,6 +21,7 @@ import os
 from dataclasses import dataclass, field
 
 from . import verdict as V
+from ..analysis.fits import pooled_scatter
 from .runs import NAN, fmt_kn, mean_sem, off_columns
 
 # the paper-size stiffening ladders (docs/model.md 6.6): runs/ladder-size/<mu>_s<seed>/kn<K>/
@@ -160,6 +161,11 @@ class Diff:
                 err = c["err"]
                 # the contrast's pooled scatter, not the other side's alone
                 lent = "; its 1 run with the sets' pooled seed scatter" if lent else ""
+        if not finite(err) and ma.n == mb.n == 1:
+            # two sides of one seed each: the seed scatter pooled over the sets of their N and μ (the rule)
+            sd = _one_seed_scatter(ctx, self.a, self.b)
+            if finite(sd):
+                err, lent = sd * math.sqrt(2), POOLED_BOTH
         if not lent and (ma.borrowed or mb.borrowed):
             if ma.borrowed == mb.borrowed:      # both sides one run, their error from the same place
                 lent = "; each side's " + ma.borrowed
@@ -169,6 +175,18 @@ class Diff:
 
 
 LENT = "; its 1 run with the other's seed scatter"
+POOLED_BOTH = "; each side's 1 run with the seed scatter pooled over its N and μ's sets"
+
+
+def _one_seed_scatter(ctx, a, b):
+    """One run's seed scatter for ``a`` − ``b``, two sets (``S`` of this collect, or ``Ext`` of one other) of
+    one run each and of one N and μ: pooled over the sets of that N and μ (``Context.pooled_scatter``); nan
+    for other sources or where no such set has two seeds."""
+    if isinstance(a, S) and isinstance(b, S) and a.q == b.q:
+        return ctx.pooled_scatter(None, a.set, b.set, a.q)
+    if isinstance(a, Ext) and isinstance(b, Ext) and a.results == b.results and a.q == b.q:
+        return ctx.pooled_scatter(a.results, a.set, b.set, a.q)
+    return NAN
 
 
 def diff_error(ma, mb):
@@ -267,7 +285,12 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
         return missing(where, f"no {key}", "not determined")
     # a fit over piles measured again at several k_n (a ladder's) names its piles
     piles = f" of {f['n_piles']} piles" if f.get("n_piles") else ""
-    return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}{piles}", where)
+    # a fit whose errors are not widened by its χ² (no 'scale') and whose law fails its own test: its error
+    # is the points' alone, so the row says the law's χ² beside it
+    p, failed = f.get("p_value"), ""
+    if "scale" not in f and finite(p) and p < V.P_K and finite(f.get("chi2")):
+        failed = f"; its law's χ² = {f['chi2']:.3g} for {f.get('dof')} dof, p = {p:.2g}"
+    return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}{piles}{failed}", where)
 
 
 @dataclass
@@ -512,6 +535,11 @@ class Eq9PaperTest:
                        f"φ_i = {x[i]:g}")
 
 
+def _n_mu(s):
+    """A set's (N, μ): the sets whose seed scatter a one-seed value borrows."""
+    return s.params.get("pour.N"), s.params.get("contact.mu")
+
+
 def _count(v):
     """A count read from a table cell: 0 where it holds none."""
     x = _f(v)
@@ -597,6 +625,28 @@ class Context:
         input's ladder-size/ (converged or not: a converged one is a collected set)."""
         want = None if k_n is None else f"kn{fmt_kn(k_n)}"
         return any(want is None or d.endswith("/" + want) for d in self.ladder_dirs(mu))
+
+    def pooled_scatter(self, results, sid, other, q):
+        """The seed-to-seed standard deviation of ``q`` pooled over the sets of ``sid``'s N and μ, in this
+        collect (``results`` None) or another's ``sets.csv`` (from each set's standard error and seeds); nan
+        where ``other`` is of another N or μ, or no such set has two seeds."""
+        if results is None:
+            a, b = self.sets.get(sid), self.sets.get(other)
+            if a is None or b is None or _n_mu(a) != _n_mu(b):
+                return NAN
+            return pooled_scatter([[r.q.get(q) for r in s.runs] for s in self.set_list
+                                   if _n_mu(s) == _n_mu(a)])[0]
+        rows = self.ext_sets(results)
+        a, b = rows.get(sid), rows.get(other)
+        if a is None or b is None or (_f(a.get("N")), _f(a.get("mu"))) != (_f(b.get("N")), _f(b.get("mu"))):
+            return NAN
+        ss = dof = 0
+        for r in rows.values():
+            n, sem = _count(r.get("n_seeds")), _f(r.get(f"{q}_sem"))
+            if (_f(r.get("N")), _f(r.get("mu"))) == (_f(a.get("N")), _f(a.get("mu"))) and n >= 2 and finite(sem):
+                ss += sem ** 2 * n * (n - 1)        # the set's sum of squares about its mean
+                dof += n - 1
+        return math.sqrt(ss / dof) if dof else NAN
 
     def ext_sets(self, results):
         key = ("sets", results)
