@@ -432,8 +432,8 @@ def test_a_value_that_rests_on_an_assumed_choice_is_not_determined_where_an_alte
     split = src.Assumes(ms(0.001), "x = 1/2", [("1/3", ms(0.1)), ("2/3", ms(0.005))]).resolve(None)
     v = ct.judge(c, split)
     assert v.kind == "not determined"
-    assert v.why == ("it rests on x = 1/2: with it reproduced (0.1 σ); with 1/3: differs by +0.100 (10.0 σ); "
-                     "with 2/3: 0.005 ± 0.010, reproduced (0.5 σ)")
+    assert v.why == ("it rests on x = 1/2: with it reproduced (0.1 σ); with 1/3: 0.100 ± 0.010, differs by +0.100 "
+                     "(10.0 σ); with 2/3: 0.005 ± 0.010, reproduced (0.5 σ)")
     # alternatives that agree leave the verdict, and it says they were tried
     both_differ = src.Assumes(ms(0.1), "x = 1/2", [("1/3", ms(0.2)), ("2/3", ms(-0.3))]).resolve(None)
     w = ct.judge(c, both_differ)

@@ -83,10 +83,11 @@ def _judge_assumed(claim, m):
         same = ", ".join(f"{label} ({value(a, av, k)})" for label, a, av, k in alts)
         v.why = "; ".join(w for w in (v.why, f"the same with {same} in place of {assumption}") if w)
         return v
-    # a 'differs by X' names its value already, a test's verdict its p; any other verdict takes the value
+    # a test's verdict names its p, another tolerance's the same number; every other verdict takes its value
+    # and error first (a 'differs by X' names the distance from the paper's, not the value)
     each = "; ".join(f"with {label}: " + (
         f"{a.status} ({a.why})" if av is None
-        else av.text() if k in ("test", "tolerance") or av.kind == "differs" and math.isfinite(av.diff)
+        else av.text() if k in ("test", "tolerance")
         else f"{value(a, av, k)}, {av.text()}") for label, a, av, k in alts)
     return V.Verdict("not determined", why=f"it rests on {assumption}: with it {v.text()}; {each}")
 
