@@ -687,15 +687,25 @@ def test_a_fit_part_that_is_not_fitted_gives_its_own_reason_and_ids_of_other_col
 
 
 def test_a_fit_whose_law_fails_its_test_says_so_unless_its_errors_are_widened():
-    """An error of a fit whose law fails its own χ² test (p below the rule's 0.0455) is the points' alone: the
-    row says the law's χ² and p beside the number; a fit whose errors are widened by its χ² ('scale') and
-    one whose law holds say nothing more."""
-    e = {"sets": ["S15", "S30"], "status": "fitted", "n_runs": 7, "z_inf": 4.26, "z_inf_err": 0.0066,
-         "chi2": 122.4, "dof": 2, "p_value": 2.6e-27}
-    said = src.fit_measure(e, "z_inf", kind="ladder").count
-    assert said == "2 sets, 7 runs; its law's χ² = 122 for 2 dof, p = 2.6e-27"
-    assert "χ²" not in src.fit_measure(dict(e, scale=7.8), "z_inf", kind="ladder").count
-    assert "χ²" not in src.fit_measure(dict(e, chi2=1.0, p_value=0.6), "z_inf", kind="ladder").count
+    """An error of a fit whose law fails the rule's test of it (χ²/dof against F on the dof of the seed
+    scatter its weights rest on, p below 0.0455) is the points' alone: the row says the law's χ² and p beside
+    the number. A fit whose errors are widened by its χ² ('scale'), one whose law holds, and one whose noise's
+    dof is not known say nothing more. The ladder's sets'-means fits and an eq. 7 entry's fixed part read the
+    dof from the fit or its entry."""
+    from scipy import stats
+    part = {"status": "fitted", "z_inf": 4.26, "z_inf_err": 0.0066, "chi2": 122.4, "dof": 2, "pooled_dof": 3}
+    e = {"sets": ["S15", "S30"], "status": "fitted", "n_runs": 7, "set_means_fixed": part}
+    p = stats.f.sf(122.4 / 2, 2, 3)
+    said = src.fit_measure(e, "z_inf", "set_means_fixed", kind="ladder").count
+    assert said == f"2 sets, 7 runs; its law's χ² = 122 for 2 dof, p = {p:.2g} against F(2, 3)" and p < 0.0455
+    for quiet in (dict(part, scale=7.8), dict(part, chi2=5.0), {k: v for k, v in part.items() if k != "pooled_dof"}):
+        assert "χ²" not in src.fit_measure(dict(e, set_means_fixed=quiet), "z_inf", "set_means_fixed").count
+    # χ² = 9.4 for 3 dof fails against χ² itself (p = 0.025) but not against F(3, 10) (p = 0.074): quiet
+    assert "χ²" not in src.fit_measure(dict(e, set_means_fixed=dict(part, chi2=9.39, dof=3, pooled_dof=10)), "z_inf",
+                                       "set_means_fixed").count
+    eq7 = {"sets": ["S1", "S2", "S3", "S4"], "status": "fitted", "pooled_dof": 4, "z_inf": 6.0, "z_inf_err": 0.01,
+           "chi2": 1.0, "dof": 1, "fixed": {"z_inf": 6.1, "z_inf_err": 0.01, "chi2": 80.0, "dof": 2}}
+    assert "against F(2, 4)" in src.fit_measure(eq7, "z_inf", True, kind="eq7").count
 
 
 def test_a_contrasts_pooled_error_replaces_a_borrowed_one_and_the_count_says_which():

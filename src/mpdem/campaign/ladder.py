@@ -353,7 +353,9 @@ def ladders(sets, fit_one):
             means = fit_one(fam, members)
             e["set_means"] = {kk: means.get(kk) for kk in ("status", "reason", "z_inf", "z_inf_err", "alpha_n",
                                                            "alpha_n_err", "a_tilde", "a_tilde_err", "chi2", "dof",
-                                                           "p_value") if kk in means}
+                                                           "p_value", "pooled_dof") if kk in means}
             e["set_means_fixed"] = means.get("fixed") or {"status": "not fitted", "reason": means.get("reason", "")}
+            if means.get("fixed") and "pooled_dof" in means:    # the noise's dof its weights rest on (its F test)
+                e["set_means_fixed"] = dict(means["fixed"], pooled_dof=means["pooled_dof"])
         out.append(e)
     return out

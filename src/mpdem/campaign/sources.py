@@ -285,12 +285,21 @@ def fit_measure(e, key, fixed=False, n_runs_of=None, kind="fit", name=str):
         return missing(where, f"no {key}", "not determined")
     # a fit over piles measured again at several k_n (a ladder's) names its piles
     piles = f" of {f['n_piles']} piles" if f.get("n_piles") else ""
-    # a fit whose errors are not widened by its χ² (no 'scale') and whose law fails its own test: its error
-    # is the points' alone, so the row says the law's χ² beside it
-    p, failed = f.get("p_value"), ""
-    if "scale" not in f and finite(p) and p < V.P_K and finite(f.get("chi2")):
-        failed = f"; its law's χ² = {f['chi2']:.3g} for {f.get('dof')} dof, p = {p:.2g}"
+    failed = _law_fails(f, f.get("pooled_dof", e.get("pooled_dof")))
     return Measure(v, err if finite(err) else NAN, n, f"{len(sets)} sets, {_runs(n)}{piles}{failed}", where)
+
+
+def _law_fails(f, noise_dof):
+    """The count's words for a fit whose errors are not widened by its χ² (no 'scale') and whose law fails
+    the rule's test of it: χ²/dof against F(dof, ``noise_dof``), the dof of the seed scatter its weights
+    rest on (the rule: F where the noise is measured). "" otherwise, and where that dof is not known."""
+    chi2, dof = f.get("chi2"), f.get("dof")
+    if "scale" in f or not (finite(chi2) and dof and noise_dof):
+        return ""
+    from scipy import stats
+    p = float(stats.f.sf(chi2 / dof, dof, noise_dof))
+    return f"; its law's χ² = {chi2:.3g} for {dof} dof, p = {p:.2g} against F({dof}, {noise_dof})" if p < V.P_K \
+        else ""
 
 
 @dataclass
