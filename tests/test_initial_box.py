@@ -142,8 +142,8 @@ def test_the_table_bench_times_a_lammps_file_in_its_own_box(name):
     with pytest.raises(InputError, match=r"box\.L_x=20\.0.*--table .* is 10\.0 long in x"):
         bench.table_box(bench.table_config(sets), path, sets)
     # without the bed's types every sphere would be mobile: refused, as a run refuses it
-    with pytest.raises(InputError, match=r"--table .*: a LAMMPS file with atom types \[1, 2\], and run\.fixed_types "
-                                         r"is not set; .* --set run\.fixed_types=\[2\]"):
+    with pytest.raises(InputError, match=r"run\.fixed_types is not set: --table .* is a LAMMPS file with atom types "
+                                         r"\[1, 2\]; .* --set run\.fixed_types=\[2\]"):
         bench.table_box(bench.table_config(), path)
 
 

@@ -117,9 +117,7 @@ def table_box(cfg, path, sets=()):
     lammps_table = None
     if os.path.isfile(path) and lammps.kind(path):
         if not cfg.run.fixed_types:   # every sphere mobile: a pile with no bed (a run refuses it too)
-            present = sorted(set(lammps.read(path, (), what="--table").get("types_present", [])))
-            raise InputError(f"--table {path}: a LAMMPS file with atom types {present}, and run.fixed_types is not "
-                             f"set; name the bed's types, e.g. --set run.fixed_types=[{present[-1]}]")
+            raise InputError(lammps.no_bed_types(path, what="--table"))
         lammps_table = lammps.read(path, cfg.run.fixed_types, what="--table")
     box = {k: v for k, v in pilefile.file_facts(path, lammps_table, what="--table").items() if k.startswith("box.")}
     user = {config.parse_set(item)[0] for item in sets}

@@ -107,10 +107,21 @@ def initial_for(cfg):
                                  f"dataset says which spheres are bed)" if path else "run.initial_file is not set"))
         return cfg, None
     if not types:
-        present = sorted(set(read(path, ()).get("types_present", [])))
-        raise ConfigError(f"run.fixed_types is not set: {path} is a LAMMPS file with atom types {present}; "
-                          f"name the bed's types, e.g. --set run.fixed_types=[{present[-1]}]")
+        raise ConfigError(no_bed_types(path))
     return cfg, read(path, types)
+
+
+def no_bed_types(path, what="run.initial_file"):
+    """The one message refusing a LAMMPS file read without ``run.fixed_types``: every sphere would be
+    mobile, a pile with no bed. It names the file's atom types and the setting that fixes it.
+
+    Returns
+    -------
+    str : the message, for the caller's own error class.
+    """
+    present = sorted(set(read(path, (), what=what).get("types_present", [])))
+    return (f"run.fixed_types is not set: {what} {path} is a LAMMPS file with atom types {present}; "
+            f"name the bed's types, e.g. --set run.fixed_types=[{present[-1]}]")
 
 
 def _numbers(lines, path, where, ncols):
