@@ -217,6 +217,38 @@ def test_a_one_seed_value_beside_a_bound_is_judged_by_its_side_and_says_so():
     assert "beyond (1 seed, no error: by its side alone)" in r["context"]
 
 
+def test_a_one_seed_value_alone_is_judged_with_its_sets_pooled_seed_scatter_as_well():
+    """Row 38's case: one run alone against the paper's 4.69 +- 0.005 differs on the paper's error alone
+    (3.1 sigma) and is reproduced with the seed scatter pooled over the sets of its N and mu: neither is
+    measured on it, so the row is not determined and gives both. Where both readings agree the verdict
+    stands and says so; with no set of two seeds at its N and mu it is judged as before."""
+    c = _claim(value=4.69, paper="4.69")
+    one, pair = _set("S34", [4.7054]), _set("S10", [4.57, 4.62])
+    other_mu = _set("S04", [6.0, 6.3], **{"contact.mu": 0.0})
+    m = src.S("S34").resolve(src.Context([one, pair, other_mu], {}, []))
+    sd = float(np.std([4.57, 4.62], ddof=1))
+    assert math.isclose(m.pooled_sd, sd, rel_tol=1e-12) and math.isnan(m.err)
+    v = ct.judge(c, m)
+    assert v.kind == "not determined"
+    assert v.why.startswith("it rests on 1 seed with no error of its own: with it differs by +0.0154 (3.1 σ)")
+    assert f"with the seed scatter pooled over its N and μ's sets (±{sd:.2g}) as its error: 4.705 ± 0.035, " \
+           "reproduced (0.4 σ)" in v.why
+    # a second set of two seeds moves nothing but the scatter: pooled over both
+    tight = _set("S22", [4.6056, 4.6088])
+    m2 = src.S("S34").resolve(src.Context([one, pair, tight], {}, []))
+    assert math.isclose(m2.pooled_sd, math.sqrt((sd ** 2 + float(np.std([4.6056, 4.6088], ddof=1)) ** 2) / 2),
+                        rel_tol=1e-12)
+    # far beyond either error: the verdict stands, and says it was read both ways
+    far = ct.judge(c, src.S("S34").resolve(src.Context([_set("S34", [5.2]), pair], {}, [])))
+    assert far.kind == "differs" and "in place of 1 seed with no error of its own" in far.why
+    # no set of its N and mu with two seeds: judged on the paper's error alone, as the rule says
+    alone = ct.judge(c, src.S("S34").resolve(src.Context([one, other_mu], {}, [])))
+    assert alone.kind == "differs" and alone.why == "this work: 1 seed, no error; the paper's error alone"
+    # a bound: by its side alone and with the scatter, both beyond
+    b = ct.judge(_claim(kind="bound", value=4.0, paper="> 4"), m)
+    assert b.kind == "reproduced" and "in place of 1 seed with no error of its own" in b.why
+
+
 def test_frictional_excess_over_the_count_is_taken_run_by_run():
     """z and 4 + n_m/3 of the same runs move together: their difference's error is the runs' scatter of
     the difference, not the two scatters in quadrature, and its count is the runs once."""

@@ -14,7 +14,7 @@ import math
 
 from . import verdict as V
 from .runs import md_table
-from .sources import diff_error, finite, missing
+from .sources import NAN, diff_error, finite, missing
 
 
 # ---------------------------------------------------------------- judging a claim
@@ -59,20 +59,36 @@ def _against_rival(claim, m, v, ctx):
     raise ValueError(f"claim {claim.id}: a rival for kind {claim.kind!r}")
 
 
+ONE_SEED = "1 seed with no error of its own"
+
+
+def _one_seed_alternative(claim, m):
+    """A value of one run alone with no error: judged as it is (on the paper's error, or by its side of a
+    bound) and with the seed scatter pooled over the sets of its N and μ as its error (``m.pooled_sd``):
+    neither is measured on it, so a verdict that changes with the reading is not determined (the rule)."""
+    if m.alts or claim.err_alternatives or claim.kind == "test" or m.n != 1 or finite(m.err) \
+            or not finite(m.pooled_sd):
+        return []
+    label = f"the seed scatter pooled over its N and μ's sets (±{m.pooled_sd:.2g}) as its error"
+    return [(label, dataclasses.replace(m, err=m.pooled_sd, pooled_sd=NAN), None)]
+
+
 def _judge_assumed(claim, m):
-    """``_judge_one`` of ``m``, then of each alternative of ``m`` (``m.alts``) or of the paper's error
-    (``claim.err_alternatives``, the same ``m`` against another error; a claim has one kind or the other)."""
+    """``_judge_one`` of ``m``, then of each alternative of ``m`` (``m.alts``; a value of one run alone:
+    ``_one_seed_alternative``) or of the paper's error (``claim.err_alternatives``, the same ``m`` against
+    another error; a claim has one kind or the other)."""
     v = _judge_one(claim, m)
-    if not (m.alts or claim.err_alternatives) or v.kind not in ("reproduced", "differs"):
+    one = _one_seed_alternative(claim, m) if m.ok else []
+    if not (m.alts or one or claim.err_alternatives) or v.kind not in ("reproduced", "differs"):
         return v
     if m.alts and claim.err_alternatives:
         raise ValueError(f"claim {claim.id}: alternative measures and alternative paper errors at once")
     alts = [(label, a, _judge_one(claim, a, kind) if a.ok else None, kind or claim.kind)
-            for label, a, kind in m.alts]
+            for label, a, kind in m.alts + one]
     # the paper's error read otherwise (``Claim.err_alternatives``): the same number against each
     alts += [(label, m, _judge_one(dataclasses.replace(claim, paper_err=err), m), "tolerance")
              for label, err in claim.err_alternatives]
-    assumption = m.assumption if m.alts else claim.err_assumption
+    assumption = m.assumption if m.alts else ONE_SEED if one else claim.err_assumption
 
     def value(a, av, kind):
         # a test's number is its p, which its verdict names; another tolerance's, its distance

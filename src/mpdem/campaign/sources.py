@@ -49,6 +49,7 @@ class Measure:
     assumption: str = ""                        # what the number rests on (``Assumes``)
     alts: list = field(default_factory=list)    # [(label, Measure, kind or None)]: the same made with each alternative
     borrowed: str = ""                          # where a value of one run takes its error from ("1 run with …")
+    pooled_sd: float = NAN                      # one run alone: the seed scatter of the sets of its N and μ
     source: object = None                       # the source that made it (a test's rival part: ``claimtable``)
 
     @property
@@ -92,8 +93,10 @@ class S:
         m, e, n = s.stat(self.q)
         if not n:
             return missing(where, f"no {self.q} in set {self.set}")
+        # one run alone has no error of its own: the rule judges it with its sets' seed scatter as well
+        sd = ctx.pooled_scatter(None, self.set, self.set, self.q) if n == 1 else NAN
         return Measure(m, e, n, _runs_note(n), f"{where}" if self.label else self.set,
-                       k_n=s.p("k_n"))
+                       k_n=s.p("k_n"), pooled_sd=sd)
 
 
 @dataclass
@@ -398,7 +401,8 @@ class Ext:
         m, e, n = _f(row.get(f"{self.q}_mean")), _f(row.get(f"{self.q}_sem")), _count(row.get("n_seeds"))
         if not finite(m):
             return missing(where, f"no {self.q}")
-        return Measure(m, e, n, _runs_note(n), where, k_n=_f(row.get("k_n")))
+        sd = ctx.pooled_scatter(self.results, self.set, self.set, self.q) if n == 1 else NAN
+        return Measure(m, e, n, _runs_note(n), where, k_n=_f(row.get("k_n")), pooled_sd=sd)
 
 
 @dataclass
