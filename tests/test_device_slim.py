@@ -1,4 +1,4 @@
-"""tools/device_slim.sh: the result packings and checkpoints kept from travelling to a lent GPU machine
+"""tools/device_slim.sh: the result packings, checkpoints and final states kept from travelling to a lent GPU machine
 for one call (the device sends tracked and untracked-not-ignored files, at most 64 MiB), and put back.
 
 Run on a clone of this checkout: `on` leaves them on disk but neither tracked nor unignored, so they
@@ -34,12 +34,16 @@ def test_on_keeps_the_packings_at_home_and_off_gives_everything_back(tmp_path):
     assert packings, "the checkout has committed packings"
     before = travelling(repo)
 
+    def stays(p):       # what `on` keeps at home: packings, checkpoints, a ladder's committed final state
+        return p.endswith(("packing.npz", "/final.h5")) or "/checkpoints/" in p
+    assert [p for p in before if p.endswith("/final.h5")], "the checkout has a committed final state"
+
     on = slim(repo, "on")
     assert on.returncode == 0, on.stderr
     now = travelling(repo)
-    assert not [p for p in now if p.endswith("packing.npz") or "/checkpoints/" in p]
+    assert not [p for p in now if stays(p)]
     assert all((repo / p).exists() for p in packings)                  # on disk still
-    assert before - now == {p for p in before if p.endswith("packing.npz") or "/checkpoints/" in p}
+    assert before - now == {p for p in before if stays(p)}
     assert slim(repo, "on").returncode == 1                           # not twice
 
     off = slim(repo, "off")

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Keep the committed packings and checkpoints of analysis/results from travelling to a lent GPU machine,
+# Keep the committed packings, checkpoints and final states of analysis/results from travelling to a lent GPU machine,
 # for one device call, and put them back after. The device sends the working tree's tracked files and
 # its untracked files that git does not ignore, at most 64 MiB in all; the result packings
 # (packing.npz) and the checkpoints of unfinished rows are most of the tracked bytes, and the GPU check
@@ -28,12 +28,14 @@ on)
     if ! git diff --quiet HEAD -- "${IGNORES[@]}"; then
         echo "device_slim: ${IGNORES[*]} have changes of their own; commit or drop them first" >&2; exit 1
     fi
-    git ls-files -z -- 'analysis/results/**/packing.npz' 'analysis/results/**/checkpoints/*' > "$LIST"
+    # a frictional ladder's converged top rung keeps its final.h5 (the state its next rung starts from)
+    git ls-files -z -- 'analysis/results/**/packing.npz' 'analysis/results/**/checkpoints/*' \
+        'analysis/results/**/final.h5' > "$LIST"
     [ -s "$LIST" ] || { echo "device_slim: nothing to untrack"; rm -f "$LIST"; exit 0; }
     for f in "${IGNORES[@]}"; do
         # the last matching line of a .gitignore wins: these outrank its "!...packing.npz"
         printf '%s\n' "# device_slim.sh on (bash tools/device_slim.sh off restores this file)" \
-            "**/packing.npz" "**/checkpoints/" >> "$f"
+            "**/packing.npz" "**/checkpoints/" "**/final.h5" >> "$f"
     done
     xargs -0 git rm -q --cached -- < "$LIST"
     echo "device_slim: on, $(count) files untracked and ignored (on disk still); do not commit until 'off'"
