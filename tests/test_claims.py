@@ -217,7 +217,7 @@ def test_a_one_seed_value_beside_a_bound_is_judged_by_its_side_and_says_so():
     assert "beyond (1 seed, no error: by its side alone)" in r["context"]
 
 
-def test_a_one_seed_value_alone_is_judged_with_its_sets_pooled_seed_scatter_as_well():
+def test_a_one_seed_value_alone_is_judged_with_its_sets_pooled_seed_scatter_as_well(tmp_path):
     """Row 38's case: one run alone against the paper's 4.69 +- 0.005 differs on the paper's error alone
     (3.1 sigma) and is reproduced with the seed scatter pooled over the sets of its N and mu: neither is
     measured on it, so the row is not determined and gives both. Where both readings agree the verdict
@@ -247,6 +247,14 @@ def test_a_one_seed_value_alone_is_judged_with_its_sets_pooled_seed_scatter_as_w
     # a bound: by its side alone and with the scatter, both beyond
     b = ct.judge(_claim(kind="bound", value=4.0, paper="> 4"), m)
     assert b.kind == "reproduced" and "in place of 1 seed with no error of its own" in b.why
+    # another collect's set of one seed: the scatter from its sets.csv (each set's sem and seeds), its N and μ's
+    (tmp_path / "dev").mkdir()
+    (tmp_path / "dev" / "sets.csv").write_text(
+        "set,mu,N,n_seeds,z_mean,z_sem\nS06,0.5,8000,1,4.7054,\nS10,0.5,8000,2,4.595,0.025\n"
+        "S05,0.0,8000,4,6.05,0.0455\n")
+    e = src.Ext("dev", "S06").resolve(src.Context([], {}, [], out=str(tmp_path)))
+    assert math.isclose(e.pooled_sd, 0.025 * math.sqrt(2), rel_tol=1e-12)
+    assert ct.judge(c, e).kind == "not determined"
 
 
 def test_frictional_excess_over_the_count_is_taken_run_by_run():

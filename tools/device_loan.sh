@@ -45,7 +45,8 @@ pack() {  # RUNG_DIR...: into .ladder/<path under RUNS_ROOT>, and the bench's ta
         r=$(rel "$d" "$RUNS_ROOT")
         if [ -z "$ck" ] && [ "$(status_of "$d")" = converged ]; then
             # a converged rung, to be stiffened into the next there: a frictionless pile from its committed
-            # packing (what anyone can start from), a frictional one from its final state (git keeps none)
+            # packing (what anyone can start from), a frictional one from its final state (committed
+            # only where a ladder's rung kept it)
             if [ -f "$d/packing.npz" ] && [ "$(mu_of "$d")" = 0 ]; then
                 skip=(! -name 'final.*')
             elif [ ! -f "$d/final.h5" ]; then

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Keep the committed packings, checkpoints and final states of analysis/results from travelling to a lent GPU machine,
-# for one device call, and put them back after. The device sends the working tree's tracked files and
-# its untracked files that git does not ignore, at most 64 MiB in all; the result packings
-# (packing.npz) and the checkpoints of unfinished rows are most of the tracked bytes, and the GPU check
+# Keep the committed packings, checkpoints and final states of analysis/results from travelling to a lent
+# GPU machine, for one device call, and put them back after. The device sends the working tree's tracked
+# files and its untracked files that git does not ignore, at most 64 MiB in all; the result packings
+# (packing.npz), the checkpoints of unfinished rows and the final states a ladder's rungs kept (final.h5,
+# for a frictional rung above them) are most of the tracked bytes, and the GPU check
 # (tools/gpu_check.sh) needs none of them (its reference runs are their config.toml and summary.json).
 #   bash tools/device_slim.sh on       untrack them in the index only (the files stay on disk) and ignore
 #                                      them (lines appended to the results' .gitignore files, whose own
@@ -28,7 +29,7 @@ on)
     if ! git diff --quiet HEAD -- "${IGNORES[@]}"; then
         echo "device_slim: ${IGNORES[*]} have changes of their own; commit or drop them first" >&2; exit 1
     fi
-    # a frictional ladder's converged top rung keeps its final.h5 (the state its next rung starts from)
+    # a frictional ladder's rung may keep its final.h5 (the state its next rung starts from)
     git ls-files -z -- 'analysis/results/**/packing.npz' 'analysis/results/**/checkpoints/*' \
         'analysis/results/**/final.h5' > "$LIST"
     [ -s "$LIST" ] || { echo "device_slim: nothing to untrack"; rm -f "$LIST"; exit 0; }

@@ -324,13 +324,6 @@ def fit_piles(fam, points):
             e["fixed"] = fits.fit_eq7_piles(k, z, pl, s_tot, s_w, alpha_n=fixed, s_within_dof=dof_w)
         except (ValueError, np.linalg.LinAlgError) as err:
             e["fixed"] = {"status": "failed", "reason": str(err)}
-        if fam["mu"] == 0:
-            # the paper's own alpha_n (0.498) fixed: its claim tested as one law, the chi^2 against F (row 20)
-            try:
-                e["paper"] = fits.fit_eq7_piles(k, z, pl, s_tot, s_w, alpha_n=paper.EQ7_MU0["alpha_n"],
-                                                s_within_dof=dof_w)
-            except (ValueError, np.linalg.LinAlgError) as err:
-                e["paper"] = {"status": "failed", "reason": str(err)}
     if not e["determined"]:
         e.update(status="not determined", reason=f"the points cannot tell the parameters apart (largest "
                                                  f"parameter correlation {e['correlation']:.10g})")

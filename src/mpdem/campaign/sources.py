@@ -37,7 +37,9 @@ class Measure:
     ``where`` it comes from (sets, window); ``status`` 'ok', 'not measured', 'not determined' or
     'running', ``why`` the reason for a status other than 'ok'. ``k_n``: the stiffness of a rung.
     ``assumption`` and ``alts``: a number that rests on an assumed choice, with the same number made with
-    each alternative the claim names (``Assumes``; the verdict weighs them: ``claimtable.judge``)."""
+    each alternative the claim names (``Assumes``; the verdict weighs them: ``claimtable.judge``).
+    ``pooled_sd``: a set's value of one run, the seed scatter pooled over the sets of its N and μ (nan where
+    none has two seeds), the error the rule judges it with beside none (``claimtable._one_seed_alternative``)."""
     value: float = NAN
     err: float = NAN
     n: int = 0

@@ -10,17 +10,17 @@ by X (Y sigma)**, and is marked explained (the cause is found) or open. A bound 
 reproduced when this work's value is beyond it by two errors, a range ("3-8e6 steps") when the value
 lies inside it or within two errors of it. A value of one seed (no error of its own) takes the other
 side's seed scatter in a difference (``sources.diff_error``), and alone is judged on the paper's error
-(or by its side of a bound) and with the seed scatter pooled over the sets of its N and mu as well
-(``claimtable._one_seed_alternative``: not determined where the two disagree), by its side of a sign. A
-test's p value (one law, one curve) is reproduced at p >= 0.0455, the two-sided 2 sigma level. A value
-that rests on an assumed choice the measurements here do not fix (an exponent taken from theory, where
-the data fit others as well; a window the paper does not name; a second reading of the paper's error its
-text allows; a claim of one law tested both as a value and by its fit's p) is judged with each
-alternative its row names as well (``claimtable.judge``); an alternative without a number leaves the row
-not determined too. A claim set against a rival answer (``claims.Claim.rival``) is reproduced only where
-the rival is not: a value within two errors of both, or a test that both pass, is not determined. A row
-with nothing measured reads "not measured"; a fit that cannot tell its parameters apart, or a value
-whose verdict changes with the assumed choice, "not determined".
+(or by its side of a bound) and, where sets of its N and mu have two seeds, with their pooled seed
+scatter as well (``claimtable._one_seed_alternative``: not determined where the two disagree), by its
+side of a sign. A test's p value (one law, one curve) is reproduced at p >= 0.0455, the two-sided 2
+sigma level. A value that rests on an assumed choice the measurements here do not fix (an exponent taken
+from theory, where the data fit others as well; a window the paper does not name; a second reading of
+the paper's error its text allows; a claim of one law tested both as a value and by its fit's p) is
+judged with each alternative its row names as well (``claimtable.judge``); an alternative without a
+number leaves the row not determined too. A claim set against a rival answer (``claims.Claim.rival``) is
+reproduced only where the rival is not: a value within two errors of both, or a test that both pass, is
+not determined. A row with nothing measured reads "not measured"; a fit that cannot tell its parameters
+apart, or a value whose verdict changes with the assumed choice, "not determined".
 
 Everything here is arithmetic on numbers already measured: nothing is tuned to a target.
 """
@@ -44,10 +44,11 @@ RULE = (
     "has the sign and lies 2σ from zero. A value of one seed has no error of its own: in a difference or a "
     "step with a side of two or more seeds it takes that side's seed scatter (one run's standard deviation), "
     "with two sides of one seed each the seed scatter pooled over the sets of its size and friction; "
-    "alone it is judged on the paper's error or tolerance alone (against a bound by its side alone) and with "
-    "the seed scatter pooled over the sets of its size and friction as its error, neither measured on it, so "
-    "that a verdict that changes between the two is not determined; against a sign by its side alone; each "
-    "time the row says so. A claim that a family follows one law, or that sets collapse onto "
+    "alone it is judged on the paper's error or tolerance alone (against a bound by its side alone) and, where "
+    "sets of its size and friction have two seeds or more, with their pooled seed scatter as its error, "
+    "neither measured on it, so that a verdict that changes between the two is not determined (a depth "
+    "window's single run takes that pooled scatter as its error throughout); against a sign by its side "
+    "alone; each time the row says so. A claim that a family follows one law, or that sets collapse onto "
     "one curve, tested by a fit's χ² or an analysis of variance, is reproduced when the test's p ≥ 0.0455 "
     "(two-sided 2σ) and differs otherwise. A value's error is read as normal, as the paper's ± are (a row "
     "may give a Student reading beside where its scatter rests on few seeds); a test's p is its own "
